@@ -1,0 +1,55 @@
+# The two set-up commands of the README.  Both are idempotent and quick when already done.
+PY       ?= python3
+VENV     := .venv
+VPY      := $(VENV)/bin/python
+STAMP    := $(VENV)/.installed
+APT_PKGS := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgbm1
+
+.PHONY: demo test setup syslibs lint bench clean
+
+setup: syslibs $(STAMP)
+
+$(STAMP): pyproject.toml
+	@test -x $(VPY) || $(PY) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --upgrade pip
+	$(VPY) -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+# glcontext dlopens libGL and libEGL; without libgl1-mesa-dri EGL fails with 0x3001.
+syslibs:
+	@missing=""; for p in $(APT_PKGS); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  if ! command -v apt-get >/dev/null 2>&1; then \
+	    echo "crackbake needs EGL + Mesa (packages:$$missing); install your distribution's equivalents."; exit 1; \
+	  elif [ "$$(id -u)" = "0" ]; then \
+	    echo "installing system libraries:$$missing"; \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing >/dev/null || \
+	      { apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing >/dev/null; }; \
+	  else \
+	    echo "missing system libraries:$$missing"; \
+	    echo "run: sudo apt-get install -y$$missing   (then make again)"; exit 1; \
+	  fi; \
+	fi
+
+demo: setup
+	$(VPY) examples/make_demo_cracks.py examples/spot.obj -o examples/spot_demo_cracks.json
+	$(VENV)/bin/crackbake examples/spot.obj --cracks examples/spot_demo_cracks.json --res 2048 -o spot_cracks
+	@echo
+	@echo "Outputs are in ./spot_cracks/ (see README 'Output files'):"
+	@echo "  spot_cracks.exr  EXR master: crack.mask/width/depth/time/id/distance"
+	@echo "  spot_mask.png    8-bit crack mask      spot_depth.png  16-bit crack depth"
+	@echo "  spot.glb         the mesh with the cracks on its base colour (open in any glTF viewer)"
+	@echo "  cracks.json      crack network sidecar  cracks.obj  polylines for DCC tools"
+	@echo "  manifest.json    inputs, parameters, files, timings"
+
+test: setup
+	$(VPY) -m ruff check crackbake tests benchmarks examples
+	$(VPY) -m pytest -q
+
+bench: setup
+	$(VPY) benchmarks/bench_bake.py
+
+clean:
+	rm -rf $(VENV) build dist *.egg-info spot_cracks

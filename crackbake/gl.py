@@ -1,0 +1,85 @@
+"""Headless OpenGL: the EGL context and the GLSL sources in ``shaders/``.
+
+Always EGL (``backend='egl'``): it needs no display, runs on Mesa llvmpipe on CPU-only machines
+and on the GPU's own driver where there is one.  ``CRACKBAKE_EGL_DEVICE`` (or glcontext's
+``GLCONTEXT_DEVICE_INDEX``) picks the EGL device when there are several.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+from crackbake.errors import CrackbakeError
+
+APT_LINE = "apt-get install -y libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgbm1"
+
+_HINTS = (
+    ("libEGL", "libEGL (package libegl1) is missing"),
+    ("libGL", "libGL (package libgl1) is missing"),
+    ("found 0 devices", "no EGL vendor library found (package libegl-mesa0, or the GPU driver's EGL)"),
+    ("0x3001", "the Mesa DRI driver is missing (package libgl1-mesa-dri)"),
+)
+
+
+def create_context():
+    """Create a standalone OpenGL 4.3+ context on EGL.
+
+    Returns
+    -------
+    moderngl.Context
+
+    Raises
+    ------
+    CrackbakeError
+        When EGL, libGL or Mesa's driver is missing, naming the library and the apt-get line.
+    """
+    import moderngl
+
+    if "CRACKBAKE_EGL_DEVICE" in os.environ:
+        os.environ["GLCONTEXT_DEVICE_INDEX"] = os.environ["CRACKBAKE_EGL_DEVICE"]
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl", require=430)
+    except Exception as exc:
+        msg = str(exc)
+        for needle, hint in _HINTS:
+            if needle in msg:
+                raise CrackbakeError(
+                    f"cannot open a headless OpenGL context: {hint}; install with: {APT_LINE}"
+                ) from exc
+        raise CrackbakeError(
+            f"cannot open a headless OpenGL context ({msg}); on Debian/Ubuntu install: {APT_LINE}"
+        ) from exc
+    return ctx
+
+
+def renderer_info(ctx) -> dict:
+    """Vendor, renderer and version strings, for the manifest."""
+    info = ctx.info
+    return {
+        "vendor": info.get("GL_VENDOR", ""),
+        "renderer": info.get("GL_RENDERER", ""),
+        "version": info.get("GL_VERSION", ""),
+    }
+
+
+def shader_dir() -> Path:
+    """The folder holding the GLSL sources.
+
+    An installed wheel carries them as ``crackbake/shaders``; a source checkout (editable install)
+    has them at the repository's top level.
+    """
+    here = Path(__file__).resolve().parent
+    for candidate in (here / "shaders", here.parent / "shaders"):
+        if candidate.is_dir():
+            return candidate
+    raise CrackbakeError(
+        "crackbake's GLSL shaders are missing from the installation; reinstall crackbake"
+    )
+
+
+@lru_cache(maxsize=None)
+def shader_source(name: str) -> str:
+    """Text of ``shaders/<name>``."""
+    return (shader_dir() / name).read_text()

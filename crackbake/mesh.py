@@ -1,0 +1,299 @@
+"""Loading asset meshes and deriving the welded copy used for topology.
+
+The asset mesh keeps its UV seams (vertices are split where UVs differ); that is the mesh the
+textures are baked for and the mesh written to the GLB.  Anything topological (adjacency,
+geodesic distances, the simulation mesh) works on :func:`weld_by_position`'s copy, so UV seams
+never cut cracks or stress.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from crackbake.errors import CrackbakeError
+
+SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
+class CrackbakeWarning(UserWarning):
+    """Something was adjusted or looks wrong but the run can go on."""
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh as loaded, with its own UVs when it has them.
+
+    Attributes
+    ----------
+    vertices : (V, 3) float64
+        Positions, mesh units.
+    faces : (F, 3) int64
+        Counter-clockwise triangles indexing ``vertices``.
+    uv : (V, 2) float64 or None
+        Per-vertex texture coordinates, ``v`` pointing up (OBJ/Blender convention); vertices are
+        split at UV seams.  ``None`` when the file has none.
+    normals : (V, 3) float64
+        Unit vertex normals (the file's own where present, else area-weighted).
+    source : str
+        Path the mesh was read from.
+    name : str
+        Object name (file stem, or the picked/concatenated object names).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray | None
+    normals: np.ndarray
+    source: str = ""
+    name: str = "mesh"
+
+    @property
+    def bbox_min(self) -> np.ndarray:
+        return self.vertices.min(axis=0)
+
+    @property
+    def bbox_max(self) -> np.ndarray:
+        return self.vertices.max(axis=0)
+
+    @property
+    def diagonal(self) -> float:
+        """Bounding-box diagonal, mesh units."""
+        return float(np.linalg.norm(self.bbox_max - self.bbox_min))
+
+    def describe(self) -> dict:
+        """Counts, bounding box and UV presence, for reports and the sidecar."""
+        return {
+            "source": self.source,
+            "vertices": int(len(self.vertices)),
+            "faces": int(len(self.faces)),
+            "bbox_min": [float(x) for x in self.bbox_min],
+            "bbox_max": [float(x) for x in self.bbox_max],
+            "has_uv": self.uv is not None,
+        }
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit face normals, (F, 3); zero for degenerate faces."""
+    tri = vertices[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals, (V, 3), accumulated over positions.
+
+    Vertices that share a position (UV-seam splits) get the same normal, so shading is smooth
+    across UV seams.
+    """
+    wv, wf, inverse = weld_by_position(vertices, faces)
+    tri = wv[wf]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 * area
+    acc = np.zeros_like(wv)
+    for k in range(3):
+        np.add.at(acc, wf[:, k], n)
+    length = np.linalg.norm(acc, axis=1, keepdims=True)
+    acc = np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
+    return acc[inverse]
+
+
+def weld_by_position(
+    vertices: np.ndarray, faces: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Merge vertices with identical positions (the copies made by UV seams).
+
+    Returns
+    -------
+    welded_vertices : (W, 3) float64
+    welded_faces : (F, 3) int64
+        Same faces, same order, indexing ``welded_vertices``.
+    inverse : (V,) int64
+        ``welded_vertices[inverse] == vertices``.
+    """
+    welded, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1).astype(np.int64)
+    return welded, inverse[faces], inverse
+
+
+def _scene_geometries(scene, object_name: str | None, path: Path):
+    import trimesh
+
+    # dump() applies the node transforms; geometry names survive in metadata.
+    items = []
+    for node in scene.graph.nodes_geometry:
+        transform, geom_name = scene.graph[node]
+        geom = scene.geometry[geom_name]
+        if not isinstance(geom, trimesh.Trimesh):
+            continue
+        items.append((str(node), str(geom_name), geom.copy().apply_transform(transform)))
+    if not items:
+        return []
+    if object_name is not None:
+        picked = [g for node, gname, g in items if object_name in (node, gname)]
+        if not picked:
+            names = ", ".join(sorted({n for n, _, _ in items} | {g for _, g, _ in items}))
+            raise CrackbakeError(
+                f"{path}: no object named '{object_name}'; objects in the file: {names}"
+            )
+        return picked
+    if len(items) > 1:
+        warnings.warn(
+            f"{path.name} holds {len(items)} meshes; concatenating them "
+            "(use --object NAME to pick one)",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+    return [g for _, _, g in items]
+
+
+def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
+    """Load a triangle mesh from OBJ, PLY, STL, OFF, glTF or GLB.
+
+    Quads and polygons are triangulated, a scene with several meshes is concatenated (with a
+    warning) unless ``object_name`` picks one, and UVs are kept with their seams.
+
+    Parameters
+    ----------
+    path : str or Path
+        Mesh file.
+    object_name : str, optional
+        Node or geometry name to pick from a multi-object file.
+
+    Raises
+    ------
+    CrackbakeError
+        Missing file, unsupported format, unreadable file, no triangles, non-finite vertices.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.exists():
+        raise CrackbakeError(f"{path}: file not found; check the path")
+    if path.is_dir():
+        raise CrackbakeError(f"{path}: is a directory; pass a mesh file")
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise CrackbakeError(
+            f"{path}: unsupported format '{suffix or '(none)'}'; "
+            f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
+        )
+    try:
+        loaded = trimesh.load(str(path), file_type=suffix[1:], process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt input
+        raise CrackbakeError(
+            f"{path}: could not read the {suffix[1:].upper()} file ({exc}); "
+            "check that it is a valid mesh"
+        ) from exc
+
+    if isinstance(loaded, trimesh.Scene):
+        geoms = _scene_geometries(loaded, object_name, path)
+    elif isinstance(loaded, trimesh.Trimesh):
+        if object_name is not None:
+            warnings.warn(
+                f"{path.name} holds a single mesh; --object '{object_name}' ignored",
+                CrackbakeWarning,
+                stacklevel=2,
+            )
+        geoms = [loaded]
+    else:
+        geoms = []
+    geoms = [g for g in geoms if len(g.faces) > 0]
+    if not geoms:
+        kind = type(loaded).__name__
+        what = "a point cloud" if kind == "PointCloud" else "no triangles"
+        raise CrackbakeError(f"{path}: the file holds {what}; crackbake needs a triangle mesh")
+
+    uvs = [_uv_of(g) for g in geoms]
+    keep_uv = all(u is not None for u in uvs)
+    if not keep_uv and any(u is not None for u in uvs):
+        warnings.warn(
+            f"{path.name}: only some objects have UVs; ignoring them all (the mesh will be "
+            "unwrapped). Use --object to pick one",
+            CrackbakeWarning,
+            stacklevel=2,
+        )
+
+    vertices, faces, uv_parts, normal_parts = [], [], [], []
+    offset = 0
+    for g, u in zip(geoms, uvs, strict=True):
+        v = np.asarray(g.vertices, dtype=np.float64)
+        f = np.asarray(g.faces, dtype=np.int64)
+        vertices.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+        if keep_uv:
+            uv_parts.append(u)
+        normal_parts.append(_file_normals(g))
+    vertices = np.concatenate(vertices)
+    faces = np.concatenate(faces)
+
+    if not np.isfinite(vertices).all():
+        bad = int((~np.isfinite(vertices).all(axis=1)).sum())
+        raise CrackbakeError(
+            f"{path}: {bad} vertices have NaN or infinite coordinates; repair the mesh first"
+        )
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
+
+    uv = np.concatenate(uv_parts) if keep_uv else None
+    if uv is not None and not np.isfinite(uv).all():
+        warnings.warn(
+            f"{path.name}: UVs contain NaN; ignoring them (the mesh will be unwrapped)",
+            CrackbakeWarning,
+            stacklevel=2,
+        )
+        uv = None
+
+    if all(n is not None for n in normal_parts):
+        normals = np.concatenate(normal_parts)
+    else:
+        normals = vertex_normals(vertices, faces)
+
+    tri = vertices[faces]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    if not (area2 > 0).any():
+        raise CrackbakeError(f"{path}: every face has zero area; crackbake needs a surface")
+    n_degenerate = int((area2 <= 0).sum())
+    if n_degenerate:
+        warnings.warn(
+            f"{path.name}: {n_degenerate} zero-area faces (they get no texels)",
+            CrackbakeWarning,
+            stacklevel=2,
+        )
+
+    if object_name is not None:
+        name = object_name
+    else:
+        name = path.stem
+    return Mesh(
+        vertices=vertices,
+        faces=faces,
+        uv=uv,
+        normals=normals,
+        source=str(path),
+        name=name,
+    )
+
+
+def _uv_of(geom) -> np.ndarray | None:
+    uv = getattr(geom.visual, "uv", None)
+    if uv is None or len(uv) != len(geom.vertices):
+        return None
+    return np.asarray(uv, dtype=np.float64)
+
+
+def _file_normals(geom) -> np.ndarray | None:
+    # trimesh keeps a file's vertex normals in its cache; computing them ourselves would weld
+    # across seams anyway, so only trust explicit ones of the right shape.
+    n = geom._cache.cache.get("vertex_normals") if hasattr(geom, "_cache") else None
+    if n is None or len(n) != len(geom.vertices):
+        return None
+    n = np.asarray(n, dtype=np.float64)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    if not np.isfinite(n).all() or (length < 1e-12).any():
+        return None
+    return n / length
