@@ -8,7 +8,7 @@ and on the GPU's own driver where there is one.  ``CRACKBAKE_EGL_DEVICE`` (or gl
 from __future__ import annotations
 
 import os
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from crackbake.errors import CrackbakeError
@@ -18,7 +18,7 @@ APT_LINE = "apt-get install -y libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgb
 _HINTS = (
     ("libEGL", "libEGL (package libegl1) is missing"),
     ("libGL", "libGL (package libgl1) is missing"),
-    ("found 0 devices", "no EGL vendor library found (package libegl-mesa0, or the GPU driver's EGL)"),
+    ("found 0 devices", "no EGL vendor library (package libegl-mesa0, or the GPU driver's EGL)"),
     ("0x3001", "the Mesa DRI driver is missing (package libgl1-mesa-dri)"),
 )
 
@@ -79,7 +79,7 @@ def shader_dir() -> Path:
     )
 
 
-@lru_cache(maxsize=None)
+@cache
 def shader_source(name: str) -> str:
     """Text of ``shaders/<name>``."""
     return (shader_dir() / name).read_text()

@@ -1,0 +1,390 @@
+"""GPU bake of a crack network into UV-space texture maps.
+
+The asset's faces are drawn at their UV positions; every fragment knows its world position and
+its face, loops over the crack segments listed for that face and measures world-space distances.
+So widths are in mesh units whatever the UV stretch, and a crack crossing a UV seam continues on
+both islands.  Large images are drawn in tiles, and empty texels are then filled from their
+nearest island (dilation) so bilinear filtering and mip-maps never pull in background.
+
+All returned images have row 0 at the top (UV v = 1), the order image files store.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from crackbake.errors import CrackbakeError
+from crackbake.gl import create_context, shader_source
+from crackbake.mesh import CrackbakeWarning
+from crackbake.network import Segments
+
+#: Channels of :class:`CrackMaps` in EXR order, with their storage type.
+CHANNELS: dict[str, str] = {
+    "crack.mask": "half",
+    "crack.width": "half",
+    "crack.time": "half",
+    "crack.depth": "float",
+    "crack.distance": "float",
+    # half holds integers exactly only up to 2048; networks can have more cracks than that.
+    "crack.id": "float",
+}
+
+#: Default clamp of the distance channel, as a fraction of the bounding-box diagonal.
+DEFAULT_MAX_DISTANCE_FRACTION = 0.02
+
+#: Default tile edge in texels: a band holds at most tile**2 texels (19 bytes each on the GL side).
+DEFAULT_TILE = 4096
+
+
+@dataclass(eq=False)
+class CrackMaps:
+    """Baked crack channels, each (res, res), row 0 = top of the image.
+
+    Attributes
+    ----------
+    mask : float16, 0..1
+        Anti-aliased crack coverage.
+    width : float16, mesh units
+        Opening width of the nearest crack (0 where there is none within ``max_distance``).
+    time : float16, 0..1
+        Crack time of the nearest crack point.
+    depth : float32, mesh units, >= 0
+        Depth of the crack profile at the texel.
+    distance : float32, mesh units
+        World distance to the nearest crack, clamped at ``max_distance``.
+    crack_id : float32
+        Id of the nearest crack, -1 where none within ``max_distance``.
+    inside : bool
+        Texels whose centre lies on a face (before dilation).
+    """
+
+    res: int
+    mask: np.ndarray
+    width: np.ndarray
+    time: np.ndarray
+    depth: np.ndarray
+    distance: np.ndarray
+    crack_id: np.ndarray
+    inside: np.ndarray
+    max_distance: float
+    profile_shape: float
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def channels(self) -> dict[str, np.ndarray]:
+        """EXR channel name -> image, in :data:`CHANNELS` order."""
+        return {
+            "crack.mask": self.mask,
+            "crack.width": self.width,
+            "crack.time": self.time,
+            "crack.depth": self.depth,
+            "crack.distance": self.distance,
+            "crack.id": self.crack_id,
+        }
+
+
+def face_candidates(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    segments: Segments,
+    res: int,
+    max_distance: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-face lists of the crack segments that can influence the face's texels.
+
+    A segment is listed for a face when their bounding spheres come within the face's reach:
+    the distance clamp, or the widest crack's half width plus the face's largest texel footprint
+    (so the anti-aliasing ramp is never cut off).
+
+    Returns
+    -------
+    face_start : (F + 1,) uint32
+        Candidates of face ``f`` are ``candidates[face_start[f]:face_start[f + 1]]``.
+    candidates : (K,) uint32
+        Segment indices, ascending within each face.
+    """
+    n_faces = len(faces)
+    if len(segments.a) == 0:
+        return np.zeros(n_faces + 1, np.uint32), np.zeros(1, np.uint32)
+    tri = vertices[faces]
+    centre = tri.mean(axis=1)
+    radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
+
+    # Largest world length of one texel along any edge of the face (handles stretched UVs).
+    tuv = uv[faces] * res
+    edge_world = np.linalg.norm(np.roll(tri, -1, axis=1) - tri, axis=2)
+    edge_uv = np.linalg.norm(np.roll(tuv, -1, axis=1) - tuv, axis=2)
+    texel = np.max(edge_world / np.maximum(edge_uv, 1e-9), axis=1)
+    texel = np.minimum(texel, radius * 2 + 1e-12)  # UV-degenerate faces get no texels anyway
+
+    half_width = 0.5 * float(segments.width.max())
+    reach = np.maximum(max_distance, half_width + 1.5 * texel)
+
+    mid = 0.5 * (segments.a + segments.b)
+    half_len = 0.5 * np.linalg.norm(segments.b - segments.a, axis=1)
+    tree = cKDTree(mid)
+    hits = tree.query_ball_point(
+        centre, radius + reach + half_len.max(), workers=-1, return_sorted=False
+    )
+    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=n_faces)
+    seg_idx = np.fromiter(
+        (i for h in hits for i in h), dtype=np.int64, count=int(counts.sum())
+    )
+    face_idx = np.repeat(np.arange(n_faces), counts)
+    keep = np.linalg.norm(centre[face_idx] - mid[seg_idx], axis=1) <= (
+        radius[face_idx] + reach[face_idx] + half_len[seg_idx]
+    )
+    face_idx, seg_idx = face_idx[keep], seg_idx[keep]
+    order = np.lexsort((seg_idx, face_idx))
+    face_idx, seg_idx = face_idx[order], seg_idx[order]
+    face_start = np.zeros(n_faces + 1, np.int64)
+    np.cumsum(np.bincount(face_idx, minlength=n_faces), out=face_start[1:])
+    if len(seg_idx) == 0:
+        seg_idx = np.zeros(1, np.int64)  # GL refuses empty buffers
+    return face_start.astype(np.uint32), seg_idx.astype(np.uint32)
+
+
+def _segment_buffer(segments: Segments) -> np.ndarray:
+    n = max(len(segments.a), 1)
+    buf = np.zeros((n, 4, 4), np.float32)
+    if len(segments.a):
+        buf[:, 0, :3] = segments.a
+        buf[:, 0, 3] = segments.width[:, 0]
+        buf[:, 1, :3] = segments.b
+        buf[:, 1, 3] = segments.width[:, 1]
+        buf[:, 2, 0:2] = segments.depth
+        buf[:, 2, 2:4] = segments.time
+        buf[:, 3, 0] = segments.crack_id
+    return buf
+
+
+def nearest_island_index(inside: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For every texel outside the islands, the flat index of the nearest inside texel.
+
+    Returns
+    -------
+    empty : (E,) int64
+        Flat indices of texels outside every island.
+    source : (E,) int64
+        Flat index of the nearest island texel for each.
+    distance : (E,) float32
+        Euclidean distance between them, texels.
+    """
+    h, w = inside.shape
+    empty = np.flatnonzero(~inside)
+    if len(empty) == 0 or not inside.any():
+        return empty, empty.copy(), np.zeros(len(empty), np.float32)
+    iy, ix = ndimage.distance_transform_edt(
+        ~inside, return_distances=False, return_indices=True
+    )
+    sy = iy.ravel()[empty].astype(np.int64)
+    sx = ix.ravel()[empty].astype(np.int64)
+    del iy, ix
+    ey, ex = np.divmod(empty, w)
+    dist = np.hypot((ey - sy).astype(np.float32), (ex - sx).astype(np.float32))
+    return empty, sy * w + sx, dist
+
+
+def dilate(
+    images: list[np.ndarray],
+    inside: np.ndarray,
+    limit: int | None = None,
+    background: list[float] | None = None,
+) -> None:
+    """Fill texels outside the islands from their nearest island texel, in place.
+
+    Parameters
+    ----------
+    images : list of (H, W) arrays
+        Channels to fill.
+    inside : (H, W) bool
+        Texels covered by a face.
+    limit : int, optional
+        Fill only texels within this many texels of an island; farther ones get ``background``.
+        ``None`` fills every texel (unbounded dilation).
+    background : list of float, optional
+        Value per image for texels beyond ``limit`` (default 0).
+    """
+    empty, source, dist = nearest_island_index(inside)
+    if len(empty) == 0:
+        return
+    if limit is not None:
+        far = dist > limit
+        far_idx = empty[far]
+        empty, source = empty[~far], source[~far]
+    for k, img in enumerate(images):
+        flat = img.reshape(-1)
+        flat[empty] = flat[source]
+        if limit is not None:
+            flat[far_idx] = 0.0 if background is None else background[k]
+
+
+def bake_cracks(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    segments: Segments,
+    res: int,
+    max_distance: float | None = None,
+    profile_shape: float = 1.0,
+    dilate_px: int | None = None,
+    tile: int = DEFAULT_TILE,
+    ctx=None,
+) -> CrackMaps:
+    """Bake crack segments into UV-space maps of the given triangles.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        World positions of the triangles to bake (the asset in its UV atlas, or any other set).
+    faces : (F, 3) int
+        Triangles indexing ``vertices`` and ``uv``.
+    uv : (V, 2) float
+        Texture coordinates in [0, 1], v up.
+    segments : Segments
+        Crack segments in world space (``crackbake.network.segments``).
+    res : int
+        Output edge in texels (square).
+    max_distance : float, optional
+        Clamp of the distance channel and reach of the id/width/time channels, mesh units.
+        Default 2 % of the bounding-box diagonal.
+    profile_shape : float
+        Depth profile exponent across the crack: depth = D (1 - |x| / half_width) ** shape;
+        1 is a V, 0.5 a rounded U, 2 a sharp slot.
+    dilate_px : int, optional
+        Limit of the gutter fill in texels; ``None`` fills every empty texel.
+    tile : int
+        Largest framebuffer edge; bigger images are drawn tile by tile.
+    ctx : moderngl.Context, optional
+        Context to reuse; one is created (and released) when not given.
+
+    Returns
+    -------
+    CrackMaps
+    """
+    import moderngl
+
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    vertices = np.asarray(vertices, np.float64)
+    faces = np.asarray(faces, np.int64)
+    uv = np.asarray(uv, np.float64)
+    if not 1 <= res <= 16384:
+        raise CrackbakeError(f"bake resolution {res} is out of range; use 64..16384")
+    if profile_shape <= 0:
+        raise CrackbakeError(f"profile shape {profile_shape} must be > 0 (1 = V profile)")
+    diagonal = float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
+    if max_distance is None:
+        max_distance = DEFAULT_MAX_DISTANCE_FRACTION * diagonal
+    if not max_distance > 0:
+        raise CrackbakeError(f"max distance {max_distance} must be > 0 (mesh units)")
+    if len(segments.a) and max_distance < 0.5 * float(segments.width.max()):
+        widest = float(segments.width.max())
+        warnings.warn(
+            f"max distance {max_distance:g} is below the widest crack's half width; "
+            f"raising it to {widest:g} so wide cracks are not cut",
+            CrackbakeWarning,
+            stacklevel=2,
+        )
+        max_distance = widest
+
+    face_start, cand = face_candidates(vertices, faces, uv, segments, res, max_distance)
+    timings["candidates"] = time.perf_counter() - t0
+
+    own_ctx = ctx is None
+    if own_ctx:
+        ctx = create_context()
+    try:
+        t1 = time.perf_counter()
+        # Non-indexed corners so gl_PrimitiveID is the face index.
+        corner = np.empty((len(faces) * 3, 5), np.float32)
+        corner[:, 0:2] = uv[faces].reshape(-1, 2)
+        corner[:, 2:5] = vertices[faces].reshape(-1, 3)
+        prog = ctx.program(
+            vertex_shader=shader_source("crack_bake.vert"),
+            fragment_shader=shader_source("crack_bake.frag"),
+        )
+        vbo = ctx.buffer(corner.tobytes())
+        vao = ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")])
+        ssbo_seg = ctx.buffer(_segment_buffer(segments).tobytes())
+        ssbo_start = ctx.buffer(face_start.tobytes())
+        ssbo_cand = ctx.buffer(cand.tobytes())
+        ssbo_seg.bind_to_storage_buffer(0)
+        ssbo_start.bind_to_storage_buffer(1)
+        ssbo_cand.bind_to_storage_buffer(2)
+        prog["u_res"].value = float(res)
+        prog["u_max_distance"].value = float(max_distance)
+        prog["u_shape"].value = float(profile_shape)
+
+        # Full-width bands of at most tile*tile texels: each band reads straight into the rows
+        # of the planar channel images (no interleaved copy), and GL memory stays bounded.
+        band = max(1, min(res, (tile * tile) // res))
+        names = ("mask", "width", "time", "depth", "distance", "id", "inside")
+        dtypes = ("f2", "f2", "f2", "f4", "f4", "f4", "f1")
+        images = {
+            n: np.empty((res, res), {"f1": np.uint8, "f2": np.float16, "f4": np.float32}[d])
+            for n, d in zip(names, dtypes, strict=True)
+        }
+        textures = [ctx.texture((res, band), 1, dtype=d) for d in dtypes]
+        fbo = ctx.framebuffer(color_attachments=textures)
+        fbo.use()
+        ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        timings["setup"] = time.perf_counter() - t1
+        t_draw = t_read = 0.0
+        for y0 in range(0, res, band):
+            h = min(band, res - y0)
+            ta = time.perf_counter()
+            fbo.clear(0.0, 0.0, 0.0, 0.0)
+            prog["u_tile"].value = (0.0, float(y0), float(res), float(band))
+            vao.render(moderngl.TRIANGLES)
+            ctx.finish()
+            tb = time.perf_counter()
+            for k, (n, d) in enumerate(zip(names, dtypes, strict=True)):
+                fbo.read_into(
+                    images[n][y0 : y0 + h],
+                    viewport=(0, 0, res, h),
+                    components=1,
+                    attachment=k,
+                    dtype=d,
+                )
+            t_draw += tb - ta
+            t_read += time.perf_counter() - tb
+        timings["render"] = t_draw
+        timings["readback"] = t_read
+        for obj in (fbo, *textures, vao, vbo, ssbo_seg, ssbo_start, ssbo_cand, prog):
+            obj.release()
+    finally:
+        if own_ctx:
+            ctx.release()
+
+    mask, width, time_ch = images["mask"], images["width"], images["time"]
+    depth, distance, crack_id = images["depth"], images["distance"], images["id"]
+    inside = images.pop("inside") > 0
+
+    t3 = time.perf_counter()
+    dilate(
+        [mask, width, time_ch, depth, distance, crack_id],
+        inside,
+        limit=dilate_px,
+        background=[0.0, 0.0, 0.0, 0.0, max_distance, -1.0],
+    )
+    timings["dilate"] = time.perf_counter() - t3
+    return CrackMaps(
+        res=res,
+        mask=mask,
+        width=width,
+        time=time_ch,
+        depth=depth,
+        distance=distance,
+        crack_id=crack_id,
+        inside=inside,
+        max_distance=float(max_distance),
+        profile_shape=float(profile_shape),
+        timings=timings,
+    )

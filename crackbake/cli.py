@@ -1,0 +1,218 @@
+"""The ``crackbake`` command: parses options, builds :class:`RunParams`, calls the pipeline."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import click
+
+from crackbake import __version__
+from crackbake.errors import CrackbakeError
+from crackbake.params import FORMATS, RES_MAX, RES_MIN, RunParams, parse_impact
+
+EPILOG = """\b
+Examples:
+  # bake a crack network (cracks.json) onto spot's own UVs at 4096x4096
+  crackbake examples/spot.obj --cracks cracks.json --res 4096
+\b
+  # a mesh without UVs: unwrap it with xatlas (cached), write EXR + GLB only
+  crackbake statue.ply --cracks cracks.json --uv unwrap --formats exr,glb -o out/
+\b
+  # scripted batch use: quiet, machine-readable summary on stdout
+  crackbake wall.glb --cracks wall_cracks.json --quiet --json > run.json
+\b
+Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.mask, crack.width,
+crack.depth, crack.time, crack.id, crack.distance), <stem>_mask.png, <stem>_depth.png,
+<stem>.glb, cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
+"""
+
+
+def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
+    items = tuple(v.strip().lower() for v in value.split(",") if v.strip())
+    bad = [v for v in items if v not in FORMATS]
+    if bad or not items:
+        raise click.BadParameter(f"use a comma-separated subset of {','.join(FORMATS)}")
+    return items
+
+
+@click.command(
+    epilog=EPILOG,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+)
+@click.argument("mesh", type=click.Path(path_type=Path))
+@click.option(
+    "--impact",
+    "impacts",
+    multiple=True,
+    metavar="X,Y,Z[:R[:S]]",
+    help="Impact point, optional radius (mesh units) and strength. Repeatable.",
+)
+@click.option(
+    "--cracks",
+    type=click.Path(path_type=Path),
+    help="Bake this crack network (a cracks.json sidecar) instead of solving.",
+)
+@click.option(
+    "--res",
+    type=int,
+    default=2048,
+    show_default=True,
+    help=f"Texture size in texels ({RES_MIN}..{RES_MAX}).",
+)
+@click.option(
+    "-o", "--out", type=click.Path(path_type=Path), help="Output folder [./<mesh-stem>_cracks/]."
+)
+@click.option(
+    "--uv",
+    type=click.Choice(["auto", "keep", "unwrap"]),
+    default="auto",
+    show_default=True,
+    help="auto: keep usable UVs, else unwrap with xatlas.",
+)
+@click.option(
+    "--padding",
+    type=int,
+    help="xatlas chart gutter in texels [about res/256, at least 2].",
+)
+@click.option(
+    "--dilate",
+    type=int,
+    help="Limit the gutter fill to this many texels [fill every empty texel].",
+)
+@click.option(
+    "--max-distance",
+    type=float,
+    help="Clamp of crack.distance in mesh units [2% of the bounding-box diagonal].",
+)
+@click.option(
+    "--profile",
+    type=float,
+    default=1.0,
+    show_default=True,
+    help="Crack depth profile exponent: 1 = V, 0.5 = rounded U, 2 = sharp slot.",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option(
+    "--formats",
+    default=",".join(FORMATS),
+    show_default=True,
+    callback=_split_formats,
+    help="Which outputs to write (cracks.json, cracks.obj and manifest.json always are).",
+)
+@click.option("--float", "float32", is_flag=True, help="Write every EXR channel as 32-bit float.")
+@click.option("--object", "object_name", help="Pick this object from a multi-object file.")
+@click.option(
+    "--unwrap-timeout",
+    type=float,
+    default=300.0,
+    show_default=True,
+    help="Seconds xatlas may run before giving up.",
+)
+@click.option("--no-cache", is_flag=True, help="Do not read or write the unwrap cache.")
+@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+@click.option("-v", "--verbose", is_flag=True, help="Print stage timings and details.")
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout."
+)
+@click.version_option(__version__, "-V", "--version", prog_name="crackbake")
+def main(
+    mesh: Path,
+    impacts: tuple[str, ...],
+    cracks: Path | None,
+    res: int,
+    out: Path | None,
+    uv: str,
+    padding: int | None,
+    dilate: int | None,
+    max_distance: float | None,
+    profile: float,
+    seed: int,
+    formats: tuple[str, ...],
+    float32: bool,
+    object_name: str | None,
+    unwrap_timeout: float,
+    no_cache: bool,
+    quiet: bool,
+    verbose: bool,
+    as_json: bool,
+) -> None:
+    """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
+    from crackbake.mesh import CrackbakeWarning
+    from crackbake.pipeline import run
+
+    t0 = time.perf_counter()
+
+    def err(msg: str) -> None:
+        click.echo(msg, err=True)
+
+    def progress(msg: str) -> None:
+        if not quiet:
+            elapsed = f"[{time.perf_counter() - t0:6.1f}s] " if verbose else ""
+            err(f"{elapsed}{msg}")
+
+    recorded: list[str] = []
+
+    def show(message, category, *_args, **_kwargs) -> None:
+        recorded.append(str(message))
+        if not quiet:
+            err(f"warning: {message}")
+
+    try:
+        params = RunParams(
+            mesh=mesh,
+            out=out,
+            impacts=tuple(parse_impact(t) for t in impacts),
+            cracks=cracks,
+            res=res,
+            uv=uv,
+            padding=padding,
+            dilate=dilate,
+            max_distance=max_distance,
+            profile=profile,
+            seed=seed,
+            formats=formats,
+            float32=float32,
+            object_name=object_name,
+            unwrap_timeout=unwrap_timeout,
+            cache=not no_cache,
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", CrackbakeWarning)
+            warnings.showwarning = show
+            result = run(params, progress=progress)
+    except CrackbakeError as exc:
+        err(f"error: {exc}")
+        sys.exit(exc.exit_code)
+    except KeyboardInterrupt:
+        err("interrupted; no outputs were written")
+        sys.exit(130)
+    except Exception as exc:  # a bug: say so, keep the traceback behind --verbose
+        if verbose:
+            raise
+        err(f"internal error: {type(exc).__name__}: {exc} (rerun with --verbose for details)")
+        sys.exit(1)
+
+    result.warnings = recorded
+    if as_json:
+        click.echo(json.dumps(result.summary(), indent=2))
+    if not quiet:
+        m = result.manifest
+        err(
+            f"mesh: {m['mesh']['vertices']} vertices, {m['mesh']['faces']} faces, "
+            f"UVs {m['uv']['method']}; cracks: {m['cracks']['cracks']} "
+            f"({m['cracks']['points']} points)"
+        )
+        if verbose:
+            for stage, secs in m["timings_s"].items():
+                err(f"  {stage:<8} {secs:8.3f} s")
+        err(f"wrote {len(result.files) + 1} files to {result.out_dir}/")
+        for f in result.files:
+            err(f"  {f['name']:<28} {f['bytes'] / 1e6:8.2f} MB")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,177 @@
+"""Typed run parameters and their validation.
+
+Everything the CLI can set lives in :class:`RunParams`; the library validates it (so scripts get
+the same clear errors as the command line) and the manifest records it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from crackbake.errors import CrackbakeError
+
+FORMATS = ("exr", "png", "glb")
+UV_MODES = ("auto", "keep", "unwrap")
+RES_MIN, RES_MAX = 64, 16384
+
+
+@dataclass(frozen=True)
+class Impact:
+    """An impact point: where the surface was hit, how wide and how hard.
+
+    Attributes
+    ----------
+    point : tuple of 3 float
+        Mesh units; snapped to the nearest surface point by the solver.
+    radius : float or None
+        Mesh units; ``None`` picks a default from the mesh size.
+    strength : float
+        Relative strength (1 = the preset's default).
+    """
+
+    point: tuple[float, float, float]
+    radius: float | None = None
+    strength: float = 1.0
+
+    def to_dict(self) -> dict:
+        return {"point": list(self.point), "radius": self.radius, "strength": self.strength}
+
+
+def parse_impact(text: str) -> Impact:
+    """Parse ``X,Y,Z[:RADIUS[:STRENGTH]]``.
+
+    Raises
+    ------
+    CrackbakeError
+        Malformed text, with the expected syntax.
+    """
+    syntax = "expected X,Y,Z[:RADIUS[:STRENGTH]], e.g. --impact 0.1,0.2,0.9:0.3:1.5"
+    parts = text.strip().split(":")
+    if not 1 <= len(parts) <= 3:
+        raise CrackbakeError(f"--impact '{text}': {syntax}")
+    try:
+        xyz = tuple(float(c) for c in parts[0].split(","))
+        radius = float(parts[1]) if len(parts) > 1 and parts[1] != "" else None
+        strength = float(parts[2]) if len(parts) > 2 else 1.0
+    except ValueError:
+        raise CrackbakeError(f"--impact '{text}': {syntax}") from None
+    if len(xyz) != 3 or not all(math.isfinite(c) for c in xyz):
+        raise CrackbakeError(f"--impact '{text}': {syntax}")
+    if radius is not None and not (math.isfinite(radius) and radius > 0):
+        raise CrackbakeError(f"--impact '{text}': the radius must be a positive number")
+    if not (math.isfinite(strength) and strength > 0):
+        raise CrackbakeError(f"--impact '{text}': the strength must be a positive number")
+    return Impact(point=xyz, radius=radius, strength=strength)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """Every parameter of one crackbake run.
+
+    Attributes
+    ----------
+    mesh : Path
+        Input mesh.
+    out : Path or None
+        Output folder; ``None`` means ``./<mesh-stem>_cracks/``.
+    impacts : tuple of Impact
+        Impact points for the solver.
+    cracks : Path or None
+        A ``cracks.json`` sidecar to bake instead of solving.
+    res : int
+        Texture edge in texels, 64..16384.
+    uv : str
+        ``auto`` (keep usable UVs, else unwrap), ``keep`` or ``unwrap``.
+    padding : int or None
+        xatlas chart gutter in texels; ``None`` = about res/256, at least 2.
+    dilate : int or None
+        Gutter fill limit in texels; ``None`` fills every empty texel.
+    max_distance : float or None
+        Clamp of the distance channel, mesh units; ``None`` = 2 % of the bounding-box diagonal.
+    profile : float
+        Depth profile exponent across a crack (1 = V).
+    seed : int
+        Random seed.
+    formats : tuple of str
+        Subset of ``exr``, ``png``, ``glb``.
+    float32 : bool
+        Write every EXR channel as 32-bit float.
+    object_name : str or None
+        Object to pick from a multi-object file.
+    unwrap_timeout : float
+        Seconds xatlas may run.
+    cache : bool
+        Use the unwrap cache.
+    tile : int
+        Largest framebuffer edge of the bake.
+    """
+
+    mesh: Path
+    out: Path | None = None
+    impacts: tuple[Impact, ...] = ()
+    cracks: Path | None = None
+    res: int = 2048
+    uv: str = "auto"
+    padding: int | None = None
+    dilate: int | None = None
+    max_distance: float | None = None
+    profile: float = 1.0
+    seed: int = 0
+    formats: tuple[str, ...] = FORMATS
+    float32: bool = False
+    object_name: str | None = None
+    unwrap_timeout: float = 300.0
+    cache: bool = True
+    tile: int = 4096
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def out_dir(self) -> Path:
+        return self.out if self.out is not None else Path(f"{Path(self.mesh).stem}_cracks")
+
+    def validate(self) -> RunParams:
+        """Check every value; return self so calls chain."""
+        if not RES_MIN <= self.res <= RES_MAX:
+            raise CrackbakeError(
+                f"--res {self.res} is out of range; use a value from {RES_MIN} to {RES_MAX}"
+            )
+        if self.uv not in UV_MODES:
+            raise CrackbakeError(f"--uv '{self.uv}' is unknown; use one of {', '.join(UV_MODES)}")
+        if self.padding is not None and self.padding < 0:
+            raise CrackbakeError(f"--padding {self.padding} must be >= 0 texels")
+        if self.dilate is not None and self.dilate < 0:
+            raise CrackbakeError(f"--dilate {self.dilate} must be >= 0 texels")
+        if self.max_distance is not None and not (
+            math.isfinite(self.max_distance) and self.max_distance > 0
+        ):
+            raise CrackbakeError(f"--max-distance {self.max_distance} must be > 0 (mesh units)")
+        if not (math.isfinite(self.profile) and self.profile > 0):
+            raise CrackbakeError(f"--profile {self.profile} must be > 0 (1 = V-shaped crack)")
+        if not self.formats:
+            raise CrackbakeError(f"--formats is empty; use a subset of {','.join(FORMATS)}")
+        bad = [f for f in self.formats if f not in FORMATS]
+        if bad:
+            raise CrackbakeError(
+                f"--formats: unknown format '{bad[0]}'; use a subset of {','.join(FORMATS)}"
+            )
+        if not self.unwrap_timeout > 0:
+            raise CrackbakeError(f"--unwrap-timeout {self.unwrap_timeout} must be > 0 seconds")
+        if not 256 <= self.tile <= 16384:
+            raise CrackbakeError(f"tile size {self.tile} is out of range; use 256..16384")
+        if self.seed < 0 or self.seed >= 2**63:
+            raise CrackbakeError(f"--seed {self.seed} must be a non-negative 64-bit integer")
+        return self
+
+    def to_dict(self) -> dict:
+        """JSON-ready dict of every effective parameter (paths as strings)."""
+        d = asdict(self)
+        d["mesh"] = str(self.mesh)
+        d["out"] = str(self.out_dir)
+        d["cracks"] = str(self.cracks) if self.cracks is not None else None
+        d["impacts"] = [i.to_dict() for i in self.impacts]
+        d["formats"] = list(self.formats)
+        extra = d.pop("extra")
+        d.update(extra)
+        return d

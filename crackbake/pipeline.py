@@ -1,0 +1,247 @@
+"""One crackbake run: the stages chained exactly as the ``crackbake`` command does.
+
+mesh -> crack network (sidecar, or the solver) -> UVs -> GPU bake -> files.  Each stage is its
+own module; this one only orders them, times them and decides what gets written.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from crackbake import __version__
+from crackbake.bake import CHANNELS, CrackMaps, bake_cracks
+from crackbake.errors import CrackbakeError
+from crackbake.export import OutputStage, sha256_file, write_exr, write_glb, write_png
+from crackbake.gl import create_context, renderer_info
+from crackbake.mesh import Mesh, load_mesh
+from crackbake.network import CrackNetwork, read_sidecar, segments, write_obj, write_sidecar
+from crackbake.params import RunParams
+from crackbake.uv import UVMesh, prepare_uvs
+
+#: Base colour of the GLB preview material: intact surface and crack interior (sRGB, 0..255).
+SURFACE_RGB = np.array([200, 196, 188], np.float32)
+CRACK_RGB = np.array([24, 20, 18], np.float32)
+
+ProgressFn = Callable[[str], None]
+
+
+@dataclass
+class RunResult:
+    """What a run produced.
+
+    Attributes
+    ----------
+    out_dir : Path
+        Folder holding the outputs.
+    files : list of dict
+        ``{"name", "bytes", "sha256"}`` for every file written except the manifest.
+    manifest : dict
+        The content of ``manifest.json``.
+    """
+
+    out_dir: Path
+    files: list[dict]
+    manifest: dict
+    mesh: Mesh | None = None
+    network: CrackNetwork | None = None
+    maps: CrackMaps | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    def summary(self) -> dict:
+        """Machine-readable summary (the CLI's ``--json`` output)."""
+        return {
+            "out_dir": str(self.out_dir),
+            "files": [f["name"] for f in self.files] + ["manifest.json"],
+            "mesh": self.manifest["mesh"],
+            "uv": self.manifest["uv"],
+            "cracks": self.manifest["cracks"],
+            "timings_s": self.manifest["timings_s"],
+            "warnings": self.warnings,
+        }
+
+
+def base_color(mask: np.ndarray) -> np.ndarray:
+    """sRGB uint8 (H, W, 3) preview colour: light surface, dark cracks."""
+    m = mask.astype(np.float32)[..., None]
+    rgb = SURFACE_RGB + (CRACK_RGB - SURFACE_RGB) * m
+    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+
+
+def _exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
+    chans = maps.channels()
+    if float32:
+        return {k: v.astype(np.float32, copy=False) for k, v in chans.items()}
+    # Types follow CHANNELS: half for bounded data, float where range or precision needs it.
+    out = {}
+    for name, arr in chans.items():
+        want = np.float16 if CHANNELS[name] == "half" else np.float32
+        out[name] = arr if arr.dtype == want else arr.astype(want)
+    return out
+
+
+def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
+    """Run crackbake end to end and write the output folder.
+
+    Parameters
+    ----------
+    params : RunParams
+        Validated here.
+    progress : callable, optional
+        Called with a short message at the start of each stage.
+
+    Returns
+    -------
+    RunResult
+
+    Raises
+    ------
+    CrackbakeError
+        Any bad input; nothing is left under a final output name.
+    """
+    say = progress or (lambda _msg: None)
+    params.validate()
+    timings: dict[str, float] = {}
+    t_start = time.perf_counter()
+
+    if params.cracks is None:
+        if params.impacts:
+            raise CrackbakeError(
+                "the crack solver is not available yet in this version; "
+                "bake an existing network with --cracks cracks.json"
+            )
+        raise CrackbakeError(
+            "nothing to bake: give --cracks cracks.json "
+            "(the solver's --impact is not available yet)"
+        )
+
+    say(f"loading {params.mesh}")
+    t = time.perf_counter()
+    mesh = load_mesh(params.mesh, params.object_name)
+    timings["load"] = time.perf_counter() - t
+
+    say(f"reading crack network {params.cracks}")
+    t = time.perf_counter()
+    network = read_sidecar(params.cracks, mesh)
+    timings["cracks"] = time.perf_counter() - t
+
+    say("preparing UVs")
+    t = time.perf_counter()
+    uvmesh: UVMesh = prepare_uvs(
+        mesh,
+        mode=params.uv,
+        res=params.res,
+        padding=params.padding,
+        timeout=params.unwrap_timeout,
+        cache=params.cache,
+    )
+    timings["unwrap"] = time.perf_counter() - t
+
+    say(f"baking {params.res}x{params.res}")
+    t = time.perf_counter()
+    ctx = create_context()
+    try:
+        gl_info = renderer_info(ctx)
+        maps = bake_cracks(
+            uvmesh.vertices,
+            uvmesh.faces,
+            uvmesh.uv,
+            segments(network),
+            params.res,
+            max_distance=params.max_distance,
+            profile_shape=params.profile,
+            dilate_px=params.dilate,
+            tile=params.tile,
+            ctx=ctx,
+        )
+    finally:
+        ctx.release()
+    timings["bake"] = time.perf_counter() - t
+
+    say(f"writing {params.out_dir}")
+    t = time.perf_counter()
+    out_dir = Path(params.out_dir)
+    stem = Path(params.mesh).stem
+    depth_max = float(maps.depth.max())
+    effective = params.to_dict()
+    effective.update(
+        {
+            "max_distance": maps.max_distance,
+            "padding": uvmesh.padding_px,
+            "uv_method": uvmesh.method,
+        }
+    )
+    with OutputStage(out_dir) as stage:
+        if "exr" in params.formats:
+            write_exr(
+                stage.path(f"{stem}_cracks.exr"),
+                _exr_channels(maps, params.float32),
+                attributes={
+                    "crackbake:version": __version__,
+                    "crackbake:units": "mesh",
+                    "crackbake:uvConvention": "texel (0,0) is UV (0,1): v up, top row first",
+                    "crackbake:depthProfile": f"V exponent {maps.profile_shape:g}",
+                    "crackbake:maxDistance": float(maps.max_distance),
+                },
+            )
+        if "png" in params.formats:
+            write_png(stage.path(f"{stem}_mask.png"), maps.mask, bits=8)
+            scale = depth_max if depth_max > 0 else 1.0
+            write_png(stage.path(f"{stem}_depth.png"), maps.depth / scale, bits=16)
+        if "glb" in params.formats:
+            write_glb(
+                stage.path(f"{stem}.glb"),
+                uvmesh.vertices,
+                uvmesh.faces,
+                uvmesh.uv,
+                uvmesh.normals,
+                base_color(maps.mask),
+                name=stem,
+            )
+        write_sidecar(network, stage.path("cracks.json"))
+        write_obj(network, stage.path("cracks.obj"))
+        files = stage.records()
+        timings["write"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - t_start
+        manifest = {
+            "crackbake": __version__,
+            "inputs": _inputs(params),
+            "params": effective,
+            "mesh": mesh.describe(),
+            "uv": {
+                "method": uvmesh.method,
+                "vertices": int(len(uvmesh.vertices)),
+                "overlap_fraction": float(uvmesh.overlap_fraction),
+                "padding_px": int(uvmesh.padding_px),
+            },
+            "cracks": network.stats(),
+            "maps": {
+                "resolution": params.res,
+                "depth_png_scale": depth_max,
+                "max_distance": maps.max_distance,
+                "covered_fraction": float(maps.inside.mean()),
+                "exr_channels": {
+                    k: ("float" if params.float32 else v) for k, v in CHANNELS.items()
+                },
+            },
+            "renderer": gl_info,
+            "files": files,
+            "timings_s": {k: round(v, 4) for k, v in timings.items()},
+        }
+        Path(stage.path("manifest.json")).write_text(json.dumps(manifest, indent=2) + "\n")
+        stage.commit(last=("manifest.json",))
+    return RunResult(
+        out_dir=out_dir, files=files, manifest=manifest, mesh=mesh, network=network, maps=maps
+    )
+
+
+def _inputs(params: RunParams) -> dict:
+    inputs = {"mesh": {"path": str(params.mesh), "sha256": sha256_file(params.mesh)}}
+    if params.cracks is not None:
+        inputs["cracks"] = {"path": str(params.cracks), "sha256": sha256_file(params.cracks)}
+    return inputs

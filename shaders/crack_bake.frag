@@ -1,0 +1,95 @@
+#version 430 core
+// Measures, in world units, the distance from this texel's surface point to the crack segments
+// listed for its asset face, and turns it into the crack channels.  Working in world space makes
+// the width independent of UV stretch and continuous across UV seams.
+
+struct Segment {
+    vec4 a;      // xyz start, w = width at start
+    vec4 b;      // xyz end,   w = width at end
+    vec4 dt;     // depth at start, depth at end, time at start, time at end
+    vec4 id;     // x = crack id
+};
+
+layout(std430, binding = 0) readonly buffer Segments { Segment seg[]; };
+layout(std430, binding = 1) readonly buffer FaceStart { uint face_start[]; };
+layout(std430, binding = 2) readonly buffer Candidates { uint cand[]; };
+
+uniform float u_max_distance;   // distance channel clamp, mesh units
+uniform float u_shape;          // depth profile exponent: 1 = V, < 1 fuller (U-like), > 1 sharper
+
+in vec3 v_world;
+
+// One single-channel target per map, so each reads back straight into its own image.
+layout(location = 0) out float o_mask;      // R16F
+layout(location = 1) out float o_width;     // R16F
+layout(location = 2) out float o_time;      // R16F
+layout(location = 3) out float o_depth;     // R32F
+layout(location = 4) out float o_distance;  // R32F
+layout(location = 5) out float o_id;        // R32F
+layout(location = 6) out float o_inside;    // R8
+
+void main() {
+    uint f = uint(gl_PrimitiveID);
+    vec3 p = v_world;
+    // World-space footprint of one texel; the surface is affine inside a face.
+    vec3 dpx = dFdx(p);
+    vec3 dpy = dFdy(p);
+    float texel_iso = 0.5 * (length(dpx) + length(dpy));
+
+    float best_d = u_max_distance;
+    float best_w = 0.0;
+    float best_time = 0.0;
+    float best_id = -1.0;
+    float coverage = 0.0;
+    float depth = 0.0;
+
+    for (uint k = face_start[f]; k < face_start[f + 1u]; ++k) {
+        Segment s = seg[cand[k]];
+        vec3 ab = s.b.xyz - s.a.xyz;
+        float len2 = dot(ab, ab);
+        float t = len2 > 0.0 ? clamp(dot(p - s.a.xyz, ab) / len2, 0.0, 1.0) : 0.0;
+        vec3 g = p - (s.a.xyz + t * ab);
+        float d = length(g);
+        float w = mix(s.a.w, s.b.w, t);
+        float hw = 0.5 * w;
+
+        // Texel size measured along the direction in which the distance grows, so the
+        // anti-aliasing ramp is one texel wide whatever the UV stretch.
+        float fw = texel_iso;
+        if (d > 1e-6 * texel_iso) {
+            vec3 gn = g / d;
+            fw = length(vec2(dot(gn, dpx), dot(gn, dpy)));
+        }
+        fw = max(fw, 1e-30);
+
+        float c;
+        float dd;
+        float depth_here = mix(s.dt.x, s.dt.y, t);
+        if (w >= fw) {
+            c = clamp((hw - d) / fw + 0.5, 0.0, 1.0);
+            float u = d / max(hw, 1e-30);
+            dd = u < 1.0 ? depth_here * pow(1.0 - u, u_shape) : 0.0;
+        } else {
+            // Thinner than a texel: draw it one texel wide and weight by the covered fraction,
+            // so the mask and the depth keep the crack's area-averaged value.
+            float frac = w / fw;
+            c = clamp((0.5 * fw - d) / fw + 0.5, 0.0, 1.0) * frac;
+            dd = depth_here * c / (u_shape + 1.0);
+        }
+        coverage = max(coverage, c);
+        depth = max(depth, dd);
+        if (d < best_d) {
+            best_d = d;
+            best_w = w;
+            best_time = mix(s.dt.z, s.dt.w, t);
+            best_id = s.id.x;
+        }
+    }
+    o_mask = coverage;
+    o_width = best_w;
+    o_time = best_time;
+    o_depth = depth;
+    o_distance = best_d;
+    o_id = best_id;
+    o_inside = 1.0;
+}

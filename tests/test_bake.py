@@ -1,0 +1,247 @@
+"""GPU bake on a real EGL context (Mesa llvmpipe here): widths, seams, anti-aliasing, padding."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crackbake.bake import bake_cracks, dilate, face_candidates, nearest_island_index
+from crackbake.errors import CrackbakeError
+from crackbake.gl import create_context
+from crackbake.network import Segments
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    c = create_context()
+    yield c
+    c.release()
+
+
+def make_segments(a, b, width, depth=None, time=(0.0, 1.0), ids=None) -> Segments:
+    a = np.atleast_2d(np.asarray(a, float))
+    b = np.atleast_2d(np.asarray(b, float))
+    n = len(a)
+    w = np.broadcast_to(np.asarray(width, float), (n, 2)).copy()
+    d = w * 0.5 if depth is None else np.broadcast_to(np.asarray(depth, float), (n, 2)).copy()
+    t = np.broadcast_to(np.asarray(time, float), (n, 2)).copy()
+    ids = np.arange(n) if ids is None else np.asarray(ids)
+    return Segments(a=a, b=b, width=w, depth=d, time=t, crack_id=ids.astype(np.int64))
+
+
+def plate(uv_of_xy):
+    """Unit square in z = 0 as two triangles; UVs from a function of (x, y)."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    return v, f, np.array([uv_of_xy(x, y) for x, y, _ in v], float)
+
+
+def col_of(u, res):
+    return int(np.floor(u * res))
+
+
+def row_of(v, res):
+    return int(np.floor((1.0 - v) * res))
+
+
+def test_width_in_world_units_on_stretched_uvs(ctx):
+    res = 512
+    # v is squashed 4x: one world unit spans res/4 texels along v but res texels along u.
+    v, f, uv = plate(lambda x, y: (x, y / 4))
+    w = 0.04
+    segs = make_segments(
+        [[0.1, 0.5, 0], [0.25, 0.6, 0]], [[0.9, 0.5, 0], [0.25, 0.95, 0]], width=w
+    )
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=ctx)
+    mask = m.mask.astype(np.float64)
+    # Horizontal crack: its width runs along v -> w * res / 4 texels down a column.
+    col = col_of(0.6, res)
+    rows = slice(row_of(0.25, res), row_of(0.0, res))
+    assert mask[rows, col].sum() == pytest.approx(w * res / 4, abs=0.05)
+    # Vertical crack: its width runs along u -> w * res texels along a row.
+    row = row_of(0.8 / 4, res)
+    assert mask[row, :].sum() == pytest.approx(w * res, abs=0.05)
+    # The width channel holds the world width, not a texel count.
+    assert float(m.width[row, col_of(0.25, res)]) == pytest.approx(w, rel=2e-3)
+
+
+def test_antialiased_coverage_is_exact_area_for_straight_edges(ctx):
+    """For a straight crack along a texel axis, the one-texel ramp equals the exact covered area."""
+    res = 256
+    v, f, uv = plate(lambda x, y: (x, y))
+    w_tex = 3.3
+    for shift in (0.0, 0.3, 0.65):
+        y = 0.5 + shift / res
+        segs = make_segments([[0.1, y, 0]], [[0.9, y, 0]], width=w_tex / res)
+        m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=ctx)
+        column = m.mask[:, res // 2].astype(np.float64)
+        # A fractional value shows the edge is anti-aliased, not a hard step.
+        assert ((column > 0.05) & (column < 0.95)).any()
+        centre = (1.0 - y) * res  # in texel rows from the top
+        lo, hi = centre - w_tex / 2, centre + w_tex / 2
+        rows = np.arange(res)
+        exact = np.clip(np.minimum(rows + 1, hi) - np.maximum(rows, lo), 0, 1)
+        np.testing.assert_allclose(column, exact, atol=2e-3)
+
+
+def test_thin_crack_keeps_its_area(ctx):
+    res = 256
+    v, f, uv = plate(lambda x, y: (x, y))
+    w = 0.3 / res
+    segs = make_segments([[0.1, 0.5013, 0]], [[0.9, 0.5013, 0]], width=w)
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=ctx)
+    column = m.mask[:, res // 2].astype(np.float64)
+    assert column.sum() == pytest.approx(0.3, abs=0.02)
+    assert column.max() < 0.35
+
+
+def test_channels_values(ctx):
+    res = 256
+    v, f, uv = plate(lambda x, y: (x, y))
+    w, dmax = 0.04, 0.01
+    segs = make_segments([[0.1, 0.5, 0]], [[0.9, 0.5, 0]], width=w, depth=dmax, ids=[7])
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.1, ctx=ctx)
+    r, c = row_of(0.5, res), col_of(0.5, res)  # texel centre half a texel from the crack
+    assert float(m.crack_id[r, c]) == 7
+    assert float(m.time[r, c]) == pytest.approx((0.5 + 0.5 / res - 0.1) / 0.8, abs=2e-3)
+    assert float(m.depth[r, c]) == pytest.approx(dmax * (1 - (0.5 / res) / (w / 2)), rel=1e-4)
+    assert float(m.distance[r, c]) == pytest.approx(0.5 / res, rel=1e-3)
+    # Far from the crack: no id, distance clamped.
+    far_r = row_of(0.9, res)
+    assert float(m.crack_id[far_r, c]) == -1
+    assert float(m.distance[far_r, c]) == pytest.approx(0.1)
+    assert float(m.mask[far_r, c]) == 0
+    # Past the crack's end the distance is to the end point.
+    r2, c2 = row_of(0.5, res), col_of(0.95, res)
+    x2, y2 = (c2 + 0.5) / res, 1 - (r2 + 0.5) / res
+    assert float(m.distance[r2, c2]) == pytest.approx(np.hypot(x2 - 0.9, y2 - 0.5), rel=1e-4)
+
+
+def test_continuous_across_uv_seam(ctx):
+    """A crack crossing a UV seam continues on both islands with the same width and depth."""
+    res = 512
+    s = 0.4  # UV units per world unit on both islands
+    vertices = np.array(
+        [[0, 0, 0], [0.5, 0, 0], [0.5, 1, 0], [0, 1, 0],  # left half
+         [0.5, 0, 0], [1, 0, 0], [1, 1, 0], [0.5, 1, 0]],  # right half, seam copies
+        float,
+    )
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    uv = np.empty((8, 2))
+    uv[:4] = 0.05 + s * vertices[:4, :2]  # left island as is
+    # Right island rotated 90 degrees: x runs along v, y along u.
+    uv[4:, 0] = 0.55 + s * vertices[4:, 1]
+    uv[4:, 1] = 0.55 + s * (vertices[4:, 0] - 0.5)
+    w, dmax = 0.03, 0.01
+    segs = make_segments([[0.2, 0.5, 0]], [[0.8, 0.5, 0]], width=w, depth=dmax)
+    m = bake_cracks(vertices, faces, uv, segs, res, max_distance=0.05, dilate_px=0, ctx=ctx)
+    mask = m.mask.astype(np.float64)
+    expected = w * s * res
+    # Left island: the crack runs along u; the seam is at u = 0.25. Sum down the column next to it.
+    left_col = col_of(0.25, res) - 1
+    left = mask[row_of(0.45, res) : row_of(0.05, res), left_col]
+    # Right island: the crack runs along v; the seam is at v = 0.55. Sum along the row next to it.
+    right_row = row_of(0.55, res) - 1
+    right = mask[right_row, col_of(0.55, res) : col_of(0.95, res)]
+    assert left.sum() == pytest.approx(expected, abs=0.05)
+    assert right.sum() == pytest.approx(expected, abs=0.05)
+    dl = m.depth[row_of(0.45, res) : row_of(0.05, res), left_col].max()
+    dr = m.depth[right_row, col_of(0.55, res) : col_of(0.95, res)].max()
+    assert dl == pytest.approx(dr, rel=0.02)
+    assert dl > 0.8 * dmax
+
+
+def test_unbounded_and_limited_dilation(ctx):
+    res = 256
+    v, f, uv = plate(lambda x, y: (0.25 + 0.5 * x, 0.25 + 0.5 * y))
+    segs = make_segments([[0.0, 0.5, 0]], [[1.0, 0.5, 0]], width=0.05, ids=[3])
+    full = bake_cracks(v, f, uv, segs, res, max_distance=0.1, ctx=ctx)
+    assert full.inside.mean() == pytest.approx(0.25, abs=0.01)
+    r = row_of(0.5, res) - 1
+    # Unbounded: the crack's row continues to the image border, and the far corner is filled.
+    assert float(full.mask[r, 0]) == pytest.approx(float(full.mask[r, res // 2]), abs=1e-3)
+    assert float(full.crack_id[r, 0]) == 3
+    assert float(full.crack_id[0, 0]) == -1  # the island's corner is far from the crack
+    assert float(full.distance[0, 0]) == pytest.approx(float(full.distance[res // 4, res // 4]))
+    # Limited to 4 texels: 3 texels out is filled, 10 texels out is background.
+    lim = bake_cracks(v, f, uv, segs, res, max_distance=0.1, dilate_px=4, ctx=ctx)
+    edge = col_of(0.25, res)
+    assert float(lim.mask[r, edge - 3]) > 0.5
+    assert float(lim.mask[r, edge - 10]) == 0
+    assert float(lim.crack_id[r, edge - 10]) == -1
+    assert float(lim.distance[r, edge - 10]) == pytest.approx(0.1)
+
+
+def test_tiled_bake_matches_single_pass(ctx):
+    res = 512
+    v, f, uv = plate(lambda x, y: (x, y))
+    rng = np.random.default_rng(1)
+    a = rng.random((40, 3)) * [1, 1, 0]
+    b = a + (rng.random((40, 3)) - 0.5) * [0.3, 0.3, 0]
+    segs = make_segments(a, b, width=rng.random((40, 2)) * 0.01)
+    one = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=512, ctx=ctx)
+    tiled = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=256, ctx=ctx)  # 4 bands
+    for name, arr in one.channels().items():
+        np.testing.assert_allclose(
+            tiled.channels()[name].astype(np.float64), arr.astype(np.float64),
+            atol=2e-3, err_msg=name,
+        )
+
+
+def test_face_candidates_cover_every_segment_within_reach():
+    rng = np.random.default_rng(0)
+    v, f, uv = plate(lambda x, y: (x, y))
+    a = rng.random((200, 3)) * [1, 1, 0]
+    b = a + (rng.random((200, 3)) - 0.5) * 0.05 * [1, 1, 0]
+    segs = make_segments(a, b, width=0.001)
+    start, cand = face_candidates(v, f, uv, segs, 256, max_distance=0.05)
+    assert start[0] == 0 and start[-1] == len(cand) or (start[-1] == 0 and len(cand) == 1)
+    # Every segment lies on the plate, so both faces must list those within reach of them.
+    for face in range(2):
+        listed = set(cand[start[face] : start[face + 1]].tolist())
+        tri = v[f[face]][:, :2]
+        mid = 0.5 * (a + b)[:, :2]
+
+        def side(p, q, pts):
+            return (q[0] - p[0]) * (pts[:, 1] - p[1]) - (q[1] - p[1]) * (pts[:, 0] - p[0])
+
+        inside = (
+            (side(tri[0], tri[1], mid) >= 0)
+            & (side(tri[1], tri[2], mid) >= 0)
+            & (side(tri[2], tri[0], mid) >= 0)
+        )
+        assert set(np.flatnonzero(inside).tolist()) <= listed
+
+
+def test_nearest_island_index_matches_brute_force():
+    rng = np.random.default_rng(3)
+    inside = rng.random((40, 50)) < 0.05
+    empty, source, dist = nearest_island_index(inside)
+    iy, ix = np.nonzero(inside)
+    for e, s, d in zip(empty[::37], source[::37], dist[::37], strict=True):
+        ey, ex = divmod(int(e), 50)
+        brute = np.hypot(iy - ey, ix - ex).min()
+        assert d == pytest.approx(brute, abs=1e-5)
+        assert inside.reshape(-1)[s]
+    img = rng.random((40, 50)).astype(np.float32)
+    before = img.copy()
+    dilate([img], inside)
+    assert np.array_equal(img[inside], before[inside])
+
+
+def test_bad_arguments(ctx):
+    v, f, uv = plate(lambda x, y: (x, y))
+    segs = make_segments([[0.1, 0.5, 0]], [[0.9, 0.5, 0]], width=0.01)
+    with pytest.raises(CrackbakeError, match="resolution"):
+        bake_cracks(v, f, uv, segs, 0, ctx=ctx)
+    with pytest.raises(CrackbakeError, match="profile"):
+        bake_cracks(v, f, uv, segs, 64, profile_shape=0, ctx=ctx)
+
+
+def test_no_cracks_bakes_clean_maps(ctx):
+    v, f, uv = plate(lambda x, y: (x, y))
+    segs = make_segments(np.zeros((0, 3)), np.zeros((0, 3)), width=0.0)
+    m = bake_cracks(v, f, uv, segs, 64, max_distance=0.2, ctx=ctx)
+    assert float(m.mask.max()) == 0
+    assert (m.crack_id == -1).all()
+    assert np.allclose(m.distance, 0.2)
