@@ -1,0 +1,145 @@
+"""Mesh loading: every format through real files, UV seams kept, clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from crackbake.errors import CrackbakeError
+from crackbake.mesh import CrackbakeWarning, load_mesh, vertex_normals, weld_by_position
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
+
+CUBE_OBJ = """\
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+vt 0.0 0.0
+vt 0.25 0.0
+vt 0.25 0.25
+vt 0.0 0.25
+vt 0.5 0.5
+vt 0.75 0.5
+vt 0.75 0.75
+vt 0.5 0.75
+f 1/1 4/4 3/3 2/2
+f 5/5 6/6 7/7 8/8
+f 1/1 2/2 6/6 5/5
+f 2/2 3/3 7/7 6/6
+f 3/3 4/4 8/8 7/7
+f 4/4 1/1 5/5 8/8
+"""
+
+
+def test_example_spot_keeps_uv_seams():
+    m = load_mesh(EXAMPLE)
+    assert len(m.faces) == 5856
+    assert m.uv is not None and m.uv.shape == (len(m.vertices), 2)
+    wv, wf, inverse = weld_by_position(m.vertices, m.faces)
+    # spot has UV seams: welding by position merges the seam copies.
+    assert len(wv) < len(m.vertices)
+    assert np.array_equal(wv[inverse], m.vertices)
+    assert np.array_equal(wv[wf], m.vertices[m.faces])
+    d = m.describe()
+    assert d["faces"] == 5856 and d["has_uv"] is True
+    assert np.allclose(np.linalg.norm(m.normals, axis=1), 1.0)
+
+
+def test_quads_are_triangulated_and_uvs_follow_corners(tmp_path):
+    p = tmp_path / "cube.obj"
+    p.write_text(CUBE_OBJ)
+    m = load_mesh(p)
+    assert len(m.faces) == 12
+    # Each triangle's corner UVs are the ones the OBJ gave that position (the file's pairing
+    # of v and vt), so no seam was dropped.
+    text_v = np.array([[float(x) for x in ln.split()[1:]] for ln in CUBE_OBJ.splitlines()
+                       if ln.startswith("v ")])
+    text_vt = np.array([[float(x) for x in ln.split()[1:]] for ln in CUBE_OBJ.splitlines()
+                        if ln.startswith("vt ")])
+    pairs = {tuple(text_v[i]): set() for i in range(8)}
+    for ln in CUBE_OBJ.splitlines():
+        if ln.startswith("f "):
+            for c in ln.split()[1:]:
+                vi, ti = (int(x) - 1 for x in c.split("/"))
+                pairs[tuple(text_v[vi])].add(tuple(text_vt[ti]))
+    for pos, uv in zip(m.vertices, m.uv, strict=True):
+        assert tuple(np.round(uv, 6)) in {tuple(np.round(t, 6)) for t in pairs[tuple(pos)]}
+
+
+@pytest.mark.parametrize("ext", ["ply", "stl", "off", "glb"])
+def test_formats_load(tmp_path, ext):
+    src = trimesh.creation.annulus(r_min=0.5, r_max=1.0, height=0.2, sections=24)
+    p = tmp_path / f"ring.{ext}"
+    src.export(p)
+    m = load_mesh(p)
+    assert m.faces.shape[1] == 3
+    assert len(m.faces) == len(src.faces)
+    assert np.allclose(m.bbox_min, src.bounds[0]) and np.allclose(m.bbox_max, src.bounds[1])
+
+
+def test_gltf_with_uvs_and_scene_objects(tmp_path):
+    a = trimesh.creation.box(extents=(1, 1, 1))
+    b = trimesh.creation.box(extents=(1, 1, 1))
+    b.apply_translation((3, 0, 0))
+    for g in (a, b):
+        g.visual = trimesh.visual.TextureVisuals(uv=np.random.default_rng(0).random((8, 2)))
+    scene = trimesh.Scene()
+    scene.add_geometry(a, geom_name="left", node_name="left")
+    scene.add_geometry(b, geom_name="right", node_name="right")
+    p = tmp_path / "two.gltf"
+    scene.export(p)
+    with pytest.warns(CrackbakeWarning, match="concatenating"):
+        both = load_mesh(p)
+    assert len(both.faces) == 24 and both.uv is not None
+    right = load_mesh(p, object_name="right")
+    assert len(right.faces) == 12
+    assert right.bbox_min[0] == pytest.approx(2.5)  # node transform applied
+    with pytest.raises(CrackbakeError, match="no object named 'middle'.*left.*right"):
+        load_mesh(p, object_name="middle")
+
+
+def test_vertex_normals_are_smooth_across_seams():
+    m = load_mesh(EXAMPLE)
+    n = vertex_normals(m.vertices, m.faces)
+    _, _, inverse = weld_by_position(m.vertices, m.faces)
+    # Seam copies (same welded index) get the same normal.
+    for idx in np.flatnonzero(np.bincount(inverse) > 1)[:50]:
+        copies = np.flatnonzero(inverse == idx)
+        assert np.allclose(n[copies], n[copies[0]])
+
+
+def test_errors(tmp_path):
+    with pytest.raises(CrackbakeError, match="file not found"):
+        load_mesh(tmp_path / "nope.obj")
+    bad = tmp_path / "mesh.xyz"
+    bad.write_text("1 2 3\n")
+    with pytest.raises(CrackbakeError, match="unsupported format '.xyz'"):
+        load_mesh(bad)
+    empty = tmp_path / "empty.obj"
+    empty.write_text("# nothing\n")
+    with pytest.raises(CrackbakeError, match="no triangles"):
+        load_mesh(empty)
+    cloud = tmp_path / "cloud.ply"
+    trimesh.PointCloud(np.random.default_rng(0).random((20, 3))).export(cloud)
+    with pytest.raises(CrackbakeError, match="point cloud"):
+        load_mesh(cloud)
+    nan = tmp_path / "nan.obj"
+    nan.write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
+    with pytest.raises(CrackbakeError, match="NaN"):
+        load_mesh(nan)
+    flat = tmp_path / "flat.obj"
+    flat.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    with pytest.raises(CrackbakeError, match="zero area"):
+        load_mesh(flat)
+    garbage = tmp_path / "garbage.glb"
+    garbage.write_bytes(b"not a glb at all")
+    with pytest.raises(CrackbakeError, match="could not read"):
+        load_mesh(garbage)

@@ -1,0 +1,260 @@
+"""End to end through the library and the CLI: real EGL, real files, re-read independently."""
+
+from __future__ import annotations
+
+import json
+import struct
+import subprocess
+import sys
+from io import BytesIO
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+from click.testing import CliRunner
+from PIL import Image
+
+from crackbake import __version__
+from crackbake.cli import main
+from crackbake.mesh import load_mesh
+from crackbake.network import Crack, CrackNetwork, mesh_info, write_sidecar
+from crackbake.params import RunParams
+from crackbake.pipeline import run
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# A 2x1 plate whose UV island is offset and non-uniformly placed, so any flip or transpose of
+# the image or of the GLB's v shows up.  u = 0.1 + 0.4 x, v = 0.2 + 0.6 y.
+PLATE_OBJ = """\
+v 0 0 0
+v 2 0 0
+v 2 1 0
+v 0 1 0
+vt 0.1 0.2
+vt 0.9 0.2
+vt 0.9 0.8
+vt 0.1 0.8
+f 1/1 2/2 3/3
+f 1/1 3/3 4/4
+"""
+
+
+def plate_uv(x: float, y: float) -> tuple[float, float]:
+    return 0.1 + 0.4 * x, 0.2 + 0.6 * y
+
+
+@pytest.fixture
+def plate(tmp_path) -> tuple[Path, Path, tuple[float, float, float]]:
+    """Plate OBJ and a sidecar with one short crack around the world point (1.5, 0.75, 0)."""
+    obj = tmp_path / "plate.obj"
+    obj.write_text(PLATE_OBJ)
+    mesh = load_mesh(obj)
+    centre = (1.5, 0.75, 0.0)
+    pts = np.array([[1.49, 0.75, 0.0], [1.51, 0.75, 0.0]])
+    # Which face holds the points: the plate's triangles split along the (0,0)-(2,1) diagonal.
+    face = 1 if 0.75 > 0.5 * 1.5 else 0
+    crack = Crack(
+        id=0,
+        points=pts,
+        faces=np.array([face, face]),
+        time=np.array([0.0, 1.0]),
+        width=np.array([0.02, 0.02]),
+        depth=np.array([0.01, 0.01]),
+    )
+    net = CrackNetwork(cracks=[crack], mesh=mesh_info(mesh))
+    side = tmp_path / "marker.json"
+    write_sidecar(net, side)
+    return obj, side, centre
+
+
+def read_glb(path: Path) -> tuple[dict, bytes]:
+    data = path.read_bytes()
+    magic, version, length = struct.unpack_from("<4sII", data, 0)
+    assert magic == b"glTF" and version == 2 and length == len(data)
+    jlen, jtype = struct.unpack_from("<I4s", data, 12)
+    assert jtype == b"JSON"
+    doc = json.loads(data[20 : 20 + jlen])
+    blen, btype = struct.unpack_from("<I4s", data, 20 + jlen)
+    assert btype == b"BIN\x00"
+    return doc, data[28 + jlen : 28 + jlen + blen]
+
+
+def accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype = {5126: np.float32, 5125: np.uint32, 5123: np.uint16, 5121: np.uint8}[
+        acc["componentType"]
+    ]
+    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    arr = np.frombuffer(binary, dtype, acc["count"] * width, start)
+    return arr.reshape(acc["count"], width) if width > 1 else arr
+
+
+def test_marker_lands_on_the_right_texel_in_exr_png_and_glb(plate, tmp_path):
+    obj, side, centre = plate
+    res = 256
+    out = tmp_path / "out"
+    run(RunParams(mesh=obj, cracks=side, res=res, out=out))
+    u, v = plate_uv(centre[0], centre[1])
+    row, col = int((1 - v) * res), int(u * res)
+    flipped_row = int(v * res)
+
+    # EXR, re-read with OpenImageIO (independent of the writer's own reader).
+    buf = oiio.ImageBuf(str(out / "plate_cracks.exr"))
+    names = list(buf.spec().channelnames)
+    px = buf.get_pixels(oiio.FLOAT)
+    mask = px[..., names.index("crack.mask")]
+    assert mask.shape == (res, res)
+    assert mask[row, col] > 0.9
+    assert mask[flipped_row, col] == 0
+    assert mask.sum() == pytest.approx(0.02 * 0.4 * res * 0.02 * 0.6 * res + 2, rel=0.6)
+    assert px[..., names.index("crack.id")][row, col] == 0
+    assert buf.spec().get_string_attribute("crackbake:version") == __version__
+
+    # PNG mask: same place.
+    png = np.asarray(Image.open(out / "plate_mask.png"))
+    assert png.shape == (res, res) and png.dtype == np.uint8
+    assert png[row, col] > 230 and png[flipped_row, col] == 0
+    depth_png = np.asarray(Image.open(out / "plate_depth.png"))
+    assert depth_png.dtype == np.uint16 or depth_png.max() > 255
+    assert np.unravel_index(np.argmax(depth_png), depth_png.shape)[0] in (row - 1, row, row + 1)
+
+    # GLB: find the crack centre's UV through the GLB's own TEXCOORD_0 and sample its texture.
+    doc, binary = read_glb(out / "plate.glb")
+    prim = doc["meshes"][0]["primitives"][0]
+    pos = accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+    tex = accessor(doc, binary, prim["attributes"]["TEXCOORD_0"]).astype(np.float64)
+    idx = accessor(doc, binary, prim["indices"]).reshape(-1, 3)
+    p = np.array(centre)
+    for tri in idx:
+        a, b, c = pos[tri]
+        m = np.array([b - a, c - a]).T[:2]
+        l1, l2 = np.linalg.solve(m, (p - a)[:2])
+        if min(l1, l2, 1 - l1 - l2) >= -1e-9:
+            t0, t1, t2 = tex[tri]
+            uv_gltf = t0 + l1 * (t1 - t0) + l2 * (t2 - t0)
+            break
+    else:
+        pytest.fail("crack centre not inside any GLB triangle")
+    image_index = doc["textures"][
+        doc["materials"][prim["material"]]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+    ]["source"]
+    view = doc["bufferViews"][doc["images"][image_index]["bufferView"]]
+    start = view.get("byteOffset", 0)
+    img = np.asarray(Image.open(BytesIO(binary[start : start + view["byteLength"]])).convert("L"))
+    h, w = img.shape
+    gx, gy = int(uv_gltf[0] * w), int(uv_gltf[1] * h)  # glTF: v = 0 is the image's top row
+    assert img[gy, gx] < 80  # dark crack
+    assert img[h - 1 - gy, gx] > 150  # the v-flipped place is intact surface
+
+
+def test_outputs_manifest_and_determinism(plate, tmp_path):
+    obj, side, _ = plate
+    a = run(RunParams(mesh=obj, cracks=side, res=128, out=tmp_path / "a", seed=3))
+    b = run(RunParams(mesh=obj, cracks=side, res=128, out=tmp_path / "b", seed=3))
+    names = sorted(p.name for p in (tmp_path / "a").iterdir())
+    assert names == sorted(
+        [
+            "plate_cracks.exr",
+            "plate_mask.png",
+            "plate_depth.png",
+            "plate.glb",
+            "cracks.json",
+            "cracks.obj",
+            "manifest.json",
+        ]
+    )
+    man = json.loads((tmp_path / "a" / "manifest.json").read_text())
+    assert man["crackbake"] == __version__
+    assert set(man["timings_s"]) >= {"load", "unwrap", "bake", "write", "total"}
+    assert man["params"]["seed"] == 3 and man["params"]["res"] == 128
+    recorded = {f["name"]: f for f in man["files"]}
+    for f in (tmp_path / "a").iterdir():
+        if f.name == "manifest.json":
+            continue
+        import hashlib
+
+        assert recorded[f.name]["bytes"] == f.stat().st_size
+        assert recorded[f.name]["sha256"] == hashlib.sha256(f.read_bytes()).hexdigest()
+    # Same inputs, same bytes (the manifest differs only in timings).
+    for name in ("cracks.json", "plate_mask.png", "plate_depth.png", "plate_cracks.exr"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    assert a.summary()["files"][-1] == "manifest.json" and b.manifest["cracks"]["cracks"] == 1
+
+
+def test_formats_subset_and_float(plate, tmp_path):
+    obj, side, _ = plate
+    run(RunParams(mesh=obj, cracks=side, res=64, out=tmp_path / "o", formats=("exr",),
+                  float32=True))
+    names = {p.name for p in (tmp_path / "o").iterdir()}
+    assert names == {"plate_cracks.exr", "cracks.json", "cracks.obj", "manifest.json"}
+    spec = oiio.ImageInput.open(str(tmp_path / "o" / "plate_cracks.exr")).spec()
+    assert {str(spec.channelformat(i)) for i in range(spec.nchannels)} == {"float"}
+
+
+# --- CLI -----------------------------------------------------------------------------------
+
+
+def cli(*args: str):
+    return CliRunner().invoke(main, list(args), catch_exceptions=False)
+
+
+def test_cli_version_and_help():
+    r = cli("--version")
+    assert r.exit_code == 0 and __version__ in r.output
+    r = cli("--help")
+    assert r.exit_code == 0
+    assert "Examples:" in r.output and "--cracks" in r.output and "--res" in r.output
+
+
+def test_cli_bakes_with_json_summary(plate, tmp_path):
+    obj, side, _ = plate
+    out = tmp_path / "cli_out"
+    r = CliRunner().invoke(
+        main, [str(obj), "--cracks", str(side), "--res", "64", "-o", str(out), "--json", "-q"]
+    )
+    assert r.exit_code == 0, r.output
+    summary = json.loads(r.stdout)
+    assert summary["out_dir"] == str(out)
+    assert "manifest.json" in summary["files"]
+    assert (out / "manifest.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["missing.obj", "--cracks", "x.json"], "file not found"),
+        (["{obj}", "--cracks", "{side}", "--res", "10"], "--res 10 is out of range"),
+        (["{obj}", "--cracks", "{side}", "--res", "20000"], "--res 20000 is out of range"),
+        (["{obj}", "--impact", "1,2,3"], "not available yet"),
+        (["{obj}", "--impact", "1,2", "--cracks", "{side}"], "--impact '1,2'"),
+        (["{obj}", "--cracks", "{bad}"], "not valid JSON"),
+        (["{obj}"], "nothing to bake"),
+        (["{txt}", "--cracks", "{side}"], "unsupported format"),
+    ],
+)
+def test_cli_errors_are_one_line_and_write_nothing(plate, tmp_path, args, message):
+    obj, side, _ = plate
+    bad = tmp_path / "bad.json"
+    bad.write_text("{ not json")
+    txt = tmp_path / "mesh.txt"
+    txt.write_text("hello")
+    out = tmp_path / "never"
+    fill = {"obj": str(obj), "side": str(side), "bad": str(bad), "txt": str(txt)}
+    argv = [a.format(**fill) for a in args] + ["-o", str(out)]
+    r = CliRunner().invoke(main, argv)
+    assert r.exit_code == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1 and message in lines[0], r.stderr
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_cli_runs_as_installed_command(plate, tmp_path):
+    """The console script starts and fails cleanly (exit 2, one line) from a real process."""
+    exe = Path(sys.executable).with_name("crackbake")
+    argv = [str(exe), str(tmp_path / "none.obj"), "--cracks", "x.json", "--quiet"]
+    r = subprocess.run(argv, capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.strip().count("\n") == 0 and r.stderr.startswith("error:")
