@@ -27,7 +27,7 @@ Examples:
 \b
 Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.mask, crack.width,
 crack.depth, crack.time, crack.id, crack.distance), <stem>_mask.png, <stem>_depth.png,
-<stem>.glb, cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
+<stem>.glb, preview.png, cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
 """
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from crackbake.errors import CrackbakeError
 
-FORMATS = ("exr", "png", "glb")
+FORMATS = ("exr", "png", "glb", "preview")
 UV_MODES = ("auto", "keep", "unwrap")
 RES_MIN, RES_MAX = 64, 16384
 
@@ -95,7 +95,7 @@ class RunParams:
     seed : int
         Random seed.
     formats : tuple of str
-        Subset of ``exr``, ``png``, ``glb``.
+        Subset of ``exr``, ``png``, ``glb``, ``preview`` (a shaded picture, ``preview.png``).
     float32 : bool
         Write every EXR channel as 32-bit float.
     object_name : str or None

@@ -22,6 +22,7 @@ from crackbake.gl import create_context, renderer_info
 from crackbake.mesh import Mesh, load_mesh
 from crackbake.network import CrackNetwork, read_sidecar, segments, write_obj, write_sidecar
 from crackbake.params import RunParams
+from crackbake.preview import render_preview
 from crackbake.uv import UVMesh, prepare_uvs
 
 #: Base colour of the GLB preview material: intact surface and crack interior (sRGB, 0..255).
@@ -71,6 +72,22 @@ def base_color(mask: np.ndarray) -> np.ndarray:
     m = mask.astype(np.float32)[..., None]
     rgb = SURFACE_RGB + (CRACK_RGB - SURFACE_RGB) * m
     return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+
+
+def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, float]:
+    """A camera direction that faces the cracks: their mean surface normal, turned a little."""
+    faces = [c.faces for c in network.cracks]
+    if not faces:
+        return (0.9, 0.45, 1.0)
+    f = np.concatenate(faces)
+    tri = mesh.vertices[mesh.faces[f]]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]).sum(axis=0)
+    if np.linalg.norm(n) < 1e-12:
+        return (0.9, 0.45, 1.0)
+    n = n / np.linalg.norm(n)
+    # Tilt towards +y (the usual up) so the view is three-quarter rather than head-on.
+    d = n + np.array([0.0, 0.35, 0.0])
+    return tuple(float(x) for x in d / np.linalg.norm(d))
 
 
 def _exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
@@ -202,6 +219,19 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
                 uvmesh.normals,
                 base_color(maps.mask),
                 name=stem,
+            )
+        if "preview" in params.formats:
+            write_png(
+                stage.path("preview.png"),
+                render_preview(
+                    uvmesh.vertices,
+                    uvmesh.faces,
+                    uvmesh.uv,
+                    uvmesh.normals,
+                    base_color(maps.mask),
+                    view_dir=preview_direction(mesh, network),
+                ),
+                bits=8,
             )
         write_sidecar(network, stage.path("cracks.json"))
         write_obj(network, stage.path("cracks.obj"))

@@ -164,6 +164,7 @@ def test_outputs_manifest_and_determinism(plate, tmp_path):
             "cracks.json",
             "cracks.obj",
             "manifest.json",
+            "preview.png",
         ]
     )
     man = json.loads((tmp_path / "a" / "manifest.json").read_text())
@@ -179,9 +180,14 @@ def test_outputs_manifest_and_determinism(plate, tmp_path):
         assert recorded[f.name]["bytes"] == f.stat().st_size
         assert recorded[f.name]["sha256"] == hashlib.sha256(f.read_bytes()).hexdigest()
     # Same inputs, same bytes (the manifest differs only in timings).
-    for name in ("cracks.json", "plate_mask.png", "plate_depth.png", "plate_cracks.exr"):
+    for name in ("cracks.json", "plate_mask.png", "plate_depth.png", "plate_cracks.exr",
+                 "preview.png"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
     assert a.summary()["files"][-1] == "manifest.json" and b.manifest["cracks"]["cracks"] == 1
+    # The preview looks at the plate: mostly surface colour, with the dark crack somewhere.
+    pic = np.asarray(Image.open(tmp_path / "a" / "preview.png").convert("L"))
+    assert pic.shape == (1024, 1024)
+    assert (pic > 120).mean() > 0.05
 
 
 def test_formats_subset_and_float(plate, tmp_path):

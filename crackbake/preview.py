@@ -1,0 +1,144 @@
+"""A shaded picture of the textured output mesh (``preview.png``), drawn headless with EGL.
+
+It answers the first question after a run (did the cracks land where I wanted?) without
+opening a DCC tool, and makes the README's pictures.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crackbake.gl import create_context, shader_source
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """4x4 view matrix (right-handed, camera looks down -z)."""
+    f = target - eye
+    f = f / np.linalg.norm(f)
+    s = np.cross(f, up)
+    if np.linalg.norm(s) < 1e-9:  # looking along up: pick any perpendicular
+        s = np.cross(f, [1.0, 0.0, 0.0] if abs(f[0]) < 0.9 else [0.0, 0.0, 1.0])
+    s = s / np.linalg.norm(s)
+    u = np.cross(s, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = s, u, -f
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """4x4 OpenGL projection matrix."""
+    f = 1.0 / np.tan(np.radians(fov_y_deg) / 2)
+    m = np.zeros((4, 4))
+    m[0, 0], m[1, 1] = f / aspect, f
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def render_preview(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    normals: np.ndarray,
+    color: np.ndarray,
+    size: int = 1024,
+    view_dir: tuple[float, float, float] = (0.9, 0.45, 1.0),
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0),
+    target: np.ndarray | None = None,
+    distance: float | None = None,
+    ctx=None,
+) -> np.ndarray:
+    """Render the mesh textured with ``color`` from a three-quarter view.
+
+    Parameters
+    ----------
+    vertices, faces, uv, normals
+        The output mesh: (V, 3), (F, 3), (V, 2) with v up, (V, 3).
+    color : (H, W, 3) uint8
+        sRGB base colour, row 0 = top of the image (UV v = 1).
+    size : int
+        Picture edge in pixels.
+    view_dir : 3 floats
+        Direction from the target towards the camera, world space.
+    up : 3 floats
+        World up for the camera.
+    target : (3,) float, optional
+        Point looked at; the bounding-box centre by default.
+    distance : float, optional
+        Camera distance from ``target``; by default the whole mesh fits the frame.
+    ctx : moderngl.Context, optional
+
+    Returns
+    -------
+    (size, size, 3) uint8
+        sRGB picture, row 0 = top.
+    """
+    import moderngl
+
+    vertices = np.asarray(vertices, np.float64)
+    lo, hi = vertices.min(0), vertices.max(0)
+    centre = 0.5 * (lo + hi) if target is None else np.asarray(target, np.float64)
+    radius = max(float(np.linalg.norm(vertices - centre, axis=1).max()), 1e-12)
+    fov = 35.0
+    if distance is None:
+        distance = radius / np.sin(np.radians(fov) / 2) * 1.02
+    d = np.asarray(view_dir, np.float64)
+    d = d / np.linalg.norm(d)
+    eye = centre + d * distance
+    view = look_at(eye, centre, np.asarray(up, np.float64))
+    proj = perspective(fov, 1.0, max(distance - 2 * radius, distance * 1e-3), distance + 2 * radius)
+    mvp = (proj @ view).astype(np.float32)
+    key = d + np.asarray(up, np.float64) * 0.6 + np.cross(np.asarray(up, np.float64), d) * 0.4
+    key = key / np.linalg.norm(key)
+    fill = -np.cross(np.asarray(up, np.float64), d)
+    fill = fill / max(np.linalg.norm(fill), 1e-12)
+
+    own = ctx is None
+    if own:
+        ctx = create_context()
+    try:
+        prog = ctx.program(
+            vertex_shader=shader_source("preview.vert"),
+            fragment_shader=shader_source("preview.frag"),
+        )
+        data = np.concatenate(
+            [vertices, np.asarray(normals, np.float64), np.asarray(uv, np.float64)], axis=1
+        ).astype(np.float32)
+        vbo = ctx.buffer(data.tobytes())
+        ibo = ctx.buffer(np.asarray(faces, np.uint32).tobytes())
+        vao = ctx.vertex_array(
+            prog, [(vbo, "3f 3f 2f", "in_pos", "in_normal", "in_uv")], index_buffer=ibo
+        )
+        # Texture rows: GL's first row is v = 0, so upload the image bottom row first.
+        img = np.ascontiguousarray(np.flipud(np.asarray(color, np.uint8)[..., :3]))
+        tex = ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes())
+        tex.build_mipmaps()
+        tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        tex.anisotropy = 8.0
+        tex.use(0)
+        prog["u_color"].value = 0
+        prog["u_mvp"].write(mvp.T.tobytes())  # GLSL matrices are column-major
+        prog["u_key"].value = tuple(key.astype(np.float32))
+        prog["u_fill"].value = tuple(fill.astype(np.float32))
+
+        samples = min(4, ctx.info.get("GL_MAX_SAMPLES", 4))
+        ms_color = ctx.renderbuffer((size, size), 4, samples=samples)
+        ms_depth = ctx.depth_renderbuffer((size, size), samples=samples)
+        ms_fbo = ctx.framebuffer([ms_color], ms_depth)
+        out_tex = ctx.texture((size, size), 4)
+        out_fbo = ctx.framebuffer([out_tex])
+        ms_fbo.use()
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        ms_fbo.clear(0.16, 0.17, 0.19, 1.0, depth=1.0)
+        vao.render(moderngl.TRIANGLES)
+        ctx.copy_framebuffer(out_fbo, ms_fbo)
+        pixels = np.frombuffer(out_fbo.read(components=3), np.uint8).reshape(size, size, 3)
+        for obj in (out_fbo, out_tex, ms_fbo, ms_depth, ms_color, tex, vao, ibo, vbo, prog):
+            obj.release()
+    finally:
+        if own:
+            ctx.release()
+    return np.ascontiguousarray(np.flipud(pixels))
