@@ -1,0 +1,127 @@
+"""Crack solvers: grow a crack network on the simulation mesh from a stress field.
+
+Two methods share the FEM kernels of :mod:`crackbake.solver.fem`:
+
+* ``iben`` (default): Iben & O'Brien 2006/2009 — separation tensors, a max-priority queue, cracks
+  cut through triangles (edge splits, node splits), residual pushed to the tips, local
+  quasi-static relaxation.  :mod:`crackbake.solver.iben`.
+* ``thesis``: the 2023 NCCA MSc variant — tensors computed once, each crack grown to its end along
+  mesh edges, scalar relaxation between cracks.  :mod:`crackbake.solver.thesis`.
+
+Both take a :class:`crackbake.simmesh.SimMesh` and a :class:`crackbake.stress.StressField` and
+return a :class:`SolverResult`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+METHODS = ("iben", "thesis")
+
+
+@dataclass(frozen=True)
+class SolverParams:
+    """Parameters of both crack methods.
+
+    Attributes
+    ----------
+    method : str
+        ``iben`` or ``thesis``.
+    toughness : float
+        Failure threshold relative to the field's typical separation on this mesh (so it does not
+        depend on the simulation resolution); 1 is a moderate value, larger gives fewer cracks.
+    tip_factor : float
+        Fraction alpha of the excess separation pushed to new crack tips (0..1).
+    relax_steps : int
+        Relaxation passes after each crack.
+    relax_rate : float
+        Relaxation strength (iben: virtual displacement per unit force, relative; thesis: unused).
+    relax_share : float
+        thesis: share of each node's value passed to its neighbours per pass (0..1).
+    max_cracks : int
+        Stop after this many cracks (iben: crack events; thesis: grown cracks).
+    max_steps : int
+        Stop after this many solver steps.
+    max_crack_length : float or None
+        Longest single crack, mesh units (``None``: unlimited).
+    crack_width : float or None
+        Widest crack opening, mesh units (``None``: 0.1 % of the bounding-box diagonal).
+    depth_ratio : float
+        Crack depth = depth_ratio x width.
+    seed : int
+        Random seed (tie-breaking, jitter).
+    """
+
+    method: str = "iben"
+    toughness: float = 1.0
+    tip_factor: float = 0.75
+    relax_steps: int = 3
+    relax_rate: float = 0.1
+    relax_share: float = 0.05
+    max_cracks: int = 500
+    max_steps: int = 20000
+    max_crack_length: float | None = None
+    crack_width: float | None = None
+    depth_ratio: float = 0.5
+    seed: int = 0
+
+
+@dataclass(eq=False)
+class CrackPath:
+    """One crack polyline on the surface.
+
+    Attributes
+    ----------
+    points : (N, 3) float64
+        Mesh units, on the surface; N >= 2.
+    asset_faces : (N,) int64
+        Asset (output-mesh) face holding each point.
+    time : (N,) float64
+        0..1, when the point cracked (solver step / total steps).
+    width : (N,) float64
+        Opening width, mesh units, tapering to 0 at free tips.
+    depth : (N,) float64
+        Mesh units.
+    """
+
+    points: np.ndarray
+    asset_faces: np.ndarray
+    time: np.ndarray
+    width: np.ndarray
+    depth: np.ndarray
+
+
+@dataclass(eq=False)
+class SolverResult:
+    """What a solver run produced.
+
+    Attributes
+    ----------
+    cracks : list of CrackPath
+    vertices, faces : (N', 3), (M', 3)
+        The simulation mesh after all splits.
+    asset_face : (M',) int64
+        Asset face of each final sim face.
+    stress_initial : (M, 3, 3)
+        Stress per *initial* sim face before any crack.
+    stress_final : (M', 3, 3)
+        Stress per final sim face.
+    separation : (N',) float64
+        Largest separation eigenvalue per final node, relative to the toughness (>= 1 failed).
+    steps : int
+        Solver steps taken.
+    stats : dict
+        Method-specific figures (counts, timings) for reports.
+    """
+
+    cracks: list[CrackPath]
+    vertices: np.ndarray
+    faces: np.ndarray
+    asset_face: np.ndarray
+    stress_initial: np.ndarray
+    stress_final: np.ndarray
+    separation: np.ndarray
+    steps: int
+    stats: dict = field(default_factory=dict)
