@@ -123,18 +123,27 @@ def separation_tensors(
         Per (face, corner) forces from the tensile and compressive stress.
     n_nodes : int
     """
-    idx = faces.reshape(-1)
     fp = f_plus.reshape(-1, 3)
     fm = f_minus.reshape(-1, 3)
-    sum_fp = np.zeros((n_nodes, 3))
-    sum_fm = np.zeros((n_nodes, 3))
-    np.add.at(sum_fp, idx, fp)
-    np.add.at(sum_fm, idx, fm)
-    sum_mp = np.zeros((n_nodes, 3, 3))
-    sum_mm = np.zeros((n_nodes, 3, 3))
-    np.add.at(sum_mp, idx, outer_over_norm(fp))
-    np.add.at(sum_mm, idx, outer_over_norm(fm))
+    # One sparse (node x corner) sum for all twenty-four columns: far faster than np.add.at.
+    gather = corner_incidence(faces, n_nodes)
+    cols = np.concatenate(
+        [fp, fm, outer_over_norm(fp).reshape(-1, 9), outer_over_norm(fm).reshape(-1, 9)], axis=1
+    )
+    sums = gather @ cols
+    sum_fp, sum_fm = sums[:, 0:3], sums[:, 3:6]
+    sum_mp, sum_mm = sums[:, 6:15].reshape(-1, 3, 3), sums[:, 15:24].reshape(-1, 3, 3)
     return 0.5 * (-outer_over_norm(sum_fp) + sum_mp + outer_over_norm(sum_fm) - sum_mm)
+
+
+def corner_incidence(faces: np.ndarray, n_nodes: int):
+    """Sparse (N, 3M) matrix summing per-corner rows onto their nodes."""
+    from scipy.sparse import csr_matrix
+
+    idx = faces.reshape(-1)
+    return csr_matrix(
+        (np.ones(len(idx)), (idx, np.arange(len(idx)))), shape=(n_nodes, len(idx))
+    )
 
 
 def largest_eigen(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
