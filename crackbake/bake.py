@@ -16,9 +16,9 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from crackbake.dilation import dilate
 from crackbake.errors import CrackbakeError
 from crackbake.gl import create_context, shader_source
 from crackbake.mesh import CrackbakeWarning
@@ -162,67 +162,6 @@ def _segment_buffer(segments: Segments) -> np.ndarray:
         buf[:, 2, 2:4] = segments.time
         buf[:, 3, 0] = segments.crack_id
     return buf
-
-
-def nearest_island_index(inside: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For every texel outside the islands, the flat index of the nearest inside texel.
-
-    Returns
-    -------
-    empty : (E,) int64
-        Flat indices of texels outside every island.
-    source : (E,) int64
-        Flat index of the nearest island texel for each.
-    distance : (E,) float32
-        Euclidean distance between them, texels.
-    """
-    h, w = inside.shape
-    empty = np.flatnonzero(~inside)
-    if len(empty) == 0 or not inside.any():
-        return empty, empty.copy(), np.zeros(len(empty), np.float32)
-    iy, ix = ndimage.distance_transform_edt(
-        ~inside, return_distances=False, return_indices=True
-    )
-    sy = iy.ravel()[empty].astype(np.int64)
-    sx = ix.ravel()[empty].astype(np.int64)
-    del iy, ix
-    ey, ex = np.divmod(empty, w)
-    dist = np.hypot((ey - sy).astype(np.float32), (ex - sx).astype(np.float32))
-    return empty, sy * w + sx, dist
-
-
-def dilate(
-    images: list[np.ndarray],
-    inside: np.ndarray,
-    limit: int | None = None,
-    background: list[float] | None = None,
-) -> None:
-    """Fill texels outside the islands from their nearest island texel, in place.
-
-    Parameters
-    ----------
-    images : list of (H, W) arrays
-        Channels to fill.
-    inside : (H, W) bool
-        Texels covered by a face.
-    limit : int, optional
-        Fill only texels within this many texels of an island; farther ones get ``background``.
-        ``None`` fills every texel (unbounded dilation).
-    background : list of float, optional
-        Value per image for texels beyond ``limit`` (default 0).
-    """
-    empty, source, dist = nearest_island_index(inside)
-    if len(empty) == 0:
-        return
-    if limit is not None:
-        far = dist > limit
-        far_idx = empty[far]
-        empty, source = empty[~far], source[~far]
-    for k, img in enumerate(images):
-        flat = img.reshape(-1)
-        flat[empty] = flat[source]
-        if limit is not None:
-            flat[far_idx] = 0.0 if background is None else background[k]
 
 
 def bake_cracks(

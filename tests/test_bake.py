@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crackbake.bake import bake_cracks, dilate, face_candidates, nearest_island_index
+from crackbake.bake import bake_cracks, face_candidates
+from crackbake.dilation import dilate, nearest_island
 from crackbake.errors import CrackbakeError
 from crackbake.gl import create_context
 from crackbake.network import Segments
@@ -213,20 +214,40 @@ def test_face_candidates_cover_every_segment_within_reach():
         assert set(np.flatnonzero(inside).tolist()) <= listed
 
 
-def test_nearest_island_index_matches_brute_force():
+def test_nearest_island_matches_brute_force_and_scipy():
+    from scipy import ndimage
+
     rng = np.random.default_rng(3)
-    inside = rng.random((40, 50)) < 0.05
-    empty, source, dist = nearest_island_index(inside)
+    inside = rng.random((61, 50)) < 0.03
+    inside[40:45, 10:30] = True
+    src, dist2 = nearest_island(inside)
     iy, ix = np.nonzero(inside)
-    for e, s, d in zip(empty[::37], source[::37], dist[::37], strict=True):
-        ey, ex = divmod(int(e), 50)
-        brute = np.hypot(iy - ey, ix - ex).min()
-        assert d == pytest.approx(brute, abs=1e-5)
-        assert inside.reshape(-1)[s]
-    img = rng.random((40, 50)).astype(np.float32)
+    for e in range(0, inside.size, 7):
+        ey, ex = divmod(e, 50)
+        brute = ((iy - ey) ** 2 + (ix - ex) ** 2).min()
+        assert dist2[e] == brute
+        sy, sx = divmod(int(src[e]), 50)
+        assert inside[sy, sx] and (sy - ey) ** 2 + (sx - ex) ** 2 == brute
+    edt = ndimage.distance_transform_edt(~inside)
+    assert np.allclose(np.sqrt(dist2.reshape(inside.shape)), edt)
+    img = rng.random((61, 50)).astype(np.float32)
+    half = img.astype(np.float16)
     before = img.copy()
-    dilate([img], inside)
+    dilate([img, half], inside)
     assert np.array_equal(img[inside], before[inside])
+    assert np.array_equal(img.reshape(-1), before.reshape(-1)[src])
+    assert np.array_equal(half.reshape(-1), before.astype(np.float16).reshape(-1)[src])
+    limited = before.copy()
+    dilate([limited], inside, limit=2, background=[-7.0])
+    far = dist2.reshape(inside.shape) > 4
+    assert (limited[far] == -7.0).all()
+    assert np.array_equal(limited[~far], before.reshape(-1)[src].reshape(inside.shape)[~far])
+
+
+def test_dilation_with_no_island_fills_background():
+    img = np.ones((8, 8), np.float32)
+    dilate([img], np.zeros((8, 8), bool), background=[3.0])
+    assert (img == 3.0).all()
 
 
 def test_bad_arguments(ctx):

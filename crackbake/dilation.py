@@ -1,0 +1,160 @@
+"""Gutter fill: every texel outside the UV islands takes the value of its nearest island texel.
+
+The nearest texel comes from an exact Euclidean distance transform with index propagation
+(Felzenszwalb & Huttenlocher's separable lower-envelope algorithm): a column pass finds the
+nearest island row per column, a row pass the nearest site along the row over those.  Both passes
+are O(texels) and run in parallel over columns and rows with numba; scipy's
+``distance_transform_edt`` gives the same answer but was 2.6 s at 4096² and 9.8 s at 8192² here,
+more than the whole GPU bake.
+
+Channels are copied as raw bits (half as uint16, float as uint32), so any 16- or 32-bit image is
+filled by the same kernel without conversion.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+_FAR = np.int64(1) << 60
+
+
+@njit(parallel=True, cache=True)
+def _nearest_row_per_column(inside: np.ndarray) -> np.ndarray:
+    """For each texel, the row of the nearest island texel in the same column (-1: none)."""
+    h, w = inside.shape
+    near = np.full((h, w), -1, np.int32)
+    for x in prange(w):
+        last = -1
+        for y in range(h):
+            if inside[y, x]:
+                last = y
+            near[y, x] = last
+        nxt = -1
+        for y in range(h - 1, -1, -1):
+            if inside[y, x]:
+                nxt = y
+            if nxt >= 0 and (near[y, x] < 0 or nxt - y < y - near[y, x]):
+                near[y, x] = nxt
+    return near
+
+
+@njit(parallel=True, cache=True)
+def _nearest_source(near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat index of the nearest island texel and the squared distance to it, per texel."""
+    h, w = near.shape
+    src = np.full(h * w, -1, np.int64)
+    dist2 = np.full(h * w, _FAR, np.int64)
+    for y in prange(h):
+        # Lower envelope of the parabolas (x - q)^2 + f(q), f(q) = (y - near[y, q])^2.
+        sites = np.empty(w, np.int64)
+        bounds = np.empty(w + 1, np.float64)
+        fvals = np.empty(w, np.int64)
+        k = -1
+        for q in range(w):
+            r = near[y, q]
+            if r < 0:
+                continue
+            fq = np.int64(y - r) * np.int64(y - r)
+            while k >= 0:
+                p = sites[k]
+                s = ((fq + q * q) - (fvals[k] + p * p)) / (2.0 * (q - p))
+                if s <= bounds[k]:
+                    k -= 1
+                else:
+                    break
+            k += 1
+            sites[k] = q
+            fvals[k] = fq
+            if k == 0:
+                bounds[0] = -1e300
+            else:
+                p = sites[k - 1]
+                bounds[k] = ((fq + q * q) - (fvals[k - 1] + p * p)) / (2.0 * (q - p))
+            bounds[k + 1] = 1e300
+        if k < 0:
+            continue
+        j = 0
+        for x in range(w):
+            while bounds[j + 1] < x:
+                j += 1
+            q = sites[j]
+            src[y * w + x] = np.int64(near[y, q]) * w + q
+            dist2[y * w + x] = (x - q) * (x - q) + fvals[j]
+    return src, dist2
+
+
+@njit(parallel=True, cache=True)
+def _fill_bits(
+    flat: np.ndarray,
+    inside: np.ndarray,
+    src: np.ndarray,
+    dist2: np.ndarray,
+    limit2: np.int64,
+    background,
+) -> None:
+    for i in prange(flat.shape[0]):
+        if inside[i]:
+            continue
+        if src[i] >= 0 and dist2[i] <= limit2:
+            flat[i] = flat[src[i]]
+        else:
+            flat[i] = background
+
+
+def nearest_island(inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest island texel of every texel.
+
+    Parameters
+    ----------
+    inside : (H, W) bool
+        Texels covered by an island.
+
+    Returns
+    -------
+    source : (H*W,) int64
+        Flat index of the nearest inside texel (itself when inside; -1 when there are none).
+    distance2 : (H*W,) int64
+        Squared Euclidean distance to it, texels².
+    """
+    inside = np.ascontiguousarray(inside, dtype=np.bool_)
+    return _nearest_source(_nearest_row_per_column(inside))
+
+
+def _bits_view(img: np.ndarray) -> np.ndarray:
+    if not img.flags.c_contiguous:
+        raise ValueError("dilation needs C-contiguous images")
+    kinds = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}
+    return img.reshape(-1).view(kinds[img.dtype.itemsize])
+
+
+def dilate(
+    images: list[np.ndarray],
+    inside: np.ndarray,
+    limit: int | None = None,
+    background: list[float] | None = None,
+) -> None:
+    """Fill texels outside the islands from their nearest island texel, in place.
+
+    Parameters
+    ----------
+    images : list of (H, W) C-contiguous arrays
+        Channels to fill (any 8/16/32/64-bit dtype).
+    inside : (H, W) bool
+        Texels covered by a face.
+    limit : int, optional
+        Fill only texels within this Euclidean distance (texels) of an island; farther ones get
+        ``background``.  ``None`` fills every texel (unbounded dilation).
+    background : list of float, optional
+        Value per image for texels beyond ``limit`` or with no island at all (default 0).
+    """
+    if inside.all():
+        return
+    src, dist2 = nearest_island(inside)
+    limit2 = np.int64(_FAR if limit is None else int(limit) * int(limit))
+    flat_inside = np.ascontiguousarray(inside).reshape(-1)
+    for k, img in enumerate(images):
+        bits = _bits_view(img)
+        value = 0.0 if background is None else background[k]
+        bg = np.array([value], dtype=img.dtype).view(bits.dtype)[0]
+        _fill_bits(bits, flat_inside, src, dist2, limit2, bg)
