@@ -16,7 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-_FAR = np.int64(1) << 60
+# Squared distances fit int32 up to 16384^2 images (2 * 16384^2 < 2^31).
+_FAR = np.int32(2**31 - 1)
 
 
 @njit(parallel=True, cache=True)
@@ -43,8 +44,8 @@ def _nearest_row_per_column(inside: np.ndarray) -> np.ndarray:
 def _nearest_source(near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Flat index of the nearest island texel and the squared distance to it, per texel."""
     h, w = near.shape
-    src = np.full(h * w, -1, np.int64)
-    dist2 = np.full(h * w, _FAR, np.int64)
+    src = np.full(h * w, -1, np.int32)
+    dist2 = np.full(h * w, _FAR, np.int32)
     for y in prange(h):
         # Lower envelope of the parabolas (x - q)^2 + f(q), f(q) = (y - near[y, q])^2.
         sites = np.empty(w, np.int64)
@@ -79,27 +80,45 @@ def _nearest_source(near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             while bounds[j + 1] < x:
                 j += 1
             q = sites[j]
-            src[y * w + x] = np.int64(near[y, q]) * w + q
+            src[y * w + x] = near[y, q] * w + q
             dist2[y * w + x] = (x - q) * (x - q) + fvals[j]
     return src, dist2
 
 
+@njit(cache=True)
+def _fill_plan(
+    inside: np.ndarray, src: np.ndarray, dist2: np.ndarray, limit2: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Compact lists: texels to copy into, where from, and texels to set to background."""
+    n_fill = 0
+    n_bg = 0
+    for i in range(inside.shape[0]):
+        if not inside[i]:
+            if src[i] >= 0 and dist2[i] <= limit2:
+                n_fill += 1
+            else:
+                n_bg += 1
+    targets = np.empty(n_fill, np.int32)
+    sources = np.empty(n_fill, np.int32)
+    background = np.empty(n_bg, np.int32)
+    a = 0
+    b = 0
+    for i in range(inside.shape[0]):
+        if not inside[i]:
+            if src[i] >= 0 and dist2[i] <= limit2:
+                targets[a] = i
+                sources[a] = src[i]
+                a += 1
+            else:
+                background[b] = i
+                b += 1
+    return targets, sources, background
+
+
 @njit(parallel=True, cache=True)
-def _fill_bits(
-    flat: np.ndarray,
-    inside: np.ndarray,
-    src: np.ndarray,
-    dist2: np.ndarray,
-    limit2: np.int64,
-    background,
-) -> None:
-    for i in prange(flat.shape[0]):
-        if inside[i]:
-            continue
-        if src[i] >= 0 and dist2[i] <= limit2:
-            flat[i] = flat[src[i]]
-        else:
-            flat[i] = background
+def _gather(flat: np.ndarray, targets: np.ndarray, sources: np.ndarray) -> None:
+    for k in prange(targets.shape[0]):
+        flat[targets[k]] = flat[sources[k]]
 
 
 def nearest_island(inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -112,9 +131,9 @@ def nearest_island(inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Returns
     -------
-    source : (H*W,) int64
+    source : (H*W,) int32
         Flat index of the nearest inside texel (itself when inside; -1 when there are none).
-    distance2 : (H*W,) int64
+    distance2 : (H*W,) int32
         Squared Euclidean distance to it, texels².
     """
     inside = np.ascontiguousarray(inside, dtype=np.bool_)
@@ -151,10 +170,13 @@ def dilate(
     if inside.all():
         return
     src, dist2 = nearest_island(inside)
-    limit2 = np.int64(_FAR if limit is None else int(limit) * int(limit))
-    flat_inside = np.ascontiguousarray(inside).reshape(-1)
+    limit2 = int(_FAR) if limit is None else min(int(limit) ** 2, int(_FAR))
+    targets, sources, far = _fill_plan(np.ascontiguousarray(inside).reshape(-1), src, dist2,
+                                       limit2)
+    del src, dist2
     for k, img in enumerate(images):
         bits = _bits_view(img)
-        value = 0.0 if background is None else background[k]
-        bg = np.array([value], dtype=img.dtype).view(bits.dtype)[0]
-        _fill_bits(bits, flat_inside, src, dist2, limit2, bg)
+        _gather(bits, targets, sources)
+        if len(far):
+            value = 0.0 if background is None else background[k]
+            bits[far] = np.array([value], dtype=img.dtype).view(bits.dtype)[0]
