@@ -12,12 +12,28 @@ import click
 
 from crackbake import __version__
 from crackbake.errors import CrackbakeError
-from crackbake.params import FORMATS, RES_MAX, RES_MIN, RunParams, parse_impact
+from crackbake.params import (
+    FORMATS,
+    METHODS,
+    RES_MAX,
+    RES_MIN,
+    RunParams,
+    load_preset,
+    parse_direction,
+    parse_impact,
+    preset_names,
+)
 
 EPILOG = """\b
 Examples:
-  # bake a crack network (cracks.json) onto spot's own UVs at 4096x4096
-  crackbake examples/spot.obj --cracks cracks.json --res 4096
+  # glass impact on the cow's flank, 4096x4096 maps on its own UVs
+  crackbake examples/spot.obj --preset glass --impact 0.45,0.1,0.3 --res 4096
+\b
+  # drying mud over the whole surface, the simpler thesis method, a different seed
+  crackbake examples/spot.obj --preset mud --method thesis --seed 7
+\b
+  # re-bake an existing crack network (cracks.json) without solving
+  crackbake examples/spot.obj --cracks spot_cracks/cracks.json --res 8192
 \b
   # a mesh without UVs: unwrap it with xatlas (cached), write EXR + GLB only
   crackbake statue.ply --cracks cracks.json --uv unwrap --formats exr,glb -o out/
@@ -29,6 +45,22 @@ Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.mask, cra
 crack.depth, crack.time, crack.id, crack.distance), <stem>_mask.png, <stem>_depth.png,
 <stem>.glb, preview.png, cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
 """
+
+
+def _preset_help() -> str:
+    return "; ".join(f"{n}: {load_preset(n).get('description', '')}" for n in preset_names())
+
+
+def _parse_curvature(text: str | None) -> tuple[float | None, float | None]:
+    if text is None:
+        return None, None
+    try:
+        parts = [float(p) for p in text.split(":")]
+    except ValueError:
+        parts = []
+    if not 1 <= len(parts) <= 2:
+        raise CrackbakeError(f"--curvature '{text}': expected BIAS[:DENSITY], e.g. 1:0.5")
+    return parts[0], parts[1] if len(parts) > 1 else None
 
 
 def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
@@ -56,6 +88,57 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     type=click.Path(path_type=Path),
     help="Bake this crack network (a cracks.json sidecar) instead of solving.",
 )
+@click.option(
+    "--preset",
+    type=click.Choice(preset_names()),
+    help="Material preset setting coherent solver/stress defaults.",
+)
+@click.option(
+    "--method",
+    type=click.Choice(METHODS),
+    help="iben: Iben & O'Brien (cracks cut through triangles) [default]; thesis: MSc variant "
+    "(cracks grown to their end along mesh edges).",
+)
+@click.option("--detail", type=float, help="Simulation mesh edge length, mesh units.")
+@click.option("--sim-faces", type=int, help="Simulation mesh size in faces [100000].")
+@click.option("--shrink", type=float, help="Uniform shrinkage tension (crackle, glaze, mud).")
+@click.option("--shrink-rate", type=float, help="Shrinkage added per solver step (relative).")
+@click.option(
+    "--direction",
+    "directions",
+    multiple=True,
+    metavar="X,Y,Z[:S]",
+    help="Directional tension (parallel cracks across it). Repeatable.",
+)
+@click.option(
+    "--curvature",
+    metavar="BIAS[:DENSITY]",
+    help="Curvature terms: cracks along the least-curved direction; more where curved.",
+)
+@click.option(
+    "--weight-map",
+    type=click.Path(path_type=Path),
+    help="Grayscale image multiplying the stress through the mesh UVs (logos, masks).",
+)
+@click.option(
+    "--weight-attribute",
+    help="Vertex attribute (PLY/GLB) multiplying the stress; 'color' for vertex colours.",
+)
+@click.option("--invert-weights", is_flag=True, help="Use 1 - weight.")
+@click.option("--noise", type=float, help="Seeded random perturbation of the field (0.1 = 10%).")
+@click.option("--hoop", type=float, help="Impact hoop/radial tension ratio [1.25].")
+@click.option("--toughness", type=float, help="Failure threshold relative to the field [1].")
+@click.option("--tip-factor", type=float, help="Share of excess stress pushed to crack tips.")
+@click.option("--relax-steps", type=int, help="Relaxation passes per crack.")
+@click.option("--relax-rate", type=float, help="iben relaxation strength.")
+@click.option("--relax-share", type=float, help="thesis: share passed to neighbours per pass.")
+@click.option("--max-cracks", type=int, help="Stop after this many cracks.")
+@click.option("--max-steps", type=int, help="Stop after this many solver steps.")
+@click.option("--max-crack-length", type=float, help="Longest single crack, mesh units.")
+@click.option(
+    "--crack-width", type=float, help="Widest crack opening, mesh units [0.1% of diagonal]."
+)
+@click.option("--depth-ratio", type=float, help="Crack depth / width.")
 @click.option(
     "--res",
     type=int,
@@ -123,6 +206,29 @@ def main(
     mesh: Path,
     impacts: tuple[str, ...],
     cracks: Path | None,
+    preset: str | None,
+    method: str | None,
+    detail: float | None,
+    sim_faces: int | None,
+    shrink: float | None,
+    shrink_rate: float | None,
+    directions: tuple[str, ...],
+    curvature: str | None,
+    weight_map: Path | None,
+    weight_attribute: str | None,
+    invert_weights: bool,
+    noise: float | None,
+    hoop: float | None,
+    toughness: float | None,
+    tip_factor: float | None,
+    relax_steps: int | None,
+    relax_rate: float | None,
+    relax_share: float | None,
+    max_cracks: int | None,
+    max_steps: int | None,
+    max_crack_length: float | None,
+    crack_width: float | None,
+    depth_ratio: float | None,
     res: int,
     out: Path | None,
     uv: str,
@@ -162,6 +268,7 @@ def main(
             err(f"warning: {message}")
 
     try:
+        bias, density = _parse_curvature(curvature)
         params = RunParams(
             mesh=mesh,
             out=out,
@@ -179,6 +286,30 @@ def main(
             object_name=object_name,
             unwrap_timeout=unwrap_timeout,
             cache=not no_cache,
+            preset=preset,
+            method=method,
+            detail=detail,
+            sim_faces=sim_faces,
+            shrink=shrink,
+            shrink_rate=shrink_rate,
+            directions=tuple(parse_direction(d) for d in directions),
+            curvature_bias=bias,
+            curvature_density=density,
+            weight_map=weight_map,
+            weight_attribute=weight_attribute,
+            weight_invert=invert_weights,
+            noise=noise,
+            hoop=hoop,
+            toughness=toughness,
+            tip_factor=tip_factor,
+            relax_steps=relax_steps,
+            relax_rate=relax_rate,
+            relax_share=relax_share,
+            max_cracks=max_cracks,
+            max_steps=max_steps,
+            max_crack_length=max_crack_length,
+            crack_width=crack_width,
+            depth_ratio=depth_ratio,
         )
         with warnings.catch_warnings():
             warnings.simplefilter("always", CrackbakeWarning)

@@ -672,3 +672,53 @@ __all__ = [
     "write_obj",
     "write_sidecar",
 ]
+
+
+def from_solver(
+    paths: list,
+    mesh: Mesh,
+    params: dict | None = None,
+    impacts: list[dict] | None = None,
+    solver_steps: int = 0,
+) -> CrackNetwork:
+    """The crack network of a solver run.
+
+    Parameters
+    ----------
+    paths : list of crackbake.solver.CrackPath
+        Polylines with per-point asset faces, time, width and depth.
+    mesh : Mesh
+        The asset mesh the faces index.
+    params : dict, optional
+        Every effective parameter (stored in the sidecar).
+    impacts : list of dict, optional
+        Impacts as used (snapped points).
+    solver_steps : int
+        Steps the solver took.
+
+    Returns
+    -------
+    CrackNetwork
+        Cracks numbered 0.. in the solver's order; paths with fewer than 2 points are dropped.
+    """
+    cracks = []
+    for path in paths:
+        if len(path.points) < 2:
+            continue
+        cracks.append(
+            Crack(
+                id=len(cracks),
+                points=np.asarray(path.points, np.float64),
+                faces=np.asarray(path.asset_faces, np.int64),
+                time=np.clip(np.asarray(path.time, np.float64), 0.0, 1.0),
+                width=np.maximum(np.asarray(path.width, np.float64), 0.0),
+                depth=np.maximum(np.asarray(path.depth, np.float64), 0.0),
+            )
+        )
+    return CrackNetwork(
+        cracks=cracks,
+        mesh=mesh_info(mesh),
+        params=dict(params or {}),
+        impacts=list(impacts or []),
+        solver_steps=int(solver_steps),
+    )

@@ -7,14 +7,58 @@ the same clear errors as the command line) and the manifest records it.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+import tomllib
+from dataclasses import asdict, dataclass, field, fields, replace
+from functools import cache
 from pathlib import Path
 
 from crackbake.errors import CrackbakeError
 
 FORMATS = ("exr", "png", "glb", "preview")
 UV_MODES = ("auto", "keep", "unwrap")
+METHODS = ("iben", "thesis")
 RES_MIN, RES_MAX = 64, 16384
+PRESET_DIR = Path(__file__).resolve().parent / "presets"
+
+#: Solver and stress defaults when neither the command line nor a preset sets them.
+SOLVER_DEFAULTS: dict = {
+    "method": "iben",
+    "toughness": 1.0,
+    "tip_factor": 0.75,
+    "relax_steps": 3,
+    "relax_rate": 0.1,
+    "relax_share": 0.05,
+    "max_cracks": 500,
+    "max_steps": 20000,
+    "max_crack_length": None,
+    "crack_width": None,
+    "depth_ratio": 0.5,
+    "shrink": None,
+    "shrink_rate": 0.0,
+    "hoop": 1.25,
+    "noise": 0.0,
+    "curvature_bias": None,
+    "curvature_density": None,
+    "sim_faces": 100_000,
+    "detail": None,
+}
+
+
+@cache
+def preset_names() -> tuple[str, ...]:
+    """Names of the bundled material presets."""
+    return tuple(sorted(p.stem for p in PRESET_DIR.glob("*.toml")))
+
+
+@cache
+def load_preset(name: str) -> dict:
+    """The settings of a bundled preset (``presets/<name>.toml``)."""
+    if name not in preset_names():
+        raise CrackbakeError(
+            f"--preset '{name}' is unknown; use one of {', '.join(preset_names())}"
+        )
+    with open(PRESET_DIR / f"{name}.toml", "rb") as fh:
+        return tomllib.load(fh)
 
 
 @dataclass(frozen=True)
@@ -37,6 +81,22 @@ class Impact:
 
     def to_dict(self) -> dict:
         return {"point": list(self.point), "radius": self.radius, "strength": self.strength}
+
+
+def parse_direction(text: str) -> tuple[float, float, float, float]:
+    """Parse ``X,Y,Z[:STRENGTH]`` (directional tension)."""
+    syntax = "expected X,Y,Z[:STRENGTH], e.g. --direction 0,1,0:1.5"
+    parts = text.strip().split(":")
+    try:
+        xyz = [float(c) for c in parts[0].split(",")]
+        strength = float(parts[1]) if len(parts) > 1 else 1.0
+    except ValueError:
+        raise CrackbakeError(f"--direction '{text}': {syntax}") from None
+    if len(parts) > 2 or len(xyz) != 3 or not all(math.isfinite(c) for c in [*xyz, strength]):
+        raise CrackbakeError(f"--direction '{text}': {syntax}")
+    if not any(xyz):
+        raise CrackbakeError(f"--direction '{text}': the direction must not be zero")
+    return (xyz[0], xyz[1], xyz[2], strength)
 
 
 def parse_impact(text: str) -> Impact:
@@ -106,6 +166,18 @@ class RunParams:
         Use the unwrap cache.
     tile : int
         Largest framebuffer edge of the bake.
+    preset : str or None
+        Material preset (``presets/<name>.toml``) supplying defaults for unset solver options.
+    method : str or None
+        ``iben`` (Iben & O'Brien) or ``thesis`` (the MSc variant).
+    detail, sim_faces
+        Simulation mesh target edge length (mesh units) or face count.
+    toughness, tip_factor, relax_steps, relax_rate, relax_share, max_cracks, max_steps,
+    max_crack_length, crack_width, depth_ratio
+        Solver settings (:class:`crackbake.solver.SolverParams`).
+    shrink, shrink_rate, directions, curvature_bias, curvature_density, weight_map,
+    weight_attribute, weight_invert, noise, hoop
+        Stress sources (:mod:`crackbake.stress`); ``directions`` holds (x, y, z, strength).
     """
 
     mesh: Path
@@ -125,6 +197,31 @@ class RunParams:
     unwrap_timeout: float = 300.0
     cache: bool = True
     tile: int = 4096
+    # --- solver and stress (None: from the preset, else SOLVER_DEFAULTS) ---
+    preset: str | None = None
+    method: str | None = None
+    detail: float | None = None
+    sim_faces: int | None = None
+    toughness: float | None = None
+    tip_factor: float | None = None
+    relax_steps: int | None = None
+    relax_rate: float | None = None
+    relax_share: float | None = None
+    max_cracks: int | None = None
+    max_steps: int | None = None
+    max_crack_length: float | None = None
+    crack_width: float | None = None
+    depth_ratio: float | None = None
+    shrink: float | None = None
+    shrink_rate: float | None = None
+    directions: tuple[tuple[float, float, float, float], ...] = ()
+    curvature_bias: float | None = None
+    curvature_density: float | None = None
+    weight_map: Path | None = None
+    weight_attribute: str | None = None
+    weight_invert: bool = False
+    noise: float | None = None
+    hoop: float | None = None
     extra: dict = field(default_factory=dict)
 
     @property
@@ -162,7 +259,65 @@ class RunParams:
             raise CrackbakeError(f"tile size {self.tile} is out of range; use 256..16384")
         if self.seed < 0 or self.seed >= 2**63:
             raise CrackbakeError(f"--seed {self.seed} must be a non-negative 64-bit integer")
+        if self.preset is not None:
+            load_preset(self.preset)
+        if self.method is not None and self.method not in METHODS:
+            raise CrackbakeError(
+                f"--method '{self.method}' is unknown; use one of {', '.join(METHODS)}"
+            )
+        for name in ("detail", "toughness", "relax_rate", "max_crack_length", "crack_width",
+                     "hoop"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                flag = "--" + name.replace("_", "-")
+                raise CrackbakeError(f"{flag} {value} must be a positive number")
+        for name in ("depth_ratio", "shrink_rate", "noise"):
+            value = getattr(self, name)
+            if value is not None and not (math.isfinite(value) and value >= 0):
+                flag = "--" + name.replace("_", "-")
+                raise CrackbakeError(f"{flag} {value} must be >= 0")
+        for name in ("tip_factor", "relax_share"):
+            value = getattr(self, name)
+            if value is not None and not (0 <= value <= 1):
+                flag = "--" + name.replace("_", "-")
+                raise CrackbakeError(f"{flag} {value} must lie in 0..1")
+        for name, low in (("relax_steps", 0), ("max_cracks", 1), ("max_steps", 1),
+                          ("sim_faces", 100)):
+            value = getattr(self, name)
+            if value is not None and value < low:
+                flag = "--" + name.replace("_", "-")
+                raise CrackbakeError(f"{flag} {value} must be >= {low}")
+        if self.shrink is not None and not math.isfinite(self.shrink):
+            raise CrackbakeError(f"--shrink {self.shrink} must be a finite number")
+        if self.weight_map is not None and not Path(self.weight_map).exists():
+            raise CrackbakeError(f"--weight-map {self.weight_map}: file not found")
         return self
+
+    def resolved(self) -> tuple[RunParams, dict]:
+        """Fill unset solver options from the preset, then from :data:`SOLVER_DEFAULTS`.
+
+        Returns
+        -------
+        params : RunParams
+            Every solver field set (``None`` only where ``None`` is the default).
+        relative : dict
+            Preset settings relative to the mesh size (``crack_width_rel``,
+            ``impact_radius_rel``: fractions of the bounding-box diagonal), used where the
+            absolute option is unset.
+        """
+        preset = load_preset(self.preset) if self.preset else {}
+        names = {f.name for f in fields(self)}
+        changes = {}
+        for key, default in SOLVER_DEFAULTS.items():
+            if getattr(self, key) is None:
+                changes[key] = preset.get(key, default)
+        unknown = set(preset) - names - {"description", "needs_impact", "crack_width_rel",
+                                          "impact_radius_rel"}
+        if unknown:
+            raise CrackbakeError(f"preset '{self.preset}' has unknown keys {sorted(unknown)}")
+        relative = {k: preset[k] for k in ("crack_width_rel", "impact_radius_rel") if k in preset}
+        relative["needs_impact"] = bool(preset.get("needs_impact", False))
+        return replace(self, **changes), relative
 
     def to_dict(self) -> dict:
         """JSON-ready dict of every effective parameter (paths as strings)."""
@@ -172,6 +327,8 @@ class RunParams:
         d["cracks"] = str(self.cracks) if self.cracks is not None else None
         d["impacts"] = [i.to_dict() for i in self.impacts]
         d["formats"] = list(self.formats)
+        d["weight_map"] = str(self.weight_map) if self.weight_map is not None else None
+        d["directions"] = [list(x) for x in self.directions]
         extra = d.pop("extra")
         d.update(extra)
         return d

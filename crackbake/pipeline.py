@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,10 +20,18 @@ from crackbake.bake import CHANNELS, CrackMaps, bake_cracks
 from crackbake.errors import CrackbakeError
 from crackbake.export import OutputStage, sha256_file, write_exr, write_glb, write_png
 from crackbake.gl import create_context, renderer_info
-from crackbake.mesh import Mesh, load_mesh
-from crackbake.network import CrackNetwork, read_sidecar, segments, write_obj, write_sidecar
-from crackbake.params import RunParams
+from crackbake.mesh import CrackbakeWarning, Mesh, load_mesh
+from crackbake.network import (
+    CrackNetwork,
+    from_solver,
+    read_sidecar,
+    segments,
+    write_obj,
+    write_sidecar,
+)
+from crackbake.params import RunParams, preset_names
 from crackbake.preview import render_preview
+from crackbake.solver import SolverParams
 from crackbake.uv import UVMesh, prepare_uvs
 
 #: Base colour of the GLB preview material: intact surface and crack interior (sRGB, 0..255).
@@ -126,26 +135,26 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
 
-    if params.cracks is None:
-        if params.impacts:
-            raise CrackbakeError(
-                "the crack solver is not available yet in this version; "
-                "bake an existing network with --cracks cracks.json"
-            )
-        raise CrackbakeError(
-            "nothing to bake: give --cracks cracks.json "
-            "(the solver's --impact is not available yet)"
-        )
-
     say(f"loading {params.mesh}")
     t = time.perf_counter()
     mesh = load_mesh(params.mesh, params.object_name)
     timings["load"] = time.perf_counter() - t
 
-    say(f"reading crack network {params.cracks}")
-    t = time.perf_counter()
-    network = read_sidecar(params.cracks, mesh)
-    timings["cracks"] = time.perf_counter() - t
+    solver_stats: dict = {}
+    if params.cracks is not None:
+        if params.impacts:
+            warnings.warn(
+                "--impact is ignored with --cracks (the network is baked as given)",
+                CrackbakeWarning,
+                stacklevel=2,
+            )
+        say(f"reading crack network {params.cracks}")
+        t = time.perf_counter()
+        network = read_sidecar(params.cracks, mesh)
+        timings["cracks"] = time.perf_counter() - t
+    else:
+        params, relative = params.resolved()
+        network, solver_stats = solve(mesh, params, relative, say, timings)
 
     say("preparing UVs")
     t = time.perf_counter()
@@ -186,6 +195,8 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
     stem = Path(params.mesh).stem
     depth_max = float(maps.depth.max())
     effective = params.to_dict()
+    if solver_stats:
+        effective["solver"] = solver_stats
     effective.update(
         {
             "max_distance": maps.max_distance,
@@ -270,8 +281,153 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
     )
 
 
+def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
+    """The stress sources a (resolved) parameter set asks for.
+
+    Raises
+    ------
+    CrackbakeError
+        When nothing would load the surface, or a preset needs an impact that is missing.
+    """
+    from crackbake.stress import (
+        CurvatureSource,
+        DirectionalSource,
+        ImpactSource,
+        NoiseSource,
+        ShrinkSource,
+        WeightSource,
+        load_weight_map,
+        vertex_weights,
+    )
+
+    if relative.get("needs_impact") and not params.impacts:
+        raise CrackbakeError(
+            f"preset '{params.preset}' needs an impact point; add --impact X,Y,Z "
+            "(a point on or near the surface, mesh units)"
+        )
+    diagonal = mesh.diagonal
+    sources: list = []
+    for imp in params.impacts:
+        radius = imp.radius
+        if radius is None:
+            radius = relative.get("impact_radius_rel", 0.15) * diagonal
+        sources.append(ImpactSource(imp.point, radius, imp.strength, hoop=params.hoop))
+    if params.shrink:
+        sources.append(ShrinkSource(params.shrink, params.shrink_rate or 0.0))
+    for x, y, z, strength in params.directions:
+        sources.append(DirectionalSource((x, y, z), strength))
+    if params.curvature_bias or params.curvature_density:
+        sources.append(CurvatureSource(params.curvature_bias or 0.0,
+                                       params.curvature_density or 0.0))
+    if not sources:
+        raise CrackbakeError(
+            "nothing to crack: give --impact X,Y,Z, --shrink S, --direction X,Y,Z, --curvature B "
+            f"or a --preset ({', '.join(preset_names())}), or bake a network with --cracks"
+        )
+    if params.weight_map is not None or params.weight_attribute is not None:
+        per_vertex = (
+            vertex_weights(params.mesh, params.weight_attribute, params.object_name)
+            if params.weight_attribute is not None
+            else None
+        )
+        image = load_weight_map(params.weight_map) if params.weight_map is not None else None
+        sources.append(WeightSource(per_vertex, image, params.weight_invert))
+    if params.noise:
+        sources.append(NoiseSource(params.noise))
+    return sources
+
+
+def solver_params(params: RunParams, mesh: Mesh, relative: dict) -> SolverParams:
+    """:class:`SolverParams` from a resolved parameter set (relative widths made absolute)."""
+    width = params.crack_width
+    if width is None:
+        width = relative.get("crack_width_rel", 0.001) * mesh.diagonal
+    return SolverParams(
+        method=params.method or "iben",
+        toughness=params.toughness,
+        tip_factor=params.tip_factor,
+        relax_steps=params.relax_steps,
+        relax_rate=params.relax_rate,
+        relax_share=params.relax_share,
+        max_cracks=params.max_cracks,
+        max_steps=params.max_steps,
+        max_crack_length=params.max_crack_length,
+        crack_width=width,
+        depth_ratio=params.depth_ratio,
+        seed=params.seed,
+    )
+
+
+def solve(
+    mesh: Mesh,
+    params: RunParams,
+    relative: dict,
+    say: ProgressFn,
+    timings: dict[str, float],
+) -> tuple[CrackNetwork, dict]:
+    """Simulation mesh, stress field and crack solver: the network for a resolved run.
+
+    Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).
+    """
+    from crackbake.simmesh import build_simmesh
+    from crackbake.stress import stress_field
+
+    sources = stress_sources(params, mesh, relative)
+    say("building the simulation mesh")
+    t = time.perf_counter()
+    sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces,
+                        seed=params.seed)
+    timings["simmesh"] = time.perf_counter() - t
+    say(f"stress field on {len(sim.faces)} simulation faces")
+    t = time.perf_counter()
+    field = stress_field(sim, mesh, sources, seed=params.seed)
+    timings["stress"] = time.perf_counter() - t
+    sp = solver_params(params, mesh, relative)
+    say(f"growing cracks ({sp.method})")
+    t = time.perf_counter()
+    if sp.method == "thesis":
+        from crackbake.solver.thesis import solve_thesis
+
+        result = solve_thesis(sim, field, sp, progress=say)
+    else:
+        from crackbake.solver.iben import solve_iben
+
+        result = solve_iben(sim, field, sp, progress=say)
+    timings["solve"] = time.perf_counter() - t
+    effective = params.to_dict()
+    effective.update({"crack_width": sp.crack_width, "sim_faces_built": int(len(sim.faces)),
+                      "sim_edge_length": float(sim.edge_length)})
+    network = from_solver(result.cracks, mesh, params=_sidecar_params(effective),
+                          impacts=field.impacts, solver_steps=result.steps)
+    stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
+    stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
+    return network, _jsonable(stats)
+
+
+def _sidecar_params(effective: dict) -> dict:
+    """Parameters stored in the sidecar: everything that shapes the network, no output paths."""
+    drop = {"out", "formats", "float32", "unwrap_timeout", "cache", "tile", "res", "padding",
+            "dilate", "max_distance", "profile", "cracks"}
+    return _jsonable({k: v for k, v in effective.items() if k not in drop})
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
 def _inputs(params: RunParams) -> dict:
     inputs = {"mesh": {"path": str(params.mesh), "sha256": sha256_file(params.mesh)}}
+    if params.weight_map is not None:
+        inputs["weight_map"] = {"path": str(params.weight_map),
+                                "sha256": sha256_file(params.weight_map)}
     if params.cracks is not None:
         inputs["cracks"] = {"path": str(params.cracks), "sha256": sha256_file(params.cracks)}
     return inputs

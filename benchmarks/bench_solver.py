@@ -1,0 +1,79 @@
+"""Benchmark of the iben crack solver on jittered plates (glass impact and uniform shrinkage).
+
+Run: ``python benchmarks/bench_solver.py [--sizes 100000 400000 1000000]``.  A tiny warm-up run
+first loads / compiles the numba kernels, so the times exclude compilation.  Prints a markdown
+table: faces, field, wall seconds, solver steps, crack events, crack ids, ms per step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from types import SimpleNamespace
+
+import numpy as np
+from scipy.spatial import Delaunay
+
+from crackbake.solver import SolverParams
+from crackbake.solver.iben import solve_iben
+
+
+def plate(n_faces: int, seed: int = 1) -> SimpleNamespace:
+    """Jittered triangulated unit plate with about ``n_faces`` faces."""
+    n = max(2, int(round(np.sqrt(n_faces / 2))))
+    h = 1.0 / n
+    x, y = np.meshgrid(np.arange(n + 1) * h, np.arange(n + 1) * h, indexing="ij")
+    p = np.stack([x.ravel(), y.ravel()], 1)
+    inner = (p > 1e-9).all(1) & (p < 1 - 1e-9).all(1)
+    p[inner] += np.random.default_rng(seed).uniform(-0.35, 0.35, (inner.sum(), 2)) * h
+    tri = Delaunay(p).simplices.astype(np.int64)
+    v = np.concatenate([p, np.zeros((len(p), 1))], 1)
+    cr = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
+    tri[cr < 0] = tri[cr < 0][:, [0, 2, 1]]
+    tri = tri[np.abs(cr) > 1e-12 * h * h]
+    return SimpleNamespace(vertices=v, faces=tri, asset_face=np.arange(len(tri)), edge_length=h)
+
+
+def impact_field(sim, centre=(0.5, 0.5, 0.0), radius=0.25) -> SimpleNamespace:
+    """Glass impact: w (r r^T + 1.25 c c^T), w = 2 cos(d / r) inside d <= pi r / 2."""
+    c = sim.vertices[sim.faces].mean(1) - np.asarray(centre)
+    d = np.linalg.norm(c, axis=1)
+    w = np.where(d <= np.pi * radius / 2, 2 * np.cos(d / radius), 0.0)
+    r = c / np.maximum(d, 1e-12)[:, None]
+    t = np.cross([0.0, 0.0, 1.0], r)
+    s = w[:, None, None] * (np.einsum("ea,eb->eab", r, r) + 1.25 * np.einsum("ea,eb->eab", t, t))
+    return SimpleNamespace(stress=s, growth=None, weight=w, impacts=[])
+
+
+def shrink_field(sim, s=1.0) -> SimpleNamespace:
+    st = np.zeros((len(sim.faces), 3, 3))
+    st[:, 0, 0] = st[:, 1, 1] = s
+    return SimpleNamespace(stress=st, growth=None, weight=np.ones(len(sim.faces)), impacts=[])
+
+
+GLASS = SolverParams(toughness=0.7, relax_steps=10, relax_rate=0.6, max_cracks=20000)
+SHRINK = SolverParams(toughness=0.7, relax_steps=10, relax_rate=0.6, max_cracks=3000)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[100_000, 400_000, 1_000_000])
+    args = ap.parse_args()
+    warm = plate(2000)
+    solve_iben(warm, impact_field(warm), GLASS)
+    print("| faces | field | wall s | steps | events | crack ids | ms/step |")
+    print("|---:|---|---:|---:|---:|---:|---:|")
+    for size in args.sizes:
+        sim = plate(size)
+        for name, field, params in (("glass", impact_field(sim), GLASS),
+                                    ("shrink", shrink_field(sim), SHRINK)):
+            t = time.perf_counter()
+            r = solve_iben(sim, field, params)
+            wall = time.perf_counter() - t
+            ms = 1000 * wall / max(r.steps, 1)
+            print(f"| {len(sim.faces)} | {name} | {wall:.2f} | {r.steps} | {r.stats['events']} "
+                  f"| {r.stats['cracks']} | {ms:.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

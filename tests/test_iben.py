@@ -1,0 +1,352 @@
+"""The iben crack solver on generated plates: kernels, invariants, determinism, pattern quality."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from crackbake.errors import CrackbakeError
+from crackbake.solver import SolverParams
+from crackbake.solver.fem import face_geometry, largest_eigen, node_forces, separation_tensors
+from crackbake.solver.iben import solve_iben
+from crackbake.solver.topology import eig_max_sym3
+
+PARAMS = SolverParams(toughness=0.7, relax_steps=10, relax_rate=0.6, max_cracks=5000)
+
+
+def plate(n: int, jitter: float = 0.35, seed: int = 1) -> SimpleNamespace:
+    """Unit plate, n x n jittered grid points, Delaunay triangulated, normals +z."""
+    h = 1.0 / n
+    x, y = np.meshgrid(np.arange(n + 1) * h, np.arange(n + 1) * h, indexing="ij")
+    p = np.stack([x.ravel(), y.ravel()], 1)
+    inner = (p > 1e-9).all(1) & (p < 1 - 1e-9).all(1)
+    p[inner] += np.random.default_rng(seed).uniform(-jitter, jitter, (inner.sum(), 2)) * h
+    tri = Delaunay(p).simplices.astype(np.int64)
+    v = np.concatenate([p, np.zeros((len(p), 1))], 1)
+    cr = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
+    tri[cr < 0] = tri[cr < 0][:, [0, 2, 1]]
+    tri = tri[np.abs(cr) > 1e-12 * h * h]
+    # Two sim faces per asset face where possible, so asset faces are not all distinct.
+    return SimpleNamespace(vertices=v, faces=tri, asset_face=np.arange(len(tri)) // 2,
+                           edge_length=h, boundary=None)
+
+
+def field(stress: np.ndarray, growth=None) -> SimpleNamespace:
+    return SimpleNamespace(stress=stress, growth=growth, weight=np.ones(len(stress)), impacts=[])
+
+
+def uniform(sim, s=1.0):
+    st = np.zeros((len(sim.faces), 3, 3))
+    st[:, 0, 0] = st[:, 1, 1] = s
+    return field(st)
+
+
+def directional(sim, d=(1.0, 0.3, 0.0), s=1.0):
+    d = np.asarray(d) / np.linalg.norm(d)
+    return field(np.repeat((s * np.outer(d, d))[None], len(sim.faces), 0))
+
+
+def impact(sim, centre=(0.5, 0.5, 0.0), radius=0.25):
+    c = sim.vertices[sim.faces].mean(1) - np.asarray(centre)
+    d = np.linalg.norm(c, axis=1)
+    w = np.where(d <= np.pi * radius / 2, 2 * np.cos(d / radius), 0.0)
+    r = c / np.maximum(d, 1e-12)[:, None]
+    t = np.cross([0.0, 0.0, 1.0], r)
+    return field(w[:, None, None] * (np.einsum("ea,eb->eab", r, r)
+                                     + 1.25 * np.einsum("ea,eb->eab", t, t)))
+
+
+# ------------------------------------------------------------------ crack-network measurements
+
+
+def crack_graph(result):
+    adj: dict[tuple, list[tuple]] = {}
+    edges = []
+    for c in result.cracks:
+        for i in range(len(c.points) - 1):
+            a, b = tuple(np.round(c.points[i], 9)), tuple(np.round(c.points[i + 1], 9))
+            edges.append((a, b))
+            adj.setdefault(a, []).append(b)
+            adj.setdefault(b, []).append(a)
+    return adj, edges
+
+
+def on_plate_boundary(p, eps=1e-9):
+    return min(p[0], p[1], 1 - p[0], 1 - p[1]) < eps
+
+
+def total_length(result):
+    return sum(np.linalg.norm(np.diff(c.points, axis=0), axis=1).sum() for c in result.cracks)
+
+
+@pytest.fixture(scope="module")
+def sim60():
+    return plate(60)
+
+
+@pytest.fixture(scope="module")
+def shrink_result(sim60):
+    return solve_iben(sim60, uniform(sim60), PARAMS)
+
+
+@pytest.fixture(scope="module")
+def impact_result(sim60):
+    return solve_iben(sim60, impact(sim60), PARAMS)
+
+
+# ------------------------------------------------------------------ kernels
+
+
+def test_jacobi_eigen_matches_numpy():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        a = rng.normal(size=(3, 3))
+        a = a + a.T
+        if rng.random() < 0.3:  # nearly isotropic in a plane, the hard case for closed forms
+            a = np.diag([1.0, 1.0 + 1e-12, -0.5])
+        val, vec = eig_max_sym3(a)
+        w, v = np.linalg.eigh(a)
+        assert val == pytest.approx(w[-1], abs=1e-10)
+        assert np.allclose(a @ vec, val * vec, atol=1e-9)
+
+
+def test_initial_separation_matches_fem_module(sim60):
+    """The compiled per-node separation equals fem.py's vectorised one (before any crack)."""
+    fld = impact(sim60)
+    r = solve_iben(sim60, fld, SolverParams(max_cracks=0, max_steps=0))
+    area, _, grad = face_geometry(sim60.vertices, sim60.faces)
+    # The impact field is positive semidefinite: all tension, no compression.
+    fp = node_forces(area, grad, fld.stress)
+    sep = separation_tensors(sim60.faces, fp, np.zeros_like(fp), len(sim60.vertices))
+    value, _ = largest_eigen(sep)
+    tau_node = value / np.where(r.separation > 0, r.separation, np.inf)
+    ok = r.separation > 0
+    assert ok.sum() > 100
+    # separation = v+ / tau_n with tau_n = tau * h_n * flaw: recover tau_n, must be positive.
+    assert np.all(tau_node[ok] > 0)
+    assert r.steps == 0 and r.cracks == []
+
+
+# ------------------------------------------------------------------ invariants
+
+
+def check_mesh(result, sim):
+    v, f = result.vertices, result.faces
+    area, _, _ = face_geometry(v, f)
+    area0, _, _ = face_geometry(sim.vertices, sim.faces)
+    assert area.sum() == pytest.approx(area0.sum(), rel=1e-9)
+    assert area.min() > 1e-6 * area0.mean()
+    # Oriented 2-manifold with boundary: each directed edge once, each undirected edge <= 2.
+    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    assert len(np.unique(directed, axis=0)) == len(directed)
+    und = np.sort(directed, axis=1)
+    _, counts = np.unique(und, axis=0, return_counts=True)
+    assert counts.max() <= 2
+    # No pinched vertices: the faces around each vertex are connected through shared edges.
+    inc: dict[int, list[int]] = {}
+    for i, tri in enumerate(f.tolist()):
+        for x in tri:
+            inc.setdefault(x, []).append(i)
+    for x, fl in inc.items():
+        seen, stack = {fl[0]}, [fl[0]]
+        while stack:
+            g = stack.pop()
+            for h in fl:
+                if h not in seen and len(set(f[g]) & set(f[h])) == 2:
+                    seen.add(h)
+                    stack.append(h)
+        assert len(seen) == len(fl), f"vertex {x} is pinched"
+    assert len(result.asset_face) == len(f)
+    assert result.stress_final.shape == (len(f), 3, 3)
+
+
+def check_cracks(result, sim):
+    n_asset = int(sim.asset_face.max()) + 1
+    for c in result.cracks:
+        n = len(c.points)
+        assert n >= 2
+        for arr in (c.asset_faces, c.time, c.width, c.depth):
+            assert arr.shape == (n,)
+        assert ((c.asset_faces >= 0) & (c.asset_faces < n_asset)).all()
+        assert ((c.time >= 0) & (c.time <= 1)).all()
+        assert (c.width >= 0).all() and np.allclose(c.depth, 0.5 * c.width)
+    # No crossings: segments intersect only at shared end points (checked on a 2D plate).
+    segs = np.array([np.stack([c.points[i, :2], c.points[i + 1, :2]])
+                     for c in result.cracks for i in range(len(c.points) - 1)])
+    a, b = segs[:, 0], segs[:, 1]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    for i in range(len(segs)):
+        cand = np.nonzero((lo[:, 0] <= hi[i, 0]) & (hi[:, 0] >= lo[i, 0])
+                          & (lo[:, 1] <= hi[i, 1]) & (hi[:, 1] >= lo[i, 1]))[0]
+        for j in cand[cand > i]:
+            p, r = a[i], b[i] - a[i]
+            q, s = a[j], b[j] - a[j]
+            den = r[0] * s[1] - r[1] * s[0]
+            if abs(den) < 1e-15:
+                continue
+            t = ((q - p)[0] * s[1] - (q - p)[1] * s[0]) / den
+            u = ((q - p)[0] * r[1] - (q - p)[1] * r[0]) / den
+            assert not (1e-9 < t < 1 - 1e-9 and 1e-9 < u < 1 - 1e-9), "cracks cross"
+
+
+def test_invariants_shrinkage(sim60, shrink_result):
+    assert len(shrink_result.cracks) > 20
+    check_mesh(shrink_result, sim60)
+    check_cracks(shrink_result, sim60)
+
+
+def test_invariants_impact(sim60, impact_result):
+    assert len(impact_result.cracks) > 10
+    check_mesh(impact_result, sim60)
+    check_cracks(impact_result, sim60)
+    widths = np.concatenate([c.width for c in impact_result.cracks])
+    diag = np.sqrt(2.0)
+    assert widths.max() == pytest.approx(1e-3 * diag)
+
+
+def test_invariants_every_step():
+    """The mesh is valid after each of the first crack events, not only at the end."""
+    sim = plate(20)
+    fld = impact(sim)
+    for k in range(1, 12):
+        r = solve_iben(sim, fld, SolverParams(toughness=0.7, relax_steps=10, relax_rate=0.6,
+                                              max_cracks=k))
+        check_mesh(r, sim)
+
+
+def test_determinism(sim60, impact_result):
+    again = solve_iben(sim60, impact(sim60), PARAMS)
+    assert len(again.cracks) == len(impact_result.cracks)
+    for a, b in zip(again.cracks, impact_result.cracks, strict=True):
+        assert np.array_equal(a.points, b.points) and np.array_equal(a.width, b.width)
+        assert np.array_equal(a.asset_faces, b.asset_faces)
+    assert np.array_equal(again.faces, impact_result.faces)
+
+
+def test_no_stress_no_cracks(sim60):
+    r = solve_iben(sim60, uniform(sim60, 0.0), PARAMS)
+    assert r.cracks == [] and r.steps == 0
+
+
+def test_user_errors(sim60):
+    with pytest.raises(CrackbakeError):
+        solve_iben(sim60, uniform(sim60), SolverParams(toughness=0))
+    with pytest.raises(CrackbakeError):
+        solve_iben(sim60, field(np.zeros((3, 3, 3))), PARAMS)
+
+
+def test_budget_and_growth(sim60):
+    r = solve_iben(sim60, uniform(sim60), SolverParams(max_cracks=7))
+    assert r.stats["events"] == 7
+    st = uniform(sim60, 0.0).stress
+    grow = uniform(sim60, 0.05).stress
+    r = solve_iben(sim60, field(st, grow), SolverParams(max_cracks=50, relax_steps=10,
+                                                           relax_rate=0.6, toughness=0.7))
+    assert r.stats["growth_steps"] > 0 and r.stats["events"] == 50
+
+
+# ------------------------------------------------------------------ pattern quality
+
+
+def test_impact_radial_near_concentric_further_out(impact_result):
+    radius = np.pi * 0.25 / 2
+    rows = []
+    for c in impact_result.cracks:
+        p = c.points[:, :2]
+        for i in range(len(p) - 1):
+            m, d = 0.5 * (p[i] + p[i + 1]), p[i + 1] - p[i]
+            rr = m - 0.5
+            dist = np.linalg.norm(rr)
+            rows.append((dist / radius, abs(d @ rr) / (np.linalg.norm(d) * max(dist, 1e-12)),
+                         np.linalg.norm(d)))
+    rows = np.array(rows)
+    near, far = rows[rows[:, 0] < 0.35], rows[rows[:, 0] > 0.5]
+    radial_near = (near[:, 2] * (near[:, 1] > 0.7)).sum() / near[:, 2].sum()
+    tangential_far = (far[:, 2] * (far[:, 1] < 0.5)).sum() / far[:, 2].sum()
+    assert radial_near > 0.45  # measured ~0.6
+    assert tangential_far > 0.15  # measured ~0.27: concentric links
+    dens = [rows[(rows[:, 0] >= a) & (rows[:, 0] < b), 2].sum() / (b * b - a * a)
+            for a, b in ((0, 0.33), (0.33, 0.66), (0.66, 1.2))]
+    assert dens[0] > dens[1] > dens[2]
+
+
+def test_shrinkage_network(shrink_result):
+    adj, edges = crack_graph(shrink_result)
+    # Connected: the largest component holds most of the crack length.
+    comp: dict[tuple, int] = {}
+    for s in adj:
+        if s in comp:
+            continue
+        comp[s] = len(comp)
+        stack, cid = [s], comp[s]
+        while stack:
+            u = stack.pop()
+            for w in adj[u]:
+                if w not in comp:
+                    comp[w] = cid
+                    stack.append(w)
+    length: dict[int, float] = {}
+    for a, b in edges:
+        length[comp[a]] = length.get(comp[a], 0) + np.linalg.norm(np.subtract(a, b))
+    assert max(length.values()) / sum(length.values()) > 0.8
+    # Most crack ends finish on another crack or the boundary.
+    ends = [p for p, nb in adj.items() if len(nb) != 2]
+    free = sum(1 for p in ends if len(adj[p]) == 1 and not on_plate_boundary(p))
+    incidences = sum(len(adj[p]) for p in ends)
+    assert 1 - free / incidences > 0.7
+    # Junction angles: the stem of a T meets the through crack near 90 degrees.
+    angles = []
+    for p, nb in adj.items():
+        if len(nb) != 3:
+            continue
+        dirs = []
+        for q in nb:
+            prev, cur = p, q
+            for _ in range(3):
+                if len(adj[cur]) != 2:
+                    break
+                prev, cur = cur, next(x for x in adj[cur] if x != prev)
+            d = np.subtract(cur, p)[:2]
+            dirs.append(d / np.linalg.norm(d))
+        ang = [[np.degrees(np.arccos(np.clip(dirs[i] @ dirs[j], -1, 1))) for j in range(3)]
+               for i in range(3)]
+        i, j = max(((0, 1), (0, 2), (1, 2)), key=lambda ij: ang[ij[0]][ij[1]])
+        k = 3 - i - j
+        angles.append(min(ang[k][i], ang[k][j]))
+    angles = np.array(angles)
+    assert len(angles) > 20
+    assert np.mean(np.abs(angles - 90) < 45) > 0.55  # measured ~0.62
+
+
+def test_straight_under_directional_stress():
+    sim = plate(60)
+    r = solve_iben(sim, directional(sim), PARAMS)
+    turn, length = 0.0, 0.0
+    for c in r.cracks:
+        d = np.diff(c.points[:, :2], axis=0)
+        seg = np.linalg.norm(d, axis=1)
+        u = d / seg[:, None]
+        length += seg.sum()
+        turn += np.arccos(np.clip((u[1:] * u[:-1]).sum(1), -1, 1)).sum()
+    # Radians of turning per edge length h; following zig-zag mesh edges gives ~0.5-1.
+    assert turn / length * sim.edge_length < 0.2  # measured ~0.13
+    # Cracks run across the tension direction.
+    d = np.array([1.0, 0.3]) / np.linalg.norm([1.0, 0.3])
+    along = [abs((c.points[-1, :2] - c.points[0, :2]) @ d)
+             / np.linalg.norm(c.points[-1, :2] - c.points[0, :2]) for c in r.cracks
+             if np.linalg.norm(c.points[-1, :2] - c.points[0, :2]) > 5 * sim.edge_length]
+    assert np.median(along) < 0.4
+
+
+@pytest.mark.xfail(reason="crack spacing follows the ring-local relaxation, so it scales with the "
+                   "sim edge length (measured: halving h gives ~1.6-1.8x the crack length); "
+                   "see the iben module docstring", strict=False)
+def test_resolution_independence():
+    counts = []
+    for n in (40, 80):
+        sim = plate(n)
+        counts.append(total_length(solve_iben(sim, impact(sim), PARAMS)))
+    assert abs(counts[1] / counts[0] - 1) <= 0.3
