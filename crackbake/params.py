@@ -23,10 +23,10 @@ PRESET_DIR = Path(__file__).resolve().parent / "presets"
 #: Solver and stress defaults when neither the command line nor a preset sets them.
 SOLVER_DEFAULTS: dict = {
     "method": "iben",
-    "toughness": 1.0,
+    "toughness": 0.7,
     "tip_factor": 0.75,
-    "relax_steps": 3,
-    "relax_rate": 0.1,
+    "relax_steps": 10,
+    "relax_rate": 0.6,
     "relax_share": 0.05,
     "max_cracks": 500,
     "max_steps": 20000,

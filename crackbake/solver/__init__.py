@@ -55,10 +55,10 @@ class SolverParams:
     """
 
     method: str = "iben"
-    toughness: float = 1.0
+    toughness: float = 0.7
     tip_factor: float = 0.75
-    relax_steps: int = 3
-    relax_rate: float = 0.1
+    relax_steps: int = 10
+    relax_rate: float = 0.6
     relax_share: float = 0.05
     max_cracks: int = 500
     max_steps: int = 20000
