@@ -34,14 +34,14 @@ syslibs:
 	fi
 
 demo: setup
-	$(VPY) examples/make_demo_cracks.py examples/spot.obj -o examples/spot_demo_cracks.json
-	$(VENV)/bin/crackbake examples/spot.obj --cracks examples/spot_demo_cracks.json --res 2048 -o spot_cracks
+	$(VENV)/bin/crackbake examples/spot.obj --preset glass --impact 0.45,0.1,0.3 --res 2048 -o spot_cracks
 	@echo
-	@echo "Outputs are in ./spot_cracks/ (see README 'Output files'):"
-	@echo "  spot_cracks.exr  EXR master: crack.mask/width/depth/time/id/distance"
+	@echo "Outputs are in ./spot_cracks/ (README 'Output files'):"
+	@echo "  spot_cracks.exr  EXR master: crack.mask/width/depth/time/id/distance (linear, mesh units)"
 	@echo "  spot_mask.png    8-bit crack mask      spot_depth.png  16-bit crack depth"
 	@echo "  spot.glb         the mesh with the cracks on its base colour (open in any glTF viewer)"
-	@echo "  cracks.json      crack network sidecar  cracks.obj  polylines for DCC tools"
+	@echo "  preview.png      a shaded picture of the result"
+	@echo "  cracks.json      crack network sidecar (re-bake it with --cracks)  cracks.obj  polylines"
 	@echo "  manifest.json    inputs, parameters, files, timings"
 
 test: setup
@@ -50,6 +50,7 @@ test: setup
 
 bench: setup
 	$(VPY) benchmarks/bench_bake.py
+	$(VPY) benchmarks/bench_solver.py
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info spot_cracks

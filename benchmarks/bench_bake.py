@@ -149,13 +149,18 @@ def child(mesh_name: str, res: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         planes = _exr_channels(maps, float32=False)
-        t = time.perf_counter()
-        write_exr(tmp / "out.exr", planes, {"crackbake:version": "bench"})
-        row["exr"] = time.perf_counter() - t
+        # Two alternating rounds, best of each: single writes vary by +-30 % on 2 busy cores.
+        ours, bares = [], []
+        for _ in range(2):
+            t = time.perf_counter()
+            write_exr(tmp / "out.exr", planes, {"crackbake:version": "bench"})
+            ours.append(time.perf_counter() - t)
+            bares.append(bare_exr_writes(planes, tmp))
+        row["exr"] = min(ours)
         row["exr_MB"] = (tmp / "out.exr").stat().st_size / 1e6
-        bare = bare_exr_writes(planes, tmp)
-        row["bare_openexr"], row["bare_oiio"] = bare["openexr"], bare["oiio"]
-        row["exr_vs_bare"] = row["exr"] / min(bare.values())
+        row["bare_openexr"] = min(b["openexr"] for b in bares)
+        row["bare_oiio"] = min(b["oiio"] for b in bares)
+        row["exr_vs_bare"] = row["exr"] / min(row["bare_openexr"], row["bare_oiio"])
         t = time.perf_counter()
         write_png(tmp / "mask.png", maps.mask, bits=8)
         depth = maps.depth / max(float(maps.depth.max()), 1e-30)

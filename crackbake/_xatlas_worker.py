@@ -23,13 +23,12 @@ import sys
 import numpy as np
 import xatlas
 
-# Most xatlas runs are needed when a fixed texels_per_unit still spills onto a second page;
-# each retry shrinks by at least 10 %, so 10 runs reach 0.35 x the first scale.
-MAX_ATTEMPTS = 10
+# Repacks tried (each shrinks the scale by SHRINK) before giving up on one page.
+MAX_ATTEMPTS = 12
+SHRINK = 0.93
 
 
-def _generate(atlas, res: int, padding: int, texels_per_unit: float) -> None:
-    chart = xatlas.ChartOptions()
+def _pack_options(res: int, padding: int, texels_per_unit: float):
     pack = xatlas.PackOptions()
     pack.resolution = int(res)
     pack.padding = int(padding)
@@ -37,60 +36,87 @@ def _generate(atlas, res: int, padding: int, texels_per_unit: float) -> None:
     # bruteForce ran for minutes on 20k faces at 4096 (shared/research/deps.md); never use it.
     pack.bruteForce = False
     pack.texels_per_unit = float(texels_per_unit)
-    atlas.generate(chart, pack)
+    return pack
+
+
+def _repack(texels: np.ndarray, indices: np.ndarray, res: int, padding: int, scale: float):
+    """Pack existing charts again at ``scale`` x their size: no chart computation (~20x faster)."""
+    atlas = xatlas.Atlas()
+    atlas.add_uv_mesh(texels.astype(np.float32), indices.astype(np.uint32))
+    atlas.generate(xatlas.ChartOptions(), _pack_options(res, padding, scale))
+    return atlas
 
 
 def fit_one_page(
     vertices: np.ndarray, faces: np.ndarray, res: int, padding: int
 ) -> dict[str, np.ndarray]:
-    """Unwrap and pack into one ``res`` x ``res`` page with square texels.
+    """Unwrap and pack into one ``res`` x ``res`` page with square texels, as large as fits.
 
     ``resolution=res`` alone lets xatlas choose its own scale, which gives a page of w x h texels
-    that is often not square and can exceed ``res``; a fixed scale that is too large spills onto
-    several pages.  So: run once with xatlas's own scale, and while the result does not fit one
-    page, run again with the scale shrunk by the overflow (2 % margin, at least 10 % per retry
-    once xatlas pins the page at ``res``).
+    that is often not square, can exceed ``res``, or leaves much of it empty.  So the charts are
+    computed once (the slow part: about 45 s for 100k faces) and then only *repacked* at the
+    scale that fills the page, shrinking by 7 % per try until everything fits one page.
     """
     atlas = xatlas.Atlas()
     atlas.add_mesh(vertices, faces)
-    _generate(atlas, res, padding, 0.0)
-    tried = [(atlas.width, atlas.height, atlas.atlas_count)]
-    while max(atlas.width, atlas.height) > res or atlas.atlas_count > 1:
-        if len(tried) >= MAX_ATTEMPTS:
-            raise RuntimeError(
-                f"could not fit the charts into one {res}x{res} page after {len(tried)} runs "
-                f"(last: {atlas.width}x{atlas.height}, {atlas.atlas_count} pages)"
-            )
-        scale = min(0.98 * res / max(atlas.width, atlas.height), 0.9 if len(tried) > 1 else 0.98)
-        _generate(atlas, res, padding, atlas.texels_per_unit * scale)
-        tried.append((atlas.width, atlas.height, atlas.atlas_count))
+    atlas.generate(xatlas.ChartOptions(), _pack_options(res, padding, 0.0))
+    vm1, ix1, uv1 = atlas[0]
+    w1, h1 = int(atlas.width), int(atlas.height)
+    tried = [(w1, h1, int(atlas.atlas_count))]
+    texels = uv1.astype(np.float64) * np.array([w1, h1])
+    chart_count = int(atlas.chart_count)
+    tpu1 = float(atlas.texels_per_unit)
+    fits = max(w1, h1) <= res and atlas.atlas_count == 1
 
-    vmapping, indices, uv = atlas[0]
-    page, _chart = atlas.get_mesh_vertex_assignment(0)
-    if page.size and int(page.max()) != 0:
-        raise RuntimeError("xatlas placed vertices on a second page")
-    width, height = int(atlas.width), int(atlas.height)
-    # xatlas-python returns texel position / (width, height) per axis; going back to texels and
-    # dividing both by res keeps texels square.  The y axis is kept as is (no flip): xatlas's
-    # texel y counts rows from 0 like GL's framebuffer rows (row 0 = v 0, bottom) and its charts
-    # come in both orientations anyway, so reading y as v-up (OBJ) is as valid as any and keeps
-    # chart texel alignment.
-    uv = uv.astype(np.float64)
-    uv[:, 0] *= width / res
-    uv[:, 1] *= height / res
+    best = (vm1.astype(np.int64), ix1.astype(np.int64), texels, w1, h1) if fits else None
+    scale = 0.99 * res / max(w1, h1)
+    if not fits or scale > 1.05:  # does not fit, or wastes more than ~10 % of the page
+        for _ in range(MAX_ATTEMPTS):
+            packed = _repack(texels, ix1, res, padding, scale)
+            w, h, pages = int(packed.width), int(packed.height), int(packed.atlas_count)
+            tried.append((w, h, pages))
+            if pages == 1 and max(w, h) <= res:
+                vm2, ix2, uv2 = packed[0]
+                best = (
+                    vm1.astype(np.int64)[vm2.astype(np.int64)],
+                    ix2.astype(np.int64),
+                    uv2.astype(np.float64) * np.array([w, h]),
+                    w,
+                    h,
+                )
+                break
+            scale *= SHRINK
+    if best is None:
+        raise RuntimeError(
+            f"could not fit the charts into one {res}x{res} page after {len(tried)} tries "
+            f"(last: {tried[-1][0]}x{tried[-1][1]}, {tried[-1][2]} pages)"
+        )
+    vmapping, indices, texels, width, height = best
+    # Texel positions / res on both axes keep texels square.  The y axis is kept as is (no
+    # flip): xatlas's texel y counts rows from 0 like GL's framebuffer rows (row 0 = v 0,
+    # bottom) and its charts come in both orientations anyway, so reading y as v-up (OBJ) is as
+    # valid as any and keeps chart texel alignment.
+    uv = texels / res
     return {
-        "vmapping": vmapping.astype(np.int64),
-        "indices": indices.astype(np.int64),
+        "vmapping": vmapping,
+        "indices": indices,
         "uv": np.clip(uv, 0.0, 1.0),
         "width": np.int64(width),
         "height": np.int64(height),
-        "atlas_count": np.int64(atlas.atlas_count),
-        "chart_count": np.int64(atlas.chart_count),
-        "utilization": np.float64(np.asarray(atlas.utilization, dtype=np.float64).ravel()[0]),
-        "texels_per_unit": np.float64(atlas.texels_per_unit),
+        "atlas_count": np.int64(1),
+        "chart_count": np.int64(chart_count),
+        "utilization": np.float64(_utilization(uv, indices)),
+        "texels_per_unit": np.float64(tpu1 * (width / w1 if w1 else 1.0)),
         "attempts": np.int64(len(tried)),
         "tried": np.asarray(tried, dtype=np.int64),
     }
+
+
+def _utilization(uv: np.ndarray, faces: np.ndarray) -> float:
+    """Fraction of the page covered by charts (sum of UV triangle areas)."""
+    c = uv[faces]
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    return float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -310,7 +310,10 @@ def test_unwrap_square_texels_on_one_page():
     assert along_u.sum() > 10 and along_v.sum() > 10
     ratio_u = np.median(d3[along_u] / np.abs(duv[along_u, 0]))
     ratio_v = np.median(d3[along_v] / np.abs(duv[along_v, 1]))
-    assert ratio_u == pytest.approx(ratio_v, rel=1e-3)
+    # Repacking rounds each chart's size to whole texels: square to within one texel per chart
+    # (0.4 % on this 256-texel page, far less at production sizes).  Without the square-texel
+    # fix the ratio is 2:1.
+    assert ratio_u == pytest.approx(ratio_v, rel=1e-2)
     # The long side spans most of the page: xatlas's scale was fitted to res, not shrunk away.
     extent = (out.uv.max(axis=0) - out.uv.min(axis=0)).max()
     assert 0.7 < extent <= 1.0
