@@ -207,14 +207,14 @@ def mesh_info(mesh: Mesh) -> dict:
     }
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
     """Plain-Python copy of a params/impacts value (numpy scalars and arrays become lists)."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, Path):
@@ -247,8 +247,8 @@ def to_dict(network: CrackNetwork) -> dict:
             "bbox_min": [float(x) for x in m["bbox_min"]],
             "bbox_max": [float(x) for x in m["bbox_max"]],
         },
-        "params": _jsonable(dict(network.params)),
-        "impacts": _jsonable(list(network.impacts)),
+        "params": jsonable(dict(network.params)),
+        "impacts": jsonable(list(network.impacts)),
         "cracks": [
             {
                 "id": int(c.id),

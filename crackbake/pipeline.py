@@ -24,6 +24,7 @@ from crackbake.mesh import CrackbakeWarning, Mesh, load_mesh
 from crackbake.network import (
     CrackNetwork,
     from_solver,
+    jsonable,
     read_sidecar,
     segments,
     write_obj,
@@ -401,26 +402,14 @@ def solve(
                           impacts=field.impacts, solver_steps=result.steps)
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
-    return network, _jsonable(stats)
+    return network, jsonable(stats)
 
 
 def _sidecar_params(effective: dict) -> dict:
     """Parameters stored in the sidecar: everything that shapes the network, no output paths."""
     drop = {"out", "formats", "float32", "unwrap_timeout", "cache", "tile", "res", "padding",
             "dilate", "max_distance", "profile", "cracks"}
-    return _jsonable({k: v for k, v in effective.items() if k not in drop})
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    return value
+    return jsonable({k: v for k, v in effective.items() if k not in drop})
 
 
 def _inputs(params: RunParams) -> dict:

@@ -595,19 +595,9 @@ def _asset_barycentrics(sim, mesh: Mesh, geo: _Geometry) -> tuple[np.ndarray, np
             "simulation mesh does not match the asset mesh (asset_face out of range); "
             "rebuild it from this mesh"
         )
-    tri = mesh.vertices[mesh.faces[af]]
-    a = tri[:, 0]
-    ab, ac, ap = tri[:, 1] - a, tri[:, 2] - a, geo.centroid - a
-    d00 = np.einsum("ka,ka->k", ab, ab)
-    d01 = np.einsum("ka,ka->k", ab, ac)
-    d11 = np.einsum("ka,ka->k", ac, ac)
-    d20 = np.einsum("ka,ka->k", ap, ab)
-    d21 = np.einsum("ka,ka->k", ap, ac)
-    den = d00 * d11 - d01 * d01
-    safe = np.where(den > 0, den, 1.0)
-    v = np.where(den > 0, (d11 * d20 - d01 * d21) / safe, 1 / 3)
-    w = np.where(den > 0, (d00 * d21 - d01 * d20) / safe, 1 / 3)
-    bary = np.clip(np.stack([1.0 - v - w, v, w], axis=1), 0.0, None)
+    from crackbake.simmesh import asset_barycentric
+
+    bary = np.clip(asset_barycentric(mesh, af, geo.centroid), 0.0, None)
     bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
     return af, bary
 
