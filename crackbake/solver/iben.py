@@ -13,26 +13,47 @@ Algorithm (../shared/research/method.md §A, gaps resolved as in §B):
    (``SNAP_BOUNDARY_DEG`` when that vertex lies on a crack or the boundary, or ``t`` within
    ``SNAP_T`` of an end); split the node along the cut; recompute forces and ``ς`` of the changed
    1-ring; push ``α(v⁺ − τ) n̂n̂ᵀ`` to the new free tips (not to tips that met a crack or the
-   boundary: those cracks are finished); relax the stress ``relax_steps`` times inside
-   ``RELAX_RINGS`` rings of the change; re-queue the changed nodes.  The work per step is local,
-   so it does not grow with the mesh.
+   boundary: those cracks are finished); relax the stress (fine level, below); cast the crack's
+   stress shadow (coarse level, below); re-queue the changed nodes.  The work per step does not
+   grow with the mesh.
 3. Shrinkage growth (``field.growth``) is applied quasi-statically: whenever no node fails, the
    growth is added to every face (one solver step), and the loop resumes.  Drying is slow
    compared with cracking, so cracks run until the field is at rest before it grows again.
 
+Stress relief works on two levels, so that the pattern has a world scale rather than the scale
+of the simulation mesh:
+
+* **Fine (near the crack, in rings).**  Method.md §A8 with the stability fix of §B5: per pass,
+  each node within ``RELAX_RINGS`` rings of the change moves by ``d = relax_rate · F_net / K``
+  with ``K = Σ A|g|²`` the diagonal stiffness (a damped Jacobi step of the equilibrium), and each
+  face adds ``sym(Σ_i d_i g_iᵀ)``, capped at ``RELAX_CAP`` of its stress norm per pass; passes
+  stop early once no face changes by more than ``RELAX_TOL``.  This shapes tips and junctions.
+* **Coarse (world-scale stress shadow).**  Global relaxation, as in the paper, would cost O(n) a
+  step.  Instead each new crack segment (length ℓ, normal n̂) deposits ``ℓ (n̂·S·n̂) n̂n̂ᵀ`` with a
+  compact kernel of radius ``R = SHADOW_REL ×`` bounding-box diagonal into a uniform grid of
+  cell size R/3 (O(1) cells per event).  A face's *effective* stress is its stress minus the
+  grid's release interpolated at its centroid, projected on its plane and never pushed into new
+  compression.  A long crack thus releases its normal stress fully along itself, fading to zero
+  at distance R, while stress parallel to it is untouched: parallel cracks keep a world spacing,
+  and perpendicular ones still form T-junctions.  Free crack tips read the *raw* stress (their
+  own crack's shadow would otherwise stall them; their growth is a near-field matter).  The
+  heap is lazy: a popped node is re-evaluated against the current shadow and re-queued if it no
+  longer is the most critical, so nodes far from the last event are never touched.
+
 Toughness is resolution independent: a node's separation scales with its edge length h, so the
 failure test compares ``v⁺ / h_n`` with ``τ = toughness × P90`` where ``P90`` is the 90th
 percentile of the initial ``v⁺ / h_n`` over interior nodes with positive separation.  Each node
-also gets a seeded flaw factor (±``FLAW`` relative), the material's imperfections.
+also gets a seeded flaw factor (±``FLAW`` relative, a smooth world-space field), the material's
+imperfections.
 
-Known limitation: the relaxation is local in *rings* (so a step costs the same at any mesh size),
-so the stress shadow around a crack, and with it the crack spacing, scales with the simulation
-edge length: halving it gives about 1.6-1.8x the crack length on the test plates.
+Resolution independence (measured, tests/test_iben.py::test_resolution_independence): on unit
+plates with the glass impact and shrinkage fields, halving the sim edge length (60 -> 120 grid
+cells) changes the total crack length and the number of cracks by less than ``RES_TOLERANCE``
+(25 %).  The remaining dependence comes from the fine level (a few edge lengths wide) and the
+crack paths' zig-zag along the mesh.
 
-Relaxation (method.md §A8 with the stability fix of §B5): per pass, each node inside the region
-moves by ``d = relax_rate · F_net / K`` with ``K = Σ A|g|²`` the diagonal stiffness (a damped
-Jacobi step of the equilibrium, so the rate is resolution independent), and each face adds
-``sym(Σ_i d_i g_iᵀ)``, capped at ``RELAX_CAP`` of its stress norm per pass.
+Budgets: ``max_cracks`` bounds the distinct cracks started (nucleations; existing cracks keep
+growing), ``max_steps`` the solver steps (crack events plus growth steps).
 """
 
 from __future__ import annotations
@@ -60,6 +81,7 @@ from crackbake.solver.topology import (
     node_update,
     on_boundary,
     separate,
+    shadow_add,
     split_edge,
     spoke_count,
 )
@@ -71,9 +93,19 @@ SNAP_BOUNDARY_DEG = 25.0
 SNAP_T = 0.12
 """Snap when the crossing is this close (fraction of the edge) to an end: avoids slivers."""
 RELAX_RINGS = 3
-"""Rings of faces around a crack event that the local relaxation touches."""
+"""Rings of faces around a crack event that the fine relaxation touches."""
 RELAX_CAP = 0.1
 """Largest relative change of a face's stress in one relaxation pass."""
+RELAX_TOL = 0.002
+"""Stop the relaxation passes once no face's stress changes by more than this (relative)."""
+SHADOW_REL = 0.04
+"""Radius of a crack's world-scale stress shadow, relative to the bounding-box diagonal."""
+SHADOW_GAIN = 1.0
+"""Fraction of the normal stress a crack releases on its own line (coarse level)."""
+SHADOW_MAX_CELLS = 4_000_000
+"""Largest shadow grid (cells); coarser cells are used on very elongated bounding boxes."""
+RES_TOLERANCE = 0.25
+"""Documented tolerance of the crack length / count when the sim edge length halves."""
 REF_PERCENTILE = 90.0
 """Percentile of the initial normalised separation that toughness 1 corresponds to."""
 FLAW = 0.25
@@ -85,22 +117,39 @@ GROWTH_REF_STEPS = 20
 """With no initial stress, toughness 1 is the separation of this many growth steps."""
 EXTRA_DEGREE = 24
 """Room for faces a node may gain by edge splits around it (node -> face table width)."""
+PROGRESS_SECONDS = 0.5
+"""Least time between two progress messages."""
 
 # Indices into the counter array shared by the kernels.
-_HEAP, _NN, _NF, _NS, _STEP, _EVENTS, _STAMP, _NCRACK, _ABORT, _GROW = range(10)
+(_HEAP, _NN, _NF, _NS, _STEP, _EVENTS, _STAMP, _NCRACK, _ABORT, _GROW, _DEP,
+ _REFRESH) = range(12)
+# Return codes of _run.
+_MORE, _DONE, _FULL = 0, 1, 2
 
 
 @njit(cache=True)
-def _setup(nn, nf, X, F, S, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec):
+def _scratch():
+    return np.empty(8), np.empty((3, 3)), np.empty((3, 3)), np.empty((2, 3)), np.empty(6)
+
+
+@njit(cache=True)
+def _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, crack_of, G, gp):
+    """Recompute every face and every node (setup, growth steps, the final state)."""
+    sc, acc, ev, fr, r6 = _scratch()
+    for f in range(nf):
+        face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
+    for n in range(nn):
+        node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of[n] >= 0,
+                    sc, acc, ev)
+
+
+@njit(cache=True)
+def _incidence(nf, F, NF, NFc):
     for f in range(nf):
         for k in range(3):
             n = F[f, k]
             NF[n, NFc[n]] = f
             NFc[n] += 1
-    for f in range(nf):
-        face_update(f, X, F, S, area, nrm, grad, fp, fm)
-    for n in range(nn):
-        node_update(n, F, NF, NFc, fp, fm, rho, val, vec)
 
 
 @njit(cache=True)
@@ -120,76 +169,222 @@ def _push(n, hk, hn, hv, cnt, val, taun, nver, dead):
 
 
 @njit(cache=True)
-def _angle(u, v):
-    nu = np.sqrt(u @ u)
-    nv = np.sqrt(v @ v)
+def _angle(u0, u1, u2, v0, v1, v2):
+    nu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+    nv = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     if nu == 0.0 or nv == 0.0:
         return 0.0
-    return np.arccos(min(1.0, max(-1.0, (u @ v) / (nu * nv))))
+    return np.arccos(min(1.0, max(-1.0, (u0 * v0 + u1 * v1 + u2 * v2) / (nu * nv))))
 
 
 @njit(cache=True)
-def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun, hn, pid, onb,
-         crack_of, nver, dead, fst, nst, hk, hn_, hv, segp, seg_alive, seg_info, clen, cnt,
-         prm, max_events, max_steps, chunk):
-    """Advance the crack loop by at most ``chunk`` crack events; returns 1 when finished."""
+def _relax(nrelax, rate, regf, nrf, regn, nrn, stamp, fst, F, S, NF, NFc, area, nrm, grad, disp):
+    """Fine relaxation of the region's stress (raw S), damped Jacobi passes; see module doc."""
+    for _pass in range(nrelax):
+        for i in range(nrn):
+            n = regn[i]
+            free = True
+            f0 = f1 = f2 = 0.0
+            kn = 0.0
+            for j in range(NFc[n]):
+                f = NF[n, j]
+                if fst[f] != stamp:
+                    free = False
+                    break
+                k = 0
+                while F[f, k] != n:
+                    k += 1
+                g = grad[f, k]
+                s = S[f]
+                A = area[f]
+                f0 -= A * (s[0, 0] * g[0] + s[0, 1] * g[1] + s[0, 2] * g[2])
+                f1 -= A * (s[1, 0] * g[0] + s[1, 1] * g[1] + s[1, 2] * g[2])
+                f2 -= A * (s[2, 0] * g[0] + s[2, 1] * g[1] + s[2, 2] * g[2])
+                kn += A * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+            if free and kn > 0:
+                disp[n, 0] = rate * f0 / kn
+                disp[n, 1] = rate * f1 / kn
+                disp[n, 2] = rate * f2 / kn
+            else:
+                disp[n, 0] = disp[n, 1] = disp[n, 2] = 0.0
+        worst = 0.0
+        for i in range(nrf):
+            f = regf[i]
+            nf_ = nrm[f]
+            m00 = m01 = m02 = m10 = m11 = m12 = m20 = m21 = m22 = 0.0
+            for q in range(3):
+                d = disp[F[f, q]]
+                dn = d[0] * nf_[0] + d[1] * nf_[1] + d[2] * nf_[2]
+                d0 = d[0] - dn * nf_[0]
+                d1 = d[1] - dn * nf_[1]
+                d2 = d[2] - dn * nf_[2]
+                g = grad[f, q]
+                m00 += d0 * g[0]
+                m01 += d0 * g[1]
+                m02 += d0 * g[2]
+                m10 += d1 * g[0]
+                m11 += d1 * g[1]
+                m12 += d1 * g[2]
+                m20 += d2 * g[0]
+                m21 += d2 * g[1]
+                m22 += d2 * g[2]
+            a01 = 0.5 * (m01 + m10)
+            a02 = 0.5 * (m02 + m20)
+            a12 = 0.5 * (m12 + m21)
+            nds = np.sqrt(m00 * m00 + m11 * m11 + m22 * m22
+                          + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12))
+            s = S[f]
+            ns = 0.0
+            for a in range(3):
+                for b in range(3):
+                    ns += s[a, b] * s[a, b]
+            ns = np.sqrt(ns)
+            scale = 1.0
+            if nds > RELAX_CAP * ns:
+                scale = RELAX_CAP * ns / nds
+            if ns > 0.0:
+                worst = max(worst, scale * nds / ns)
+            s[0, 0] += scale * m00
+            s[1, 1] += scale * m11
+            s[2, 2] += scale * m22
+            s[0, 1] += scale * a01
+            s[1, 0] += scale * a01
+            s[0, 2] += scale * a02
+            s[2, 0] += scale * a02
+            s[1, 2] += scale * a12
+            s[2, 1] += scale * a12
+        if worst < RELAX_TOL:
+            break
+    for i in range(nrn):
+        disp[regn[i], 0] = disp[regn[i], 1] = disp[regn[i], 2] = 0.0
+
+
+@njit(cache=True)
+def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn, pid, onb,
+         crack_of, nver, dead, fst, nst, nevl, segof, hk, hn_, hv, segp, seg_alive, seg_info,
+         clen, G, gp, cnt, prm, max_cracks, max_steps, chunk):
+    """Advance the crack loop by at most ``chunk`` steps.
+
+    Returns ``_MORE`` (chunk done), ``_DONE`` (finished) or ``_FULL`` (the state arrays need more
+    room: grow them and call again).
+    """
     alpha, rate, nrelax, max_len = prm[0], prm[1], int(prm[2]), prm[3]
     snap, snap_b, snap_t, rings = prm[4], prm[5], prm[6], int(prm[7])
+    gain = prm[8]
+    shadow = G.shape[0] >= 2
     W = NF.shape[1]
     ncap = X.shape[0]
     mcap = F.shape[0]
-    regf = np.empty(200000, np.int64)
-    regn = np.empty(400000, np.int64)
+    regf = np.empty(65536, np.int64)
+    regn = np.empty(65536, np.int64)
     disp = np.zeros((ncap, 3))
-    buf = np.empty(4, np.int64)
+    buf = np.empty(8, np.int64)
+    par = np.empty(W, np.int64)
+    comp = np.empty(W, np.int64)
+    fbuf = np.empty(W, np.int64)
+    centers = np.empty(24, np.int64)
+    sc, acc, ev, fr, r6 = _scratch()
+    sa = np.empty(2, np.int64)
+    sb = np.empty(2, np.int64)
+    st = np.empty(2)
+    sd = np.empty(2)
+    tip = np.empty(2, np.int64)
+    split = np.empty(2, np.bool_)
+    free_tip = np.empty(2, np.bool_)
     done = 0
     while True:
-        if cnt[_EVENTS] >= max_events or cnt[_STEP] >= max_steps:
-            return 1
+        if cnt[_STEP] >= max_steps:
+            return _DONE
         if done >= chunk:
-            return 0
-        if cnt[_NN] + 16 > ncap or cnt[_NF] + 8 > mcap or cnt[_NS] + 8 > segp.shape[0]:
-            return 1
+            return _MORE
+        if (cnt[_NN] + 32 > ncap or cnt[_NF] + 16 > mcap or cnt[_NS] + 16 > segp.shape[0]
+                or cnt[_NCRACK] + 2 > clen.shape[0]):
+            return _FULL
         if cnt[_HEAP] == 0:
             if GR.shape[0] > 1:
                 # Quasi-static shrinkage: nothing fails, so the material dries a step further.
-                for f in range(cnt[_NF]):
+                nn, nf = cnt[_NN], cnt[_NF]
+                for f in range(nf):
                     S[f] += GR[f]
-                    face_update(f, X, F, S, area, nrm, grad, fp, fm)
-                for n in range(cnt[_NN]):
-                    node_update(n, F, NF, NFc, fp, fm, rho, val, vec)
+                _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec,
+                            crack_of, G, gp)
+                for n in range(nn):
                     nver[n] += 1
+                    nevl[n] = cnt[_DEP]
                 _rebuild_heap(hk, hn_, hv, cnt, val, taun, nver, dead)
                 cnt[_STEP] += 1
                 cnt[_GROW] += 1
+                done += 1
                 continue
-            return 1
+            return _DONE
         _key, c, ver = heap_pop(hk, hn_, hv, cnt)
         if ver != nver[c] or dead[c] or not val[c] > taun[c]:
             continue
+        nucleate = crack_of[c] < 0
+        if nucleate and cnt[_NCRACK] >= max_cracks:
+            # The crack budget is spent: only existing cracks may grow.
+            continue
+        if shadow and nevl[c] != cnt[_DEP]:
+            # Lazy heap: the shadow grew since this node was evaluated; refresh and re-check.
+            for j in range(NFc[c]):
+                face_update(NF[c, j], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
+            node_update(c, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, not nucleate,
+                        sc, acc, ev)
+            nevl[c] = cnt[_DEP]
+            cnt[_REFRESH] += 1
+            if not val[c] > taun[c]:
+                nver[c] += 1
+                continue
+            if cnt[_HEAP] > 0 and val[c] / taun[c] < hk[0]:
+                _push(c, hk, hn_, hv, cnt, val, taun, nver, dead)
+                continue
         # ---- crack plane: n-hat projected on the tangent plane; t runs along the crack.
-        xc = X[c].copy()
-        vn = np.zeros(3)
+        xc0, xc1, xc2 = X[c, 0], X[c, 1], X[c, 2]
+        vn0 = vn1 = vn2 = 0.0
+        asum = 0.0
         for j in range(NFc[c]):
             f = NF[c, j]
-            vn += area[f] * nrm[f]
-        lvn = np.sqrt(vn @ vn)
+            vn0 += area[f] * nrm[f, 0]
+            vn1 += area[f] * nrm[f, 1]
+            vn2 += area[f] * nrm[f, 2]
+            asum += area[f]
+        lvn = np.sqrt(vn0 * vn0 + vn1 * vn1 + vn2 * vn2)
         if lvn == 0.0:
             dead[c] = True
             continue
-        vn /= lvn
-        nc = vec[c] - (vec[c] @ vn) * vn
-        lnc = np.sqrt(nc @ nc)
+        vn0 /= lvn
+        vn1 /= lvn
+        vn2 /= lvn
+        e0, e1, e2 = vec[c, 0], vec[c, 1], vec[c, 2]
+        en = e0 * vn0 + e1 * vn1 + e2 * vn2
+        nc0 = e0 - en * vn0
+        nc1 = e1 - en * vn1
+        nc2 = e2 - en * vn2
+        lnc = np.sqrt(nc0 * nc0 + nc1 * nc1 + nc2 * nc2)
         if lnc < 1e-6:
             dead[c] = True
             continue
-        nc /= lnc
-        tc = np.cross(vn, nc)
+        nc0 /= lnc
+        nc1 /= lnc
+        nc2 /= lnc
+        tc0 = vn1 * nc2 - vn2 * nc1
+        tc1 = vn2 * nc0 - vn0 * nc2
+        tc2 = vn0 * nc1 - vn1 * nc0
+        # Normal stress across the cut (effective, so overlapping shadows do not double count).
+        sig_n = 0.0
+        for j in range(NFc[c]):
+            f = NF[c, j]
+            p = pr[f]
+            a1 = p[2] * nc0 + p[3] * nc1 + p[4] * nc2
+            a2 = p[5] * nc0 + p[6] * nc1 + p[7] * nc2
+            sig_n += area[f] * (p[0] * a1 * a1 + p[1] * a2 * a2)
+        sig_n = max(sig_n / asum, 0.0) if asum > 0 else 0.0
         # ---- the crossed opposite edge on each side (+t, -t).
-        sa = np.full(2, -1, np.int64)
-        sb = np.full(2, -1, np.int64)
-        st = np.zeros(2)
-        sd = np.full(2, np.inf)
+        for side in range(2):
+            sa[side] = -1
+            sb[side] = -1
+            st[side] = 0.0
+            sd[side] = np.inf
         for j in range(NFc[c]):
             f = NF[c, j]
             k = 0
@@ -197,30 +392,34 @@ def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
                 k += 1
             a = F[f, (k + 1) % 3]
             b = F[f, (k + 2) % 3]
-            da = (X[a] - xc) @ nc
-            db = (X[b] - xc) @ nc
+            da = (X[a, 0] - xc0) * nc0 + (X[a, 1] - xc1) * nc1 + (X[a, 2] - xc2) * nc2
+            db = (X[b, 0] - xc0) * nc0 + (X[b, 1] - xc1) * nc1 + (X[b, 2] - xc2) * nc2
             if da == db or da * db > 0:
                 continue
             tt = da / (da - db)
-            p = X[a] + tt * (X[b] - X[a])
-            along = (p - xc) @ tc
+            p0 = X[a, 0] + tt * (X[b, 0] - X[a, 0]) - xc0
+            p1 = X[a, 1] + tt * (X[b, 1] - X[a, 1]) - xc1
+            p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - xc2
+            along = p0 * tc0 + p1 * tc1 + p2 * tc2
             side = 0 if along > 0 else 1
-            dist = np.sqrt((p - xc) @ (p - xc))
+            dist = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
             if dist < sd[side]:
                 sd[side] = dist
                 sa[side] = a
                 sb[side] = b
                 st[side] = tt
         # ---- snap or split, per side.
-        tip = np.full(2, -1, np.int64)
-        split = np.zeros(2, np.bool_)
         for side in range(2):
+            tip[side] = -1
+            split[side] = False
             if sa[side] < 0:
                 continue
             a, b, tt = sa[side], sb[side], st[side]
-            p = X[a] + tt * (X[b] - X[a])
-            ang_a = _angle(p - xc, X[a] - xc)
-            ang_b = _angle(p - xc, X[b] - xc)
+            p0 = X[a, 0] + tt * (X[b, 0] - X[a, 0]) - xc0
+            p1 = X[a, 1] + tt * (X[b, 1] - X[a, 1]) - xc1
+            p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - xc2
+            ang_a = _angle(p0, p1, p2, X[a, 0] - xc0, X[a, 1] - xc1, X[a, 2] - xc2)
+            ang_b = _angle(p0, p1, p2, X[b, 0] - xc0, X[b, 1] - xc1, X[b, 2] - xc2)
             thr_a = snap_b if on_boundary(F, NF, NFc, a) else snap
             thr_b = snap_b if on_boundary(F, NF, NFc, b) else snap
             snap_a = ang_a < thr_a or tt < snap_t
@@ -263,7 +462,8 @@ def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
             if split[side]:
                 tip[side] = split_edge(sa[side], sb[side], st[side], X, F, S, AF, GR, NF, NFc,
                                        pid, onb, hn, taun, rho, crack_of, nver, segp,
-                                       seg_alive, seg_info, cnt)
+                                       seg_alive, seg_info, segof, cnt)
+                nevl[tip[side]] = -1
         for side in range(2):
             if split[side]:
                 # The separation of a node scales with its own edge lengths: measure the new
@@ -274,9 +474,10 @@ def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
                 for j in range(NFc[p]):
                     f = NF[p, j]
                     for q in range(3):
-                        if F[f, q] != p:
-                            d = X[F[f, q]] - X[p]
-                            hsum += np.sqrt(d @ d)
+                        y = F[f, q]
+                        if y != p:
+                            hsum += np.sqrt((X[y, 0] - X[p, 0]) ** 2 + (X[y, 1] - X[p, 1]) ** 2
+                                            + (X[y, 2] - X[p, 2]) ** 2)
                             hcnt += 1
                 if hcnt > 0:
                     scale = (hsum / hcnt) / hn[p]
@@ -284,35 +485,34 @@ def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
                     taun[p] *= scale
         # ---- open the crack: split the node along the cut edges.
         nsplit = separate(c, tip[0], tip[1], X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of,
-                          nver, cnt, buf)
+                          nver, cnt, buf, par, comp, fbuf)
         if nsplit == 0:
             dead[c] = True
             cnt[_ABORT] += 1
             continue
         cnt[_STAMP] += 1
         stamp = cnt[_STAMP]
-        centers = np.full(12, -1, np.int64)
         ncen = 0
         centers[ncen] = c
         ncen += 1
         for q in range(nsplit):
             centers[ncen] = buf[q]
             ncen += 1
-        free_tip = np.zeros(2, np.bool_)
         for side in range(2):
+            free_tip[side] = False
             if tip[side] < 0:
                 continue
             centers[ncen] = tip[side]
             ncen += 1
             # A tip that lay on a boundary is pinched by the cut: mend it; its crack is finished.
             m = separate(tip[side], -1, -1, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of,
-                         nver, cnt, buf)
+                         nver, cnt, buf, par, comp, fbuf)
             free_tip[side] = m == 0
             for q in range(m):
                 if ncen < centers.shape[0]:
                     centers[ncen] = buf[q]
                     ncen += 1
-        # ---- record the segments and the crack they extend.
+        # ---- record the segments and the crack they extend; cast their stress shadow.
         cid = crack_of[c]
         if cid < 0:
             cid = cnt[_NCRACK]
@@ -338,8 +538,17 @@ def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
             seg_info[s, 0] = af
             seg_info[s, 1] = cnt[_STEP]
             seg_info[s, 2] = release
-            d = X[t] - xc
-            clen[cid] += np.sqrt(d @ d)
+            segof[pid[c]] = s
+            segof[pid[t]] = s
+            d0 = X[t, 0] - xc0
+            d1 = X[t, 1] - xc1
+            d2 = X[t, 2] - xc2
+            seglen = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            clen[cid] += seglen
+            if shadow and sig_n > 0.0:
+                shadow_add(xc0 + 0.5 * d0, xc1 + 0.5 * d1, xc2 + 0.5 * d2,
+                           gain * seglen * sig_n, nc0, nc1, nc2, G, gp)
+                cnt[_DEP] += 1
         # ---- recompute the changed faces and nodes (1-ring of the centres).
         nrf = 0
         for q in range(ncen):
@@ -353,16 +562,18 @@ def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
                     regf[nrf] = f
                     nrf += 1
         for i in range(nrf):
-            face_update(regf[i], X, F, S, area, nrm, grad, fp, fm)
+            face_update(regf[i], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
         for side in range(2):
             t = tip[side]
             if t >= 0 and free_tip[side]:
                 crack_of[t] = cid
                 if clen[cid] < max_len:
                     for i in range(3):
+                        ni = nc0 if i == 0 else (nc1 if i == 1 else nc2)
                         for j in range(3):
-                            rho[t, i, j] += alpha * excess * nc[i] * nc[j]
-        # ---- local relaxation: grow the region by rings, then damped Jacobi passes.
+                            nj = nc0 if j == 0 else (nc1 if j == 1 else nc2)
+                            rho[t, i, j] += alpha * excess * ni * nj
+        # ---- fine relaxation: grow the region by rings, then damped Jacobi passes.
         lo = 0
         hi = nrf
         for _ring in range(rings):
@@ -388,54 +599,19 @@ def _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
                     regn[nrn] = n
                     nrn += 1
         if nrelax > 0 and rate > 0:
-            for _pass in range(nrelax):
-                for i in range(nrn):
-                    n = regn[i]
-                    free = True
-                    fn = np.zeros(3)
-                    kn = 0.0
-                    for j in range(NFc[n]):
-                        f = NF[n, j]
-                        if fst[f] != stamp:
-                            free = False
-                            break
-                        k = 0
-                        while F[f, k] != n:
-                            k += 1
-                        g = grad[f, k]
-                        fn -= area[f] * (S[f] @ g)
-                        kn += area[f] * (g @ g)
-                    if free and kn > 0:
-                        disp[n] = rate * fn / kn
-                    else:
-                        disp[n] = 0.0
-                for i in range(nrf):
-                    f = regf[i]
-                    nf_ = nrm[f]
-                    m = np.zeros((3, 3))
-                    for q in range(3):
-                        d = disp[F[f, q]]
-                        d = d - (d @ nf_) * nf_
-                        g = grad[f, q]
-                        for a in range(3):
-                            for b in range(3):
-                                m[a, b] += d[a] * g[b]
-                    ds = 0.5 * (m + m.T)
-                    nds = np.sqrt(np.sum(ds * ds))
-                    ns = np.sqrt(np.sum(S[f] * S[f]))
-                    if nds > RELAX_CAP * ns:
-                        ds *= RELAX_CAP * ns / nds
-                    S[f] += ds
-            for i in range(nrn):
-                disp[regn[i]] = 0.0
+            _relax(nrelax, rate, regf, nrf, regn, nrn, stamp, fst, F, S, NF, NFc, area, nrm,
+                   grad, disp)
             for i in range(nrf):
-                face_update(regf[i], X, F, S, area, nrm, grad, fp, fm)
-        else:
-            # Without relaxation only the 1-ring changed, but the extra rings are harmless.
-            pass
+                face_update(regf[i], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
+        elif shadow:
+            # The new shadow reaches the whole region: refresh its faces.
+            for i in range(nrf):
+                face_update(regf[i], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
         for i in range(nrn):
             n = regn[i]
-            node_update(n, F, NF, NFc, fp, fm, rho, val, vec)
+            node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec,
+                        crack_of[n] >= 0, sc, acc, ev)
+            nevl[n] = cnt[_DEP]
             _push(n, hk, hn_, hv, cnt, val, taun, nver, dead)
         cnt[_STEP] += 1
         cnt[_EVENTS] += 1
@@ -446,10 +622,13 @@ def _edges_boundary(faces: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.nda
     """Boundary flag per node (N,) and the unique undirected edges (E, 2)."""
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     e.sort(axis=1)
-    uniq, counts = np.unique(e, axis=0, return_counts=True)
+    # One int64 key per edge: a 1-D unique is far faster than np.unique(axis=0).
+    key = e[:, 0] * np.int64(n_nodes) + e[:, 1]
+    uniq, counts = np.unique(key, return_counts=True)
+    edges = np.stack([uniq // n_nodes, uniq % n_nodes], axis=1)
     bnd = np.zeros(n_nodes, bool)
-    bnd[uniq[counts == 1].ravel()] = True
-    return bnd, uniq
+    bnd[edges[counts == 1].ravel()] = True
+    return bnd, edges
 
 
 def _flaw(seed: int, points: np.ndarray) -> np.ndarray:
@@ -499,6 +678,65 @@ def _check(params: SolverParams) -> None:
         raise CrackbakeError(f"depth ratio is {params.depth_ratio}; it must be >= 0")
 
 
+def _shadow_grid(X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Empty shadow grid over the bounding box and its parameters ``origin, cell, radius``."""
+    lo, hi = X0.min(0), X0.max(0)
+    diag = float(np.linalg.norm(hi - lo)) or 1.0
+    radius = SHADOW_REL * diag
+    cell = radius / 3.0
+    pad = 2
+    while True:
+        dims = np.floor((hi - lo) / cell).astype(np.int64) + 1 + 2 * pad
+        if int(np.prod(dims)) <= SHADOW_MAX_CELLS:
+            break
+        cell *= 1.25
+    origin = lo - pad * cell
+    G = np.zeros((int(dims[0]), int(dims[1]), int(dims[2]), 6))
+    return G, np.array([origin[0], origin[1], origin[2], cell, radius])
+
+
+# State arrays, in _run's argument order, and the capacity each is sized by.
+_NODE_ARRAYS = ("X", "NF", "NFc", "rho", "val", "vec", "taun", "hn", "pid", "onb", "crack_of",
+                "nver", "dead", "nst", "nevl", "segof")
+_FACE_ARRAYS = ("F", "S", "AF", "area", "nrm", "grad", "pr", "fst")
+_SEG_ARRAYS = ("segp", "seg_alive", "seg_info")
+_RUN_ORDER = ("X", "F", "S", "AF", "GR", "area", "nrm", "grad", "pr", "NF", "NFc", "rho", "val",
+              "vec", "taun", "hn", "pid", "onb", "crack_of", "nver", "dead", "fst", "nst", "nevl",
+              "segof", "hk", "hnode", "hv", "segp", "seg_alive", "seg_info", "clen", "G", "gp",
+              "cnt", "prm")
+
+
+def _grown(a: np.ndarray, size: int) -> np.ndarray:
+    out = np.zeros((size,) + a.shape[1:], a.dtype)
+    out[: len(a)] = a
+    return out
+
+
+def _grow(state: dict, has_growth: bool) -> None:
+    """Double whichever capacity ran short (nodes, faces, segments, cracks)."""
+    cnt = state["cnt"]
+    ncap, mcap = len(state["X"]), len(state["F"])
+    if cnt[_NN] + 32 > ncap:
+        for k in _NODE_ARRAYS:
+            state[k] = _grown(state[k], 2 * ncap)
+        state["pid"][ncap:] = np.arange(ncap, 2 * ncap)
+        state["crack_of"][ncap:] = -1
+        state["segof"][ncap:] = -1
+        hcap = 2 * ncap + 65536
+        for k in ("hk", "hnode", "hv"):
+            state[k] = _grown(state[k], hcap)
+    if cnt[_NF] + 16 > mcap:
+        for k in _FACE_ARRAYS:
+            state[k] = _grown(state[k], 2 * mcap)
+        if has_growth:
+            state["GR"] = _grown(state["GR"], 2 * mcap)
+    if cnt[_NS] + 16 > len(state["segp"]):
+        for k in _SEG_ARRAYS:
+            state[k] = _grown(state[k], 2 * len(state["segp"]))
+    if cnt[_NCRACK] + 2 > len(state["clen"]):
+        state["clen"] = _grown(state["clen"], 2 * len(state["clen"]))
+
+
 def solve_iben(
     sim, field, params: SolverParams, progress: Callable[[str], None] | None = None
 ) -> SolverResult:
@@ -513,14 +751,16 @@ def solve_iben(
         ``stress (M, 3, 3)`` world in-plane stress per face (tension positive); ``growth``
         ``(M, 3, 3)`` or None, added per quasi-static growth step.
     params : SolverParams
+        ``max_cracks`` bounds the distinct cracks started, ``max_steps`` the solver steps.
     progress : callable(str), optional
-        Receives a one-line status now and then.
+        Receives a one-line status at most every ``PROGRESS_SECONDS``.
 
     Returns
     -------
     SolverResult
         ``stats`` holds ``tau`` (separation per unit edge length at toughness 1 x toughness),
-        ``events``, ``cracks`` (crack ids), ``aborted``, ``growth_steps``, ``seconds``.
+        ``events``, ``cracks`` (distinct cracks started), ``aborted``, ``growth_steps``,
+        ``refreshed`` (lazy heap re-evaluations), ``shadow_radius``, ``seconds``.
     """
     _check(params)
     t0 = _time.perf_counter()
@@ -534,10 +774,11 @@ def solve_iben(
         )
     growth = getattr(field, "growth", None)
     has_growth = growth is not None and bool(np.any(growth))
-    max_events = int(min(params.max_cracks, params.max_steps))
-    ncap = n0 + 10 * max_events + 64
-    mcap = m0 + 4 * max_events + 16
-    scap = 6 * max_events + 16
+    # Initial room for a few thousand events; _grow doubles it on demand.
+    room = int(min(params.max_steps, 4096)) + 16
+    ncap = n0 + 10 * room
+    mcap = m0 + 4 * room
+    scap = 6 * room
 
     bnd, edges = _edges_boundary(F0, n0)
     elen = np.linalg.norm(X0[edges[:, 0]] - X0[edges[:, 1]], axis=1)
@@ -547,33 +788,34 @@ def solve_iben(
     deg = np.bincount(F0.ravel(), minlength=n0)
     width = int(deg.max()) + EXTRA_DEGREE
 
-    X = np.zeros((ncap, 3))
-    X[:n0] = X0
-    F = np.zeros((mcap, 3), np.int64)
-    F[:m0] = F0
-    S = np.zeros((mcap, 3, 3))
-    S[:m0] = S0
-    AF = np.zeros(mcap, np.int64)
-    AF[:m0] = np.asarray(sim.asset_face, dtype=np.int64)
-    GR = np.zeros((mcap if has_growth else 1, 3, 3))
-    if has_growth:
-        GR[:m0] = np.asarray(growth, dtype=np.float64)
-    area = np.zeros(mcap)
-    nrm = np.zeros((mcap, 3))
-    grad = np.zeros((mcap, 3, 3))
-    fp = np.zeros((mcap, 3, 3))
-    fm = np.zeros((mcap, 3, 3))
-    NF = np.zeros((ncap, width), np.int64)
-    NFc = np.zeros(ncap, np.int64)
-    rho = np.zeros((ncap, 3, 3))
-    val = np.zeros(ncap)
-    vec = np.zeros((ncap, 3))
-    _setup(n0, m0, X, F, S, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec)
-    if np.any(area[:m0] <= 0):
+    st: dict = {}
+    st["X"] = _grown(X0, ncap)
+    st["F"] = _grown(F0, mcap)
+    st["S"] = _grown(S0, mcap)
+    st["AF"] = _grown(np.asarray(sim.asset_face, dtype=np.int64), mcap)
+    st["GR"] = (_grown(np.asarray(growth, dtype=np.float64), mcap) if has_growth
+                else np.zeros((1, 3, 3)))
+    st["area"] = np.zeros(mcap)
+    st["nrm"] = np.zeros((mcap, 3))
+    st["grad"] = np.zeros((mcap, 3, 3))
+    st["pr"] = np.zeros((mcap, 8))
+    st["fst"] = np.zeros(mcap, np.int64)
+    st["NF"] = np.zeros((ncap, width), np.int64)
+    st["NFc"] = np.zeros(ncap, np.int64)
+    st["rho"] = np.zeros((ncap, 3, 3))
+    st["val"] = np.zeros(ncap)
+    st["vec"] = np.zeros((ncap, 3))
+    st["crack_of"] = np.full(ncap, -1, np.int64)
+    G, gp = _shadow_grid(X0)
+    st["G"], st["gp"] = G, gp
+    _incidence(m0, st["F"], st["NF"], st["NFc"])
+    _update_all(n0, m0, st["X"], st["F"], st["S"], st["area"], st["nrm"], st["grad"], st["pr"],
+                st["NF"], st["NFc"], st["rho"], st["val"], st["vec"], st["crack_of"], G, gp)
+    if np.any(st["area"][:m0] <= 0):
         raise CrackbakeError("the simulation mesh has zero-area faces; clean the mesh first")
 
-    hn = np.zeros(ncap)
-    hn[:n0] = h_node
+    val = st["val"]
+    st["hn"] = _grown(h_node, ncap)
     norm_sep = val[:n0] / np.maximum(h_node, 1e-300)
     ref_pool = norm_sep[(~bnd) & (norm_sep > 0)]
     if len(ref_pool) == 0:
@@ -581,58 +823,78 @@ def solve_iben(
     ref = float(np.percentile(ref_pool, REF_PERCENTILE)) if len(ref_pool) else 0.0
     if ref == 0.0 and has_growth:
         # No initial stress: toughness is relative to GROWTH_REF_STEPS steps of growth.
-        ref = GROWTH_REF_STEPS * _reference_from(X0, F0, GR[:m0], h_node, bnd)
+        ref = GROWTH_REF_STEPS * _reference_from(X0, F0, st["GR"][:m0], h_node, bnd)
     tau = params.toughness * ref
-    taun = np.zeros(ncap)
-    taun[:n0] = tau * h_node * _flaw(params.seed, X0)
-    pid = np.arange(ncap, dtype=np.int64)
-    onb = np.zeros(ncap, bool)
-    onb[:n0] = bnd
-    crack_of = np.full(ncap, -1, np.int64)
-    nver = np.zeros(ncap, np.int64)
-    dead = np.zeros(ncap, bool)
-    fst = np.zeros(mcap, np.int64)
-    nst = np.zeros(ncap, np.int64)
-    hcap = max(ncap, 1 << 16)
-    hk = np.zeros(hcap)
-    hnode = np.zeros(hcap, np.int64)
-    hv = np.zeros(hcap, np.int64)
-    segp = np.zeros((scap, 2), np.int64)
-    seg_alive = np.zeros(scap, bool)
-    seg_info = np.zeros((scap, 3))
-    clen = np.zeros(max_events + 2)
-    cnt = np.zeros(10, np.int64)
+    st["taun"] = _grown(tau * h_node * _flaw(params.seed, X0), ncap)
+    st["pid"] = np.arange(ncap, dtype=np.int64)
+    st["onb"] = _grown(bnd, ncap)
+    for k in ("nver", "nst", "nevl"):
+        st[k] = np.zeros(ncap, np.int64)
+    st["dead"] = np.zeros(ncap, bool)
+    st["segof"] = np.full(ncap, -1, np.int64)
+    hcap = ncap + 65536
+    st["hk"] = np.zeros(hcap)
+    st["hnode"] = np.zeros(hcap, np.int64)
+    st["hv"] = np.zeros(hcap, np.int64)
+    st["segp"] = np.zeros((scap, 2), np.int64)
+    st["seg_alive"] = np.zeros(scap, bool)
+    st["seg_info"] = np.zeros((scap, 3))
+    st["clen"] = np.zeros(1024)
+    cnt = np.zeros(12, np.int64)
     cnt[_NN], cnt[_NF] = n0, m0
+    st["cnt"] = cnt
     max_len = np.inf if params.max_crack_length is None else float(params.max_crack_length)
-    prm = np.array([
+    st["prm"] = np.array([
         params.tip_factor, params.relax_rate, params.relax_steps, max_len,
-        np.radians(SNAP_DEG), np.radians(SNAP_BOUNDARY_DEG), SNAP_T, RELAX_RINGS,
+        np.radians(SNAP_DEG), np.radians(SNAP_BOUNDARY_DEG), SNAP_T, RELAX_RINGS, SHADOW_GAIN,
     ], dtype=np.float64)
     if tau > 0:
-        _rebuild_heap(hk, hnode, hv, cnt, val, taun, nver, dead)
-    chunk = max(1, max_events // 20)
+        _rebuild_heap(st["hk"], st["hnode"], st["hv"], cnt, val, st["taun"], st["nver"],
+                      st["dead"])
+    # Chunks are sized so a call takes about a tenth of a second: progress stays responsive
+    # without a clock inside the compiled loop.
+    chunk = 64
+    last_msg = _time.perf_counter()
     while tau > 0:
-        finished = _run(X, F, S, AF, GR, area, nrm, grad, fp, fm, NF, NFc, rho, val, vec, taun,
-                        hn, pid, onb, crack_of, nver, dead, fst, nst, hk, hnode, hv, segp,
-                        seg_alive, seg_info, clen, cnt, prm, max_events, int(params.max_steps),
-                        chunk)
-        if progress is not None:
-            progress(f"iben: {int(cnt[_EVENTS])} crack events, {int(cnt[_STEP])} steps")
-        if finished:
+        t_call = _time.perf_counter()
+        code = _run(*(st[k] for k in _RUN_ORDER), int(params.max_cracks),
+                    int(params.max_steps), chunk)
+        now = _time.perf_counter()
+        if code == _FULL:
+            _grow(st, has_growth)
+            continue
+        if now - t_call < 0.05:
+            chunk = min(chunk * 2, 1 << 20)
+        elif now - t_call > 0.2:
+            chunk = max(chunk // 2, 16)
+        if progress is not None and now - last_msg >= PROGRESS_SECONDS and code == _MORE:
+            progress(f"iben: {int(cnt[_EVENTS])} crack events, {int(cnt[_NCRACK])} cracks, "
+                     f"{int(cnt[_STEP])}/{params.max_steps} steps")
+            last_msg = now
+        if code == _DONE:
             break
 
     nn, nf, ns = int(cnt[_NN]), int(cnt[_NF]), int(cnt[_NS])
+    # Bring every face and node up to date with the final shadow (the heap was lazy).
+    _update_all(nn, nf, st["X"], st["F"], st["S"], st["area"], st["nrm"], st["grad"], st["pr"],
+                st["NF"], st["NFc"], st["rho"], st["val"], st["vec"], st["crack_of"], G, gp)
     steps = int(cnt[_STEP])
-    alive = seg_alive[:ns]
-    cracks = _chain(segp[:ns][alive], seg_info[:ns][alive], X, onb, steps, params, X0)
+    alive = st["seg_alive"][:ns]
+    X, taun, val = st["X"], st["taun"], st["val"]
+    cracks = _chain(st["segp"][:ns][alive], st["seg_info"][:ns][alive], X, st["onb"], steps,
+                    params, X0)
     sep = np.where(taun[:nn] > 0, val[:nn] / np.where(taun[:nn] > 0, taun[:nn], 1.0), 0.0)
+    pr = st["pr"][:nf]
+    # Effective stress (what the cracks left): l1 d1 d1^T + l2 d2 d2^T.
+    s_final = (pr[:, 0, None, None] * np.einsum("ea,eb->eab", pr[:, 2:5], pr[:, 2:5])
+               + pr[:, 1, None, None] * np.einsum("ea,eb->eab", pr[:, 5:8], pr[:, 5:8]))
     return SolverResult(
         cracks=cracks,
         vertices=X[:nn].copy(),
-        faces=F[:nf].copy(),
-        asset_face=AF[:nf].copy(),
+        faces=st["F"][:nf].copy(),
+        asset_face=st["AF"][:nf].copy(),
         stress_initial=S0.copy(),
-        stress_final=S[:nf].copy(),
+        stress_final=s_final,
         separation=sep,
         steps=steps,
         stats={
@@ -642,6 +904,8 @@ def solve_iben(
             "paths": len(cracks),
             "aborted": int(cnt[_ABORT]),
             "growth_steps": int(cnt[_GROW]),
+            "refreshed": int(cnt[_REFRESH]),
+            "shadow_radius": float(gp[4]),
             "seconds": _time.perf_counter() - t0,
         },
     )

@@ -1,19 +1,25 @@
-"""Numba kernels of the iben solver: per-face FEM, per-node separation, mutable mesh topology.
+"""Numba kernels of the iben solver: per-face FEM, per-node separation, shadow grid, topology.
 
 Everything here works on a preallocated *state* (plain arrays) so the sequential crack loop can
-run compiled without touching Python objects.  The arrays are described in
+run compiled without touching Python objects, and without allocating inside the hot loops (small
+temporaries are scalars or scratch rows passed in).  The arrays are described in
 :func:`crackbake.solver.iben.solve_iben`; briefly
 
 * ``X (Ncap, 3)`` node positions (nodes never move during the simulation);
 * ``F (Mcap, 3)`` faces, ``S (Mcap, 3, 3)`` world in-plane stress per face (tension positive),
-  ``AF (Mcap,)`` asset face, ``area``, ``nrm``, ``grad (Mcap, 3, 3)``, ``fp``/``fm (Mcap, 3, 3)``
-  per-corner forces of the tensile / compressive stress;
+  ``AF (Mcap,)`` asset face, ``area``, ``nrm``, ``grad (Mcap, 3, 3)``, and ``pr (Mcap, 8)`` the
+  principal split of the *effective* stress (stress minus the shadow-grid release, see below):
+  ``l1, l2, d1 (3), d2 (3)``;
 * ``NF (Ncap, W)`` incident faces per node (``NFc`` counts), ``rho (Ncap, 3, 3)`` persistent
   residual, ``val (Ncap,)`` largest separation eigenvalue, ``vec (Ncap, 3)`` its eigenvector,
   ``taun (Ncap,)`` per-node toughness in separation units, ``nver`` heap versions.
+* ``G (nx, ny, nz, 6)`` the shadow grid: released stress (symmetric, xx xy xz yy yz zz) sampled
+  at cell centres; ``gp`` = ``origin (3), cell size, kernel radius``.
 
 The FEM formulas are those of :mod:`crackbake.solver.fem` (tested against it in
-tests/test_iben.py), written per element for use inside the loop.
+tests/test_iben.py), written per element for use inside the loop: corner forces
+``f_i = -A S± g_i`` are rebuilt from the stored principal split whenever a node needs them,
+which is cheaper in memory than storing them and costs only a few flops.
 """
 
 from __future__ import annotations
@@ -25,14 +31,16 @@ from numba import njit
 
 
 @njit(cache=True)
-def eig_max_sym3(a):
-    """Largest eigenvalue and unit eigenvector of a symmetric 3x3 matrix (cyclic Jacobi).
+def eig_max_into(m, v):
+    """Largest eigenvalue of the symmetric 3x3 ``m`` (destroyed); its unit eigenvector -> v[:, 0].
 
-    Jacobi is used rather than the closed form because separation tensors are often nearly
-    isotropic in the plane (uniform tension), where closed-form eigenvectors lose all accuracy.
+    Cyclic Jacobi rather than a closed form: separation tensors are often nearly isotropic in the
+    plane (uniform tension), where closed-form eigenvectors lose all accuracy.  ``v`` is a 3x3
+    scratch; on return column 0 holds the eigenvector.
     """
-    m = a.copy()
-    v = np.eye(3)
+    for i in range(3):
+        for j in range(3):
+            v[i, j] = 1.0 if i == j else 0.0
     scale = abs(m[0, 0]) + abs(m[1, 1]) + abs(m[2, 2]) + abs(m[0, 1]) + abs(m[0, 2]) + abs(m[1, 2])
     for _sweep in range(16):
         off = abs(m[0, 1]) + abs(m[0, 2]) + abs(m[1, 2])
@@ -68,104 +76,309 @@ def eig_max_sym3(a):
     for k in range(1, 3):
         if m[k, k] > m[best, best]:
             best = k
-    out = np.empty(3)
-    for k in range(3):
-        out[k] = v[k, best]
-    return m[best, best], out
+    if best != 0:
+        for k in range(3):
+            v[k, 0] = v[k, best]
+    return m[best, best]
 
 
 @njit(cache=True)
-def _add_m(acc, f, sign):
+def eig_max_sym3(a):
+    """Largest eigenvalue and unit eigenvector of a symmetric 3x3 matrix (allocating wrapper)."""
+    m = a.copy()
+    v = np.empty((3, 3))
+    val = eig_max_into(m, v)
+    return val, v[:, 0].copy()
+
+
+@njit(cache=True)
+def _add_m(acc, f0, f1, f2, sign):
     """acc += sign * f f^T / |f| (the paper's m(f); m(0) = 0)."""
-    n = np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+    n = np.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
     if n > 0.0:
-        for i in range(3):
-            for j in range(3):
-                acc[i, j] += sign * f[i] * f[j] / n
+        s = sign / n
+        acc[0, 0] += s * f0 * f0
+        acc[0, 1] += s * f0 * f1
+        acc[0, 2] += s * f0 * f2
+        acc[1, 1] += s * f1 * f1
+        acc[1, 2] += s * f1 * f2
+        acc[2, 2] += s * f2 * f2
+
+
+# --------------------------------------------------------------------------- shadow grid
+
+
+@njit(cache=True)
+def shadow_at(x0, x1, x2, G, gp, out):
+    """Released stress at a point: trilinear interpolation of the cell-centred grid -> out[6]."""
+    for q in range(6):
+        out[q] = 0.0
+    if G.shape[0] < 2:
+        return
+    cs = gp[3]
+    u0 = (x0 - gp[0]) / cs - 0.5
+    u1 = (x1 - gp[1]) / cs - 0.5
+    u2 = (x2 - gp[2]) / cs - 0.5
+    i0 = min(max(int(np.floor(u0)), 0), G.shape[0] - 2)
+    i1 = min(max(int(np.floor(u1)), 0), G.shape[1] - 2)
+    i2 = min(max(int(np.floor(u2)), 0), G.shape[2] - 2)
+    w0 = min(max(u0 - i0, 0.0), 1.0)
+    w1 = min(max(u1 - i1, 0.0), 1.0)
+    w2 = min(max(u2 - i2, 0.0), 1.0)
+    for a in range(2):
+        wa = w0 if a else 1.0 - w0
+        for b in range(2):
+            wb = w1 if b else 1.0 - w1
+            for c in range(2):
+                w = wa * wb * (w2 if c else 1.0 - w2)
+                if w == 0.0:
+                    continue
+                for q in range(6):
+                    out[q] += w * G[i0 + a, i1 + b, i2 + c, q]
+
+
+@njit(cache=True)
+def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
+    """Deposit ``amount * n n^T * k(r)`` with a compact kernel around p into the grid.
+
+    ``k(r) = (1 - r²/R²)² / (16 R / 15)`` for ``r < R`` (R = ``gp[4]``): its integral across a
+    straight line is 1, so a long crack whose segments each deposit ``length x normal stress``
+    releases exactly its normal stress on the crack line, fading to nothing at distance R.
+    """
+    if G.shape[0] < 2:
+        return
+    cs = gp[3]
+    rk = gp[4]
+    norm = amount / (16.0 * rk / 15.0)
+    lo0 = max(int(np.floor((p0 - rk - gp[0]) / cs)), 0)
+    hi0 = min(int(np.floor((p0 + rk - gp[0]) / cs)), G.shape[0] - 1)
+    lo1 = max(int(np.floor((p1 - rk - gp[1]) / cs)), 0)
+    hi1 = min(int(np.floor((p1 + rk - gp[1]) / cs)), G.shape[1] - 1)
+    lo2 = max(int(np.floor((p2 - rk - gp[2]) / cs)), 0)
+    hi2 = min(int(np.floor((p2 + rk - gp[2]) / cs)), G.shape[2] - 1)
+    t00 = n0 * n0
+    t01 = n0 * n1
+    t02 = n0 * n2
+    t11 = n1 * n1
+    t12 = n1 * n2
+    t22 = n2 * n2
+    for i in range(lo0, hi0 + 1):
+        d0 = gp[0] + (i + 0.5) * cs - p0
+        for j in range(lo1, hi1 + 1):
+            d1 = gp[1] + (j + 0.5) * cs - p1
+            for k in range(lo2, hi2 + 1):
+                d2 = gp[2] + (k + 0.5) * cs - p2
+                r2 = (d0 * d0 + d1 * d1 + d2 * d2) / (rk * rk)
+                if r2 >= 1.0:
+                    continue
+                w = norm * (1.0 - r2) * (1.0 - r2)
+                G[i, j, k, 0] += w * t00
+                G[i, j, k, 1] += w * t01
+                G[i, j, k, 2] += w * t02
+                G[i, j, k, 3] += w * t11
+                G[i, j, k, 4] += w * t12
+                G[i, j, k, 5] += w * t22
 
 
 # --------------------------------------------------------------------------- per-face FEM
 
 
 @njit(cache=True)
-def face_update(f, X, F, S, area, nrm, grad, fp, fm):
-    """Geometry and tensile/compressive corner forces of face ``f`` (fem.py formulas)."""
-    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-    e1 = X[i1] - X[i0]
-    e2 = X[i2] - X[i0]
-    cr = np.cross(e1, e2)
-    ta = np.sqrt(cr[0] ** 2 + cr[1] ** 2 + cr[2] ** 2)
-    if ta <= 0.0:
-        area[f] = 0.0
-        nrm[f] = 0.0
-        grad[f] = 0.0
-        fp[f] = 0.0
-        fm[f] = 0.0
-        return
-    n = cr / ta
-    area[f] = 0.5 * ta
-    nrm[f] = n
-    for i in range(3):
-        j = F[f, (i + 1) % 3]
-        k = F[f, (i + 2) % 3]
-        grad[f, i] = np.cross(n, X[k] - X[j]) / ta
-    # In-plane frame, 2x2 principal split (fem.split_tension).
-    u = e1 / np.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
-    w = np.cross(n, u)
-    s = S[f]
-    su = s @ u
-    sw = s @ w
-    a = u @ su
-    b = 0.5 * (u @ sw + w @ su)
-    c = w @ sw
+def _principal(a, b, c):
+    """Eigenvalues (l1 >= l2) and the angle of l1's eigenvector of the 2x2 [[a, b], [b, c]]."""
     mean = 0.5 * (a + c)
     rad = np.sqrt((0.5 * (a - c)) ** 2 + b * b)
-    l1 = mean + rad
-    l2 = mean - rad
-    th = 0.5 * np.arctan2(2.0 * b, a - c)
-    d1 = np.cos(th) * u + np.sin(th) * w
-    d2 = -np.sin(th) * u + np.cos(th) * w
-    for i in range(3):
-        g = grad[f, i]
-        g1 = d1 @ g
-        g2 = d2 @ g
-        # f_i = -A * S_part @ g_i with S_part = sum_k l_k d_k d_k^T over the positive / negative k.
-        vp = np.zeros(3)
-        vm = np.zeros(3)
-        if l1 > 0:
-            vp += l1 * g1 * d1
-        else:
-            vm += l1 * g1 * d1
-        if l2 > 0:
-            vp += l2 * g2 * d2
-        else:
-            vm += l2 * g2 * d2
-        fp[f, i] = -area[f] * vp
-        fm[f, i] = -area[f] * vm
+    return mean + rad, mean - rad, 0.5 * np.arctan2(2.0 * b, a - c)
 
 
 @njit(cache=True)
-def node_update(n, F, NF, NFc, fp, fm, rho, val, vec):
-    """Separation tensor (plus residual) of node ``n``; stores its largest eigenpair."""
-    sp = np.zeros(3)
-    sm = np.zeros(3)
-    acc = np.zeros((3, 3))
+def face_frame(f, X, F, nrm, fr):
+    """In-plane frame of face f: u along edge 0->1 -> fr[0], w = n x u -> fr[1]."""
+    i0, i1 = F[f, 0], F[f, 1]
+    e0 = X[i1, 0] - X[i0, 0]
+    e1 = X[i1, 1] - X[i0, 1]
+    e2 = X[i1, 2] - X[i0, 2]
+    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    fr[0, 0] = e0 / le
+    fr[0, 1] = e1 / le
+    fr[0, 2] = e2 / le
+    n = nrm[f]
+    fr[1, 0] = n[1] * fr[0, 2] - n[2] * fr[0, 1]
+    fr[1, 1] = n[2] * fr[0, 0] - n[0] * fr[0, 2]
+    fr[1, 2] = n[0] * fr[0, 1] - n[1] * fr[0, 0]
+
+
+@njit(cache=True)
+def _quad(s, x, y):
+    """x^T s y for 3-vectors."""
+    acc = 0.0
+    for i in range(3):
+        acc += x[i] * (s[i, 0] * y[0] + s[i, 1] * y[1] + s[i, 2] * y[2])
+    return acc
+
+
+@njit(cache=True)
+def _quad6(r, x, y):
+    """x^T R y with R given as the six components xx xy xz yy yz zz."""
+    return (x[0] * (r[0] * y[0] + r[1] * y[1] + r[2] * y[2])
+            + x[1] * (r[1] * y[0] + r[3] * y[1] + r[4] * y[2])
+            + x[2] * (r[2] * y[0] + r[4] * y[1] + r[5] * y[2]))
+
+
+@njit(cache=True)
+def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
+    """Geometry and the principal split of the effective stress of face ``f``.
+
+    Effective stress = stress minus the shadow-grid release at the centroid, projected on the
+    face plane.  The release may not create compression the raw stress did not have (a crack
+    cannot push its neighbourhood into compression), so the effective principal stresses are
+    clamped at ``min(0, smallest raw principal stress)``.  ``fr`` (2, 3) and ``r6`` (6,) are
+    scratch rows.
+    """
+    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    e10 = X[i1, 0] - X[i0, 0]
+    e11 = X[i1, 1] - X[i0, 1]
+    e12 = X[i1, 2] - X[i0, 2]
+    e20 = X[i2, 0] - X[i0, 0]
+    e21 = X[i2, 1] - X[i0, 1]
+    e22 = X[i2, 2] - X[i0, 2]
+    c0 = e11 * e22 - e12 * e21
+    c1 = e12 * e20 - e10 * e22
+    c2 = e10 * e21 - e11 * e20
+    ta = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    if ta <= 0.0:
+        area[f] = 0.0
+        for q in range(3):
+            nrm[f, q] = 0.0
+            for r in range(3):
+                grad[f, q, r] = 0.0
+        for q in range(8):
+            pr[f, q] = 0.0
+        return
+    n0, n1, n2 = c0 / ta, c1 / ta, c2 / ta
+    area[f] = 0.5 * ta
+    nrm[f, 0], nrm[f, 1], nrm[f, 2] = n0, n1, n2
+    for i in range(3):
+        j = F[f, (i + 1) % 3]
+        k = F[f, (i + 2) % 3]
+        d0 = X[k, 0] - X[j, 0]
+        d1 = X[k, 1] - X[j, 1]
+        d2 = X[k, 2] - X[j, 2]
+        # grad N_i = n x (x_k - x_j) / (2A).
+        grad[f, i, 0] = (n1 * d2 - n2 * d1) / ta
+        grad[f, i, 1] = (n2 * d0 - n0 * d2) / ta
+        grad[f, i, 2] = (n0 * d1 - n1 * d0) / ta
+    face_frame(f, X, F, nrm, fr)
+    u = fr[0]
+    w = fr[1]
+    s = S[f]
+    a = _quad(s, u, u)
+    b = 0.5 * (_quad(s, u, w) + _quad(s, w, u))
+    c = _quad(s, w, w)
+    l1r, l2r, th = _principal(a, b, c)
+    if G.shape[0] >= 2:
+        shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
+                  (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, r6)
+        ra = _quad6(r6, u, u)
+        rc = _quad6(r6, w, w)
+        if ra != 0.0 or rc != 0.0:
+            l1, l2, th = _principal(a - ra, b - _quad6(r6, u, w), c - rc)
+            floor = min(0.0, l2r)
+            l1r = max(l1, floor)
+            l2r = max(l2, floor)
+    ct = np.cos(th)
+    st = np.sin(th)
+    pr[f, 0] = l1r
+    pr[f, 1] = l2r
+    for q in range(3):
+        pr[f, 2 + q] = ct * u[q] + st * w[q]
+        pr[f, 5 + q] = -st * u[q] + ct * w[q]
+
+
+@njit(cache=True)
+def raw_principal(f, X, F, S, nrm, fr, out):
+    """Principal split of the raw (un-shadowed) stress of face f -> out[8] (``pr`` layout)."""
+    face_frame(f, X, F, nrm, fr)
+    u = fr[0]
+    w = fr[1]
+    s = S[f]
+    l1, l2, th = _principal(_quad(s, u, u), 0.5 * (_quad(s, u, w) + _quad(s, w, u)),
+                            _quad(s, w, w))
+    ct = np.cos(th)
+    st = np.sin(th)
+    out[0] = l1
+    out[1] = l2
+    for q in range(3):
+        out[2 + q] = ct * u[q] + st * w[q]
+        out[5 + q] = -st * u[q] + ct * w[q]
+
+
+@njit(cache=True)
+def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, sc, acc, ev):
+    """Separation tensor (plus residual) of node ``n``; stores its largest eigenpair.
+
+    Corner forces ``f = -A (l1 (d1.g) d1 [+ or -] l2 (d2.g) d2)`` are rebuilt from the principal
+    split, the effective one from ``pr`` unless ``raw`` (crack tips: they grow from the local
+    stress, not from the world-scale shadow that their own crack casts over them).  ``sc`` (8,),
+    ``acc`` (3, 3), ``ev`` (3, 3) and the frame row pair inside ``sc`` are scratch.
+    """
+    for i in range(3):
+        for j in range(3):
+            acc[i, j] = 0.0
+    sp0 = sp1 = sp2 = 0.0
+    sm0 = sm1 = sm2 = 0.0
     for j in range(NFc[n]):
         f = NF[n, j]
         k = 0
         while F[f, k] != n:
             k += 1
-        sp += fp[f, k]
-        sm += fm[f, k]
-        _add_m(acc, fp[f, k], 1.0)
-        _add_m(acc, fm[f, k], -1.0)
-    _add_m(acc, sp, -1.0)
-    _add_m(acc, sm, 1.0)
-    acc *= 0.5
-    acc += rho[n]
-    v, e = eig_max_sym3(acc)
+        if raw:
+            raw_principal(f, X, F, S, nrm, ev, sc)
+            p = sc
+        else:
+            p = pr[f]
+        g = grad[f, k]
+        A = area[f]
+        l1 = p[0]
+        l2 = p[1]
+        g1 = -A * l1 * (p[2] * g[0] + p[3] * g[1] + p[4] * g[2])
+        g2 = -A * l2 * (p[5] * g[0] + p[6] * g[1] + p[7] * g[2])
+        a0 = g1 * p[2]
+        a1 = g1 * p[3]
+        a2 = g1 * p[4]
+        b0 = g2 * p[5]
+        b1 = g2 * p[6]
+        b2 = g2 * p[7]
+        if l1 > 0 and l2 > 0:
+            fp0, fp1, fp2 = a0 + b0, a1 + b1, a2 + b2
+            fm0 = fm1 = fm2 = 0.0
+        elif l1 > 0:
+            fp0, fp1, fp2 = a0, a1, a2
+            fm0, fm1, fm2 = b0, b1, b2
+        else:
+            fp0 = fp1 = fp2 = 0.0
+            fm0, fm1, fm2 = a0 + b0, a1 + b1, a2 + b2
+        sp0 += fp0
+        sp1 += fp1
+        sp2 += fp2
+        sm0 += fm0
+        sm1 += fm1
+        sm2 += fm2
+        _add_m(acc, fp0, fp1, fp2, 1.0)
+        _add_m(acc, fm0, fm1, fm2, -1.0)
+    _add_m(acc, sp0, sp1, sp2, -1.0)
+    _add_m(acc, sm0, sm1, sm2, 1.0)
+    r = rho[n]
+    for i in range(3):
+        for j in range(i, 3):
+            acc[i, j] = 0.5 * acc[i, j] + r[i, j]
+    for i in range(3):
+        for j in range(i):
+            acc[i, j] = acc[j, i]
+    v = eig_max_into(acc, ev)
     val[n] = v
-    vec[n] = e
+    for q in range(3):
+        vec[n, q] = ev[q, 0]
 
 
 # --------------------------------------------------------------------------- max-heap
@@ -272,24 +485,29 @@ def _find(par, i):
 
 @njit(cache=True)
 def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crack_of, nver,
-               segp, seg_alive, seg_info, cnt):
+               segp, seg_alive, seg_info, segof, cnt):
     """Split edge (a, b) at ``a + tt (b - a)``: one new node, each face on the edge in two.
 
     Children keep the parent's world stress (so its in-frame rotation is implicit), asset face and
     growth.  If the edge is a crack side, the recorded crack segment is split too so the network
-    keeps its junction there.  Returns the new node.
+    keeps its junction there; ``segof`` maps a node to the last live segment starting or ending
+    at it, which finds that segment without a search.  Returns the new node.
     """
-    fl = np.full(2, -1, np.int64)
+    f_0 = -1
+    f_1 = -1
     nfl = 0
     for j in range(NFc[a]):
         f = NF[a, j]
         if F[f, 0] == b or F[f, 1] == b or F[f, 2] == b:
-            if nfl < 2:
-                fl[nfl] = f
+            if nfl == 0:
+                f_0 = f
+            elif nfl == 1:
+                f_1 = f
             nfl += 1
     p = cnt[1]
     cnt[1] += 1
-    X[p] = X[a] + tt * (X[b] - X[a])
+    for q in range(3):
+        X[p, q] = X[a, q] + tt * (X[b, q] - X[a, q])
     pid[p] = p
     hn[p] = 0.5 * (hn[a] + hn[b])
     taun[p] = 0.5 * (taun[a] + taun[b])
@@ -298,8 +516,9 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
     nver[p] = 0
     NFc[p] = 0
     onb[p] = False
+    segof[p] = -1
     for i in range(min(nfl, 2)):
-        f = fl[i]
+        f = f_0 if i == 0 else f_1
         g = cnt[2]
         cnt[2] += 1
         for k in range(3):
@@ -324,36 +543,50 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
     if nfl == 1:
         pa = pid[a]
         pb = pid[b]
-        found = False
-        for s in range(cnt[3] - 1, -1, -1):
-            if seg_alive[s] and ((segp[s, 0] == pa and segp[s, 1] == pb)
-                                 or (segp[s, 0] == pb and segp[s, 1] == pa)):
-                seg_alive[s] = False
-                for q in range(2):
-                    t = cnt[3]
-                    cnt[3] += 1
-                    segp[t, 0] = segp[s, 0] if q == 0 else p
-                    segp[t, 1] = p if q == 0 else segp[s, 1]
-                    seg_alive[t] = True
-                    seg_info[t] = seg_info[s]
-                found = True
+        found = -1
+        for cand in (segof[pa], segof[pb]):
+            if cand >= 0 and seg_alive[cand] and (
+                    (segp[cand, 0] == pa and segp[cand, 1] == pb)
+                    or (segp[cand, 0] == pb and segp[cand, 1] == pa)):
+                found = cand
                 break
-        if not found:
+        if found < 0:
+            # Not the last segment at either end: fall back to a search from the newest.
+            for s in range(cnt[3] - 1, -1, -1):
+                if seg_alive[s] and ((segp[s, 0] == pa and segp[s, 1] == pb)
+                                     or (segp[s, 0] == pb and segp[s, 1] == pa)):
+                    found = s
+                    break
+        if found >= 0:
+            s = found
+            seg_alive[s] = False
+            for q in range(2):
+                t = cnt[3]
+                cnt[3] += 1
+                segp[t, 0] = segp[s, 0] if q == 0 else p
+                segp[t, 1] = p if q == 0 else segp[s, 1]
+                seg_alive[t] = True
+                seg_info[t] = seg_info[s]
+                segof[segp[t, 0]] = t
+                segof[segp[t, 1]] = t
+        else:
             onb[p] = onb[a] and onb[b]
     return p
 
 
 @njit(cache=True)
-def separate(c, cut1, cut2, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of, nver, cnt, out):
+def separate(c, cut1, cut2, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of, nver, cnt, out,
+             par, comp, faces):
     """Split node ``c`` into one node per edge-connected group of its faces.
 
     Faces around ``c`` are connected through shared edges (c, x), except through the cut edges
     (c, cut1) and (c, cut2): cutting them opens the crack; with no cuts this only mends pinched
     (bow-tie) nodes left where a crack reached a boundary.  New nodes are written to ``out``;
-    returns their number.
+    returns their number.  ``par``, ``comp``, ``faces`` are scratch rows at least the table width.
     """
     k = NFc[c]
-    par = np.arange(k)
+    for i in range(k):
+        par[i] = i
     for i in range(k):
         fi = NF[c, i]
         for j in range(i + 1, k):
@@ -367,18 +600,19 @@ def separate(c, cut1, cut2, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of, nv
                     rj = _find(par, j)
                     if ri != rj:
                         par[max(ri, rj)] = min(ri, rj)
-    lab = np.full(k, -1, np.int64)
-    comp = np.empty(k, np.int64)
     ncomp = 0
+    # Roots are their own smallest member, so a root's label is assigned before its members'.
     for i in range(k):
         r = _find(par, i)
-        if lab[r] < 0:
-            lab[r] = ncomp
+        if r == i:
+            comp[i] = ncomp
             ncomp += 1
-        comp[i] = lab[r]
+        else:
+            comp[i] = comp[r]
     if ncomp <= 1:
         return 0
-    faces = NF[c, :k].copy()
+    for i in range(k):
+        faces[i] = NF[c, i]
     NFc[c] = 0
     for i in range(k):
         if comp[i] == 0:
