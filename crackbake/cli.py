@@ -332,10 +332,13 @@ def main(
         click.echo(json.dumps(result.summary(), indent=2))
     if not quiet:
         m = result.manifest
+        lo, hi = m["mesh"]["bbox_min"], m["mesh"]["bbox_max"]
+        bbox = " x ".join(f"{b - a:.4g}" for a, b in zip(lo, hi, strict=True))
+        uv_found = "found" if m["mesh"]["has_uv"] else "none in the file"
         err(
             f"mesh: {m['mesh']['vertices']} vertices, {m['mesh']['faces']} faces, "
-            f"UVs {m['uv']['method']}; cracks: {m['cracks']['cracks']} "
-            f"({m['cracks']['points']} points)"
+            f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}; "
+            f"cracks: {m['cracks']['cracks']} ({m['cracks']['points']} points)"
         )
         if verbose:
             for stage, secs in m["timings_s"].items():
