@@ -92,16 +92,19 @@ SNAP_BOUNDARY_DEG = 25.0
 """Same, when the vertex lies on a crack or the mesh boundary (ends cracks cleanly there)."""
 SNAP_T = 0.12
 """Snap when the crossing is this close (fraction of the edge) to an end: avoids slivers."""
+BACK_DEG = 60.0
+"""A cut within this angle of a crack or boundary edge at the node is not opened (no forks)."""
 RELAX_RINGS = 3
 """Rings of faces around a crack event that the fine relaxation touches."""
 RELAX_CAP = 0.1
 """Largest relative change of a face's stress in one relaxation pass."""
 RELAX_TOL = 0.002
 """Stop the relaxation passes once no face's stress changes by more than this (relative)."""
-SHADOW_REL = 0.04
+SHADOW_REL = 0.1
 """Radius of a crack's world-scale stress shadow, relative to the bounding-box diagonal."""
-SHADOW_GAIN = 1.0
-"""Fraction of the normal stress a crack releases on its own line (coarse level)."""
+SHADOW_GAIN = 2.0
+"""Release on a crack's own line, in units of its normal stress (coarse level); above 1 the
+clamp saturates it, widening the fully released strip to about half the radius."""
 SHADOW_MAX_CELLS = 4_000_000
 """Largest shadow grid (cells); coarser cells are used on very elongated bounding boxes."""
 RES_TOLERANCE = 0.25
@@ -117,12 +120,18 @@ GROWTH_REF_STEPS = 20
 """With no initial stress, toughness 1 is the separation of this many growth steps."""
 EXTRA_DEGREE = 24
 """Room for faces a node may gain by edge splits around it (node -> face table width)."""
+TIP_FIRST = True
+"""Grow every failing crack tip before a new crack starts (see the module docstring)."""
+TIP_PRIORITY = 1e6
+"""Added to a free tip's heap key when ``TIP_FIRST``."""
+INITIAL_ROOM = 4096
+"""Crack events the state arrays first make room for (they double when full)."""
 PROGRESS_SECONDS = 0.5
 """Least time between two progress messages."""
 
 # Indices into the counter array shared by the kernels.
 (_HEAP, _NN, _NF, _NS, _STEP, _EVENTS, _STAMP, _NCRACK, _ABORT, _GROW, _DEP,
- _REFRESH) = range(12)
+ _REFRESH, _NUC_EDGE) = range(13)
 # Return codes of _run.
 _MORE, _DONE, _FULL = 0, 1, 2
 
@@ -153,19 +162,28 @@ def _incidence(nf, F, NF, NFc):
 
 
 @njit(cache=True)
-def _rebuild_heap(hk, hn, hv, cnt, val, taun, nver, dead):
-    cnt[_HEAP] = 0
-    for n in range(cnt[_NN]):
-        if not dead[n] and taun[n] > 0 and val[n] > taun[n]:
-            heap_push(hk, hn, hv, cnt, val[n] / taun[n], n, nver[n])
+def _key(n, val, taun, crack_of, tip_first):
+    """Heap key: v+/tau, plus TIP_PRIORITY for free crack tips when ``tip_first``."""
+    k = val[n] / taun[n]
+    if tip_first and crack_of[n] >= 0:
+        k += TIP_PRIORITY
+    return k
 
 
 @njit(cache=True)
-def _push(n, hk, hn, hv, cnt, val, taun, nver, dead):
+def _rebuild_heap(hk, hn, hv, cnt, val, taun, nver, dead, crack_of, tip_first):
+    cnt[_HEAP] = 0
+    for n in range(cnt[_NN]):
+        if not dead[n] and taun[n] > 0 and val[n] > taun[n]:
+            heap_push(hk, hn, hv, cnt, _key(n, val, taun, crack_of, tip_first), n, nver[n])
+
+
+@njit(cache=True)
+def _push(n, hk, hn, hv, cnt, val, taun, nver, dead, crack_of, tip_first):
     nver[n] += 1
     if not dead[n] and taun[n] > 0 and val[n] > taun[n]:
-        if not heap_push(hk, hn, hv, cnt, val[n] / taun[n], n, nver[n]):
-            _rebuild_heap(hk, hn, hv, cnt, val, taun, nver, dead)
+        if not heap_push(hk, hn, hv, cnt, _key(n, val, taun, crack_of, tip_first), n, nver[n]):
+            _rebuild_heap(hk, hn, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
 
 
 @njit(cache=True)
@@ -270,7 +288,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
     """
     alpha, rate, nrelax, max_len = prm[0], prm[1], int(prm[2]), prm[3]
     snap, snap_b, snap_t, rings = prm[4], prm[5], prm[6], int(prm[7])
-    gain = prm[8]
+    gain, back, tip_first = prm[8], prm[9], prm[10] > 0
     shadow = G.shape[0] >= 2
     W = NF.shape[1]
     ncap = X.shape[0]
@@ -311,13 +329,13 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                 for n in range(nn):
                     nver[n] += 1
                     nevl[n] = cnt[_DEP]
-                _rebuild_heap(hk, hn_, hv, cnt, val, taun, nver, dead)
+                _rebuild_heap(hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
                 cnt[_STEP] += 1
                 cnt[_GROW] += 1
                 done += 1
                 continue
             return _DONE
-        _key, c, ver = heap_pop(hk, hn_, hv, cnt)
+        _top, c, ver = heap_pop(hk, hn_, hv, cnt)
         if ver != nver[c] or dead[c] or not val[c] > taun[c]:
             continue
         nucleate = crack_of[c] < 0
@@ -335,8 +353,8 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             if not val[c] > taun[c]:
                 nver[c] += 1
                 continue
-            if cnt[_HEAP] > 0 and val[c] / taun[c] < hk[0]:
-                _push(c, hk, hn_, hv, cnt, val, taun, nver, dead)
+            if cnt[_HEAP] > 0 and _key(c, val, taun, crack_of, tip_first) < hk[0]:
+                _push(c, hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
                 continue
         # ---- crack plane: n-hat projected on the tangent plane; t runs along the crack.
         xc0, xc1, xc2 = X[c, 0], X[c, 1], X[c, 2]
@@ -439,6 +457,24 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                 split[side] = True
         if tip[0] >= 0 and tip[1] >= 0 and not split[0] and not split[1] and tip[0] == tip[1]:
             tip[1] = -1
+        # A cut that runs back along a crack or boundary edge at c would fork the crack behind
+        # its tip (a stub); cracks only grow forward from there.
+        for side in range(2):
+            if tip[side] < 0 or sa[side] < 0:
+                continue
+            a, b, tt = sa[side], sb[side], st[side]
+            p0 = X[a, 0] + tt * (X[b, 0] - X[a, 0]) - xc0
+            p1 = X[a, 1] + tt * (X[b, 1] - X[a, 1]) - xc1
+            p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - xc2
+            for j in range(NFc[c]):
+                f = NF[c, j]
+                for q in range(3):
+                    y = F[f, q]
+                    if y != c and y != tip[side] and spoke_count(F, NF, NFc, c, y) == 1:
+                        if _angle(p0, p1, p2, X[y, 0] - xc0, X[y, 1] - xc1,
+                                  X[y, 2] - xc2) < back:
+                            tip[side] = -1
+                            split[side] = False
         nt = (tip[0] >= 0) + (tip[1] >= 0)
         interior = not on_boundary(F, NF, NFc, c)
         ok = nt >= (2 if interior else 1)
@@ -517,6 +553,8 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
         if cid < 0:
             cid = cnt[_NCRACK]
             cnt[_NCRACK] += 1
+            if not interior:
+                cnt[_NUC_EDGE] += 1
         release = val[c] / hn[c]
         excess = val[c] - taun[c]
         crack_of[c] = -1
@@ -612,7 +650,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec,
                         crack_of[n] >= 0, sc, acc, ev)
             nevl[n] = cnt[_DEP]
-            _push(n, hk, hn_, hv, cnt, val, taun, nver, dead)
+            _push(n, hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
         cnt[_STEP] += 1
         cnt[_EVENTS] += 1
         done += 1
@@ -760,7 +798,9 @@ def solve_iben(
     SolverResult
         ``stats`` holds ``tau`` (separation per unit edge length at toughness 1 x toughness),
         ``events``, ``cracks`` (distinct cracks started), ``aborted``, ``growth_steps``,
-        ``refreshed`` (lazy heap re-evaluations), ``shadow_radius``, ``seconds``.
+        ``refreshed`` (lazy heap re-evaluations), ``edge_starts`` (cracks started on a crack
+        or the boundary), ``shadow_radius``, ``loop_seconds`` (the crack
+        loop alone), ``seconds``.
     """
     _check(params)
     t0 = _time.perf_counter()
@@ -775,7 +815,7 @@ def solve_iben(
     growth = getattr(field, "growth", None)
     has_growth = growth is not None and bool(np.any(growth))
     # Initial room for a few thousand events; _grow doubles it on demand.
-    room = int(min(params.max_steps, 4096)) + 16
+    room = int(min(params.max_steps, INITIAL_ROOM)) + 16
     ncap = n0 + 10 * room
     mcap = m0 + 4 * room
     scap = 6 * room
@@ -839,22 +879,23 @@ def solve_iben(
     st["segp"] = np.zeros((scap, 2), np.int64)
     st["seg_alive"] = np.zeros(scap, bool)
     st["seg_info"] = np.zeros((scap, 3))
-    st["clen"] = np.zeros(1024)
-    cnt = np.zeros(12, np.int64)
+    st["clen"] = np.zeros(min(1024, room))
+    cnt = np.zeros(13, np.int64)
     cnt[_NN], cnt[_NF] = n0, m0
     st["cnt"] = cnt
     max_len = np.inf if params.max_crack_length is None else float(params.max_crack_length)
     st["prm"] = np.array([
         params.tip_factor, params.relax_rate, params.relax_steps, max_len,
         np.radians(SNAP_DEG), np.radians(SNAP_BOUNDARY_DEG), SNAP_T, RELAX_RINGS, SHADOW_GAIN,
+        np.radians(BACK_DEG), float(TIP_FIRST),
     ], dtype=np.float64)
     if tau > 0:
         _rebuild_heap(st["hk"], st["hnode"], st["hv"], cnt, val, st["taun"], st["nver"],
-                      st["dead"])
+                      st["dead"], st["crack_of"], TIP_FIRST)
     # Chunks are sized so a call takes about a tenth of a second: progress stays responsive
     # without a clock inside the compiled loop.
     chunk = 64
-    last_msg = _time.perf_counter()
+    last_msg = t_loop = _time.perf_counter()
     while tau > 0:
         t_call = _time.perf_counter()
         code = _run(*(st[k] for k in _RUN_ORDER), int(params.max_cracks),
@@ -874,6 +915,7 @@ def solve_iben(
         if code == _DONE:
             break
 
+    loop_seconds = _time.perf_counter() - t_loop
     nn, nf, ns = int(cnt[_NN]), int(cnt[_NF]), int(cnt[_NS])
     # Bring every face and node up to date with the final shadow (the heap was lazy).
     _update_all(nn, nf, st["X"], st["F"], st["S"], st["area"], st["nrm"], st["grad"], st["pr"],
@@ -905,7 +947,9 @@ def solve_iben(
             "aborted": int(cnt[_ABORT]),
             "growth_steps": int(cnt[_GROW]),
             "refreshed": int(cnt[_REFRESH]),
+            "edge_starts": int(cnt[_NUC_EDGE]),
             "shadow_radius": float(gp[4]),
+            "loop_seconds": loop_seconds,
             "seconds": _time.perf_counter() - t0,
         },
     )

@@ -358,6 +358,14 @@ def _grow(
             buf_len[e] = 0
         start_open = excess + tau
         steps = 0
+        if boundary[s]:
+            # A crack starting on the mesh boundary grows inwards only: growing both ways
+            # would leave the boundary node inside the crack.
+            inward = np.zeros(3)
+            for q in range(ptr[s], ptr[s + 1]):
+                inward += x[nbr[q]] - x[s]
+            d0 = heading[0][0] * inward[0] + heading[0][1] * inward[1] + heading[0][2] * inward[2]
+            alive[1 if d0 >= 0 else 0] = False
 
         while (alive[0] or alive[1]) and steps < steps_per_crack and total_steps < max_steps:
             for e in range(2):
