@@ -65,6 +65,8 @@ SHRINK = SolverParams(toughness=0.7, relax_steps=10, relax_rate=0.6, max_cracks=
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[100_000, 400_000, 1_000_000])
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="runs per case; the fastest is reported (shared machines are noisy)")
     args = ap.parse_args()
     warm = plate(2000)
     solve_iben(warm, impact_field(warm), GLASS)
@@ -74,9 +76,14 @@ def main() -> None:
         sim = plate(size)
         for name, field, params in (("glass", impact_field(sim), GLASS),
                                     ("shrink", shrink_field(sim), SHRINK)):
-            t = time.perf_counter()
-            r = solve_iben(sim, field, params)
-            wall = time.perf_counter() - t
+            best = None
+            for _ in range(max(1, args.repeat)):
+                t = time.perf_counter()
+                r = solve_iben(sim, field, params)
+                wall = time.perf_counter() - t
+                if best is None or wall < best[0]:
+                    best = (wall, r)
+            wall, r = best
             loop = r.stats["loop_seconds"]
             ms = 1000 * loop / max(r.stats["events"], 1)
             length = sum(np.linalg.norm(np.diff(c.points, axis=0), axis=1).sum()

@@ -23,6 +23,9 @@ from crackbake.params import (
     parse_impact,
     preset_names,
 )
+from crackbake.params import (
+    SOLVER_DEFAULTS as D,
+)
 
 EPILOG = """\b
 Examples:
@@ -91,7 +94,8 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--preset",
     type=click.Choice(preset_names()),
-    help="Material preset setting coherent solver/stress defaults.",
+    help="Material preset setting coherent solver and stress defaults (options given "
+    "explicitly win).",
 )
 @click.option(
     "--method",
@@ -127,18 +131,30 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("--invert-weights", is_flag=True, help="Use 1 - weight.")
 @click.option("--noise", type=float, help="Seeded random perturbation of the field (0.1 = 10%).")
 @click.option("--hoop", type=float, help="Impact hoop/radial tension ratio [1.25].")
-@click.option("--toughness", type=float, help="Failure threshold relative to the field [1].")
-@click.option("--tip-factor", type=float, help="Share of excess stress pushed to crack tips.")
-@click.option("--relax-steps", type=int, help="Relaxation passes per crack.")
-@click.option("--relax-rate", type=float, help="iben relaxation strength.")
-@click.option("--relax-share", type=float, help="thesis: share passed to neighbours per pass.")
-@click.option("--max-cracks", type=int, help="Stop after this many cracks.")
-@click.option("--max-steps", type=int, help="Stop after this many solver steps.")
+@click.option(
+    "--toughness", type=float, help=f"Failure threshold relative to the field [{D['toughness']}]."
+)
+@click.option(
+    "--tip-factor",
+    type=float,
+    help=f"Share of excess stress pushed to crack tips (0..1) [{D['tip_factor']}].",
+)
+@click.option("--relax-steps", type=int, help=f"Relaxation passes per crack [{D['relax_steps']}].")
+@click.option("--relax-rate", type=float, help=f"iben relaxation strength [{D['relax_rate']}].")
+@click.option(
+    "--relax-share",
+    type=float,
+    help=f"thesis: share passed to neighbours per pass [{D['relax_share']}].",
+)
+@click.option("--max-cracks", type=int, help=f"Stop after this many cracks [{D['max_cracks']}].")
+@click.option(
+    "--max-steps", type=int, help=f"Stop after this many solver steps [{D['max_steps']}]."
+)
 @click.option("--max-crack-length", type=float, help="Longest single crack, mesh units.")
 @click.option(
     "--crack-width", type=float, help="Widest crack opening, mesh units [0.1% of diagonal]."
 )
-@click.option("--depth-ratio", type=float, help="Crack depth / width.")
+@click.option("--depth-ratio", type=float, help=f"Crack depth / width [{D['depth_ratio']}].")
 @click.option(
     "--res",
     type=int,
@@ -198,9 +214,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("--no-cache", is_flag=True, help="Do not read or write the unwrap cache.")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.option("-v", "--verbose", is_flag=True, help="Print stage timings and details.")
-@click.option(
-    "--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout."
-)
+@click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
 @click.version_option(__version__, "-V", "--version", prog_name="crackbake")
 def main(
     mesh: Path,
