@@ -29,7 +29,7 @@ SOLVER_DEFAULTS: dict = {
     "relax_rate": 0.6,
     "relax_share": 0.05,
     "max_cracks": 500,
-    "max_steps": 20000,
+    "max_steps": 100000,
     "max_crack_length": None,
     "crack_width": None,
     "depth_ratio": 0.5,

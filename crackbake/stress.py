@@ -32,7 +32,9 @@ from crackbake.solver.fem import face_frames, face_geometry
 # creases cannot swamp every other source.
 CURVATURE_CLIP = 5.0
 # Default noise feature size, in sim edge lengths.
-NOISE_SCALE_EDGES = 5.0
+# Default noise feature size, fraction of the bounding-box diagonal: in world units, so the
+# pattern does not change with the simulation resolution.
+NOISE_SCALE_DIAGONAL = 0.02
 # Sinusoids summed per noise field (more is smoother-looking but slower).
 NOISE_WAVES = 8
 # Rec. 709 luminance weights, for colour weight maps and vertex colours.
@@ -204,7 +206,7 @@ class NoiseSource:
     amount : float
         Relative size of the perturbation (0.1 = about 10 %).
     scale : float or None
-        Feature size, mesh units; ``None`` means 5 sim edge lengths.
+        Feature size, mesh units; ``None`` means 2 % of the bounding-box diagonal.
     """
 
     amount: float = 0.1
@@ -751,7 +753,7 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
     growth *= weight[:, None, None]
     for i, src in enumerate(noises):
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), i]))
-        scale = src.scale if src.scale is not None else NOISE_SCALE_EDGES * float(sim.edge_length)
+        scale = src.scale if src.scale is not None else NOISE_SCALE_DIAGONAL * mesh.diagonal
         stress, factor = _apply_noise(stress, geo, src, scale, rng)
         growth *= factor[:, None, None]
 

@@ -41,9 +41,10 @@ class SolverParams:
     relax_share : float
         thesis: share of each node's value passed to its neighbours per pass (0..1).
     max_cracks : int
-        Stop after this many cracks (iben: crack events; thesis: grown cracks).
+        Stop starting new cracks after this many (cracks already started keep growing).
     max_steps : int
-        Stop after this many solver steps.
+        Stop after this many solver steps (iben: crack events, one node cut each, plus
+        shrinkage growth steps; thesis: tip advances).
     max_crack_length : float or None
         Longest single crack, mesh units (``None``: unlimited).
     crack_width : float or None
@@ -61,7 +62,7 @@ class SolverParams:
     relax_rate: float = 0.6
     relax_share: float = 0.05
     max_cracks: int = 500
-    max_steps: int = 20000
+    max_steps: int = 100000
     max_crack_length: float | None = None
     crack_width: float | None = None
     depth_ratio: float = 0.5
