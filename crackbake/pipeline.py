@@ -85,19 +85,38 @@ def base_color(mask: np.ndarray) -> np.ndarray:
 
 
 def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, float]:
-    """A camera direction that faces the cracks: their mean surface normal, turned a little."""
-    faces = [c.faces for c in network.cracks]
-    if not faces:
-        return (0.9, 0.45, 1.0)
-    f = np.concatenate(faces)
-    tri = mesh.vertices[mesh.faces[f]]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]).sum(axis=0)
-    if np.linalg.norm(n) < 1e-12:
-        return (0.9, 0.45, 1.0)
-    n = n / np.linalg.norm(n)
-    # Tilt towards +y (the usual up) so the view is three-quarter rather than head-on.
-    d = n + np.array([0.0, 0.35, 0.0])
-    return tuple(float(x) for x in d / np.linalg.norm(d))
+    """The camera direction (from the mesh towards the camera) that shows the most cracks.
+
+    Candidates are the 17 directions of the upper half of a cube's corners, edges and faces
+    (y is up), tilted 20 degrees upwards; each scores the crack length facing it, with the
+    mesh area facing it breaking ties (and choosing the view when there are no cracks).
+    """
+    cand = np.array(
+        [
+            (x, y, z)
+            for x in (-1, 0, 1)
+            for y in (0, 1)
+            for z in (-1, 0, 1)
+            if (x, y, z) != (0, 0, 0)
+        ],
+        float,
+    )
+    cand /= np.linalg.norm(cand, axis=1, keepdims=True)
+    cand[:, 1] += np.tan(np.radians(20))
+    cand /= np.linalg.norm(cand, axis=1, keepdims=True)
+    tri = mesh.vertices[mesh.faces]
+    area_normals = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    score = np.maximum(area_normals @ cand.T, 0).sum(axis=0)
+    score = 1e-3 * score / max(score.max(), 1e-300)
+    if network.cracks:
+        unit = area_normals / np.maximum(
+            np.linalg.norm(area_normals, axis=1, keepdims=True), 1e-300
+        )
+        for crack in network.cracks:
+            seg = np.linalg.norm(np.diff(crack.points, axis=0), axis=1)
+            n = unit[crack.faces[:-1]]
+            score += (seg[:, None] * np.maximum(n @ cand.T, 0)).sum(axis=0)
+    return tuple(float(x) for x in cand[int(np.argmax(score))])
 
 
 def _exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
@@ -318,8 +337,9 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
     for x, y, z, strength in params.directions:
         sources.append(DirectionalSource((x, y, z), strength))
     if params.curvature_bias or params.curvature_density:
-        sources.append(CurvatureSource(params.curvature_bias or 0.0,
-                                       params.curvature_density or 0.0))
+        sources.append(
+            CurvatureSource(params.curvature_bias or 0.0, params.curvature_density or 0.0)
+        )
     if not sources:
         raise CrackbakeError(
             "nothing to crack: give --impact X,Y,Z, --shrink S, --direction X,Y,Z, --curvature B "
@@ -376,8 +396,7 @@ def solve(
     sources = stress_sources(params, mesh, relative)
     say("building the simulation mesh")
     t = time.perf_counter()
-    sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces,
-                        seed=params.seed)
+    sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces, seed=params.seed)
     timings["simmesh"] = time.perf_counter() - t
     say(f"stress field on {len(sim.faces)} simulation faces")
     t = time.perf_counter()
@@ -396,10 +415,20 @@ def solve(
         result = solve_iben(sim, field, sp, progress=say)
     timings["solve"] = time.perf_counter() - t
     effective = params.to_dict()
-    effective.update({"crack_width": sp.crack_width, "sim_faces_built": int(len(sim.faces)),
-                      "sim_edge_length": float(sim.edge_length)})
-    network = from_solver(result.cracks, mesh, params=_sidecar_params(effective),
-                          impacts=field.impacts, solver_steps=result.steps)
+    effective.update(
+        {
+            "crack_width": sp.crack_width,
+            "sim_faces_built": int(len(sim.faces)),
+            "sim_edge_length": float(sim.edge_length),
+        }
+    )
+    network = from_solver(
+        result.cracks,
+        mesh,
+        params=_sidecar_params(effective),
+        impacts=field.impacts,
+        solver_steps=result.steps,
+    )
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
     return network, jsonable(stats)
@@ -407,16 +436,30 @@ def solve(
 
 def _sidecar_params(effective: dict) -> dict:
     """Parameters stored in the sidecar: everything that shapes the network, no output paths."""
-    drop = {"out", "formats", "float32", "unwrap_timeout", "cache", "tile", "res", "padding",
-            "dilate", "max_distance", "profile", "cracks"}
+    drop = {
+        "out",
+        "formats",
+        "float32",
+        "unwrap_timeout",
+        "cache",
+        "tile",
+        "res",
+        "padding",
+        "dilate",
+        "max_distance",
+        "profile",
+        "cracks",
+    }
     return jsonable({k: v for k, v in effective.items() if k not in drop})
 
 
 def _inputs(params: RunParams) -> dict:
     inputs = {"mesh": {"path": str(params.mesh), "sha256": sha256_file(params.mesh)}}
     if params.weight_map is not None:
-        inputs["weight_map"] = {"path": str(params.weight_map),
-                                "sha256": sha256_file(params.weight_map)}
+        inputs["weight_map"] = {
+            "path": str(params.weight_map),
+            "sha256": sha256_file(params.weight_map),
+        }
     if params.cracks is not None:
         inputs["cracks"] = {"path": str(params.cracks), "sha256": sha256_file(params.cracks)}
     return inputs

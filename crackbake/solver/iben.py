@@ -75,14 +75,6 @@ from numba import njit
 
 from crackbake.errors import CrackbakeError
 from crackbake.solver import CrackPath, SolverParams, SolverResult
-from crackbake.solver.fem import (
-    face_frames,
-    face_geometry,
-    largest_eigen,
-    node_forces,
-    separation_tensors,
-    split_tension,
-)
 from crackbake.solver.topology import (
     face_update,
     heap_pop,
@@ -95,7 +87,7 @@ from crackbake.solver.topology import (
     spoke_count,
 )
 
-SNAP_DEG = 15.0
+SNAP_DEG = 8.0
 """Snap the cut to an existing vertex when it runs within this angle of an edge (degrees)."""
 SNAP_BOUNDARY_DEG = 25.0
 """Same, when the vertex lies on a crack or the mesh boundary (ends cracks cleanly there)."""
@@ -125,6 +117,9 @@ FLAW = 0.25
 FLAW_WAVELENGTH = 0.1
 """Flaw wavelength relative to the bounding-box diagonal."""
 FLAW_WAVES = 12
+GRAIN = 0.05
+"""Weight of a node's seeded grain direction, relative to v+, in choosing the crack normal; it
+only decides where the separation is nearly isotropic (see topology.node_update)."""
 GROWTH_REF_STEPS = 20
 """With no initial stress, toughness 1 is the separation of this many growth steps."""
 EXTRA_DEGREE = 24
@@ -147,18 +142,19 @@ _MORE, _DONE, _FULL = 0, 1, 2
 
 @njit(cache=True)
 def _scratch():
-    return np.empty(8), np.empty((3, 3)), np.empty((3, 3)), np.empty((2, 3)), np.empty(6)
+    return np.empty(8), np.empty((2, 3, 3)), np.empty((3, 3)), np.empty((2, 3)), np.empty(6)
 
 
 @njit(cache=True)
-def _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, crack_of, G, gp):
+def _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, crack_of, G, gp,
+                grain, seed):
     """Recompute every face and every node (setup, growth steps, the final state)."""
     sc, acc, ev, fr, r6 = _scratch()
     for f in range(nf):
         face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
     for n in range(nn):
         node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of[n] >= 0,
-                    sc, acc, ev)
+                    grain, seed, sc, acc, ev)
 
 
 @njit(cache=True)
@@ -212,7 +208,12 @@ def _relax(nrelax, rate, regf, nrf, regn, nrn, stamp, fst, F, S, NF, NFc, area, 
             n = regn[i]
             free = True
             f0 = f1 = f2 = 0.0
-            kn = 0.0
+            # Block stiffness of the node, (2/3) sum A (|g|^2 I + g g^T) (upper triangle): the
+            # exact diagonal block of the strain operator, scaled so that a fan with edges in
+            # all directions gets the scalar sum A |g|^2.  A scalar alone over-relaxes across
+            # the dominant edge direction of an anisotropic fan (rows of sim edges along the
+            # asset's edges), which steered crack tips along them.
+            k00 = k01 = k02 = k11 = k12 = k22 = 0.0
             for j in range(NFc[n]):
                 f = NF[n, j]
                 if fst[f] != stamp:
@@ -227,11 +228,26 @@ def _relax(nrelax, rate, regf, nrf, regn, nrn, stamp, fst, F, S, NF, NFc, area, 
                 f0 -= A * (s[0, 0] * g[0] + s[0, 1] * g[1] + s[0, 2] * g[2])
                 f1 -= A * (s[1, 0] * g[0] + s[1, 1] * g[1] + s[1, 2] * g[2])
                 f2 -= A * (s[2, 0] * g[0] + s[2, 1] * g[1] + s[2, 2] * g[2])
-                kn += A * (g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-            if free and kn > 0:
-                disp[n, 0] = rate * f0 / kn
-                disp[n, 1] = rate * f1 / kn
-                disp[n, 2] = rate * f2 / kn
+                gg = g[0] * g[0] + g[1] * g[1] + g[2] * g[2]
+                k00 += A * (gg + g[0] * g[0])
+                k01 += A * g[0] * g[1]
+                k02 += A * g[0] * g[2]
+                k11 += A * (gg + g[1] * g[1])
+                k12 += A * g[1] * g[2]
+                k22 += A * (gg + g[2] * g[2])
+            # Inverse by cofactors (the block is symmetric positive definite).
+            c00 = k11 * k22 - k12 * k12
+            c01 = k02 * k12 - k01 * k22
+            c02 = k01 * k12 - k02 * k11
+            det = k00 * c00 + k01 * c01 + k02 * c02
+            if free and det > 0:
+                c11 = k00 * k22 - k02 * k02
+                c12 = k01 * k02 - k00 * k12
+                c22 = k00 * k11 - k01 * k01
+                r = 1.5 * rate / det
+                disp[n, 0] = r * (c00 * f0 + c01 * f1 + c02 * f2)
+                disp[n, 1] = r * (c01 * f0 + c11 * f1 + c12 * f2)
+                disp[n, 2] = r * (c02 * f0 + c12 * f1 + c22 * f2)
             else:
                 disp[n, 0] = disp[n, 1] = disp[n, 2] = 0.0
         worst = 0.0
@@ -298,6 +314,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
     alpha, rate, nrelax, max_len = prm[0], prm[1], int(prm[2]), prm[3]
     snap, snap_b, snap_t, rings = prm[4], prm[5], prm[6], int(prm[7])
     gain, back, tip_first = prm[8], prm[9], prm[10] > 0
+    grain, seed = prm[11], int(prm[12])
     shadow = G.shape[0] >= 2
     W = NF.shape[1]
     ncap = X.shape[0]
@@ -334,7 +351,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                 for f in range(nf):
                     S[f] += GR[f]
                 _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec,
-                            crack_of, G, gp)
+                            crack_of, G, gp, grain, seed)
                 for n in range(nn):
                     nver[n] += 1
                     nevl[n] = cnt[_DEP]
@@ -356,7 +373,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             for j in range(NFc[c]):
                 face_update(NF[c, j], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
             node_update(c, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, not nucleate,
-                        sc, acc, ev)
+                        grain, seed, sc, acc, ev)
             nevl[c] = cnt[_DEP]
             cnt[_REFRESH] += 1
             if not val[c] > taun[c]:
@@ -657,7 +674,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
         for i in range(nrn):
             n = regn[i]
             node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec,
-                        crack_of[n] >= 0, sc, acc, ev)
+                        crack_of[n] >= 0, grain, seed, sc, acc, ev)
             nevl[n] = cnt[_DEP]
             _push(n, hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
         cnt[_STEP] += 1
@@ -695,14 +712,14 @@ def _flaw(seed: int, points: np.ndarray) -> np.ndarray:
     return 1.0 + FLAW * np.tanh(noise)
 
 
-def _reference_from(X0, F0, stress, h_node, bnd) -> float:
-    """REF_PERCENTILE of v+/h over interior nodes for a (tensile) stress field, via fem.py."""
-    area, normal, grad = face_geometry(X0, F0)
-    plus, minus, _, _ = split_tension(stress, face_frames(normal, X0, F0))
-    sep = separation_tensors(F0, node_forces(area, grad, plus), node_forces(area, grad, minus),
-                             len(X0))
-    v = largest_eigen(sep)[0] / np.maximum(h_node, 1e-300)
-    pool = v[(~bnd) & (v > 0)]
+def _percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
+    """REF_PERCENTILE of the positive normalised separations ``v+ / h`` of interior nodes.
+
+    Falls back to all nodes when no interior node has a positive separation; 0 when none has.
+    """
+    pool = norm_sep[(~bnd) & (norm_sep > 0)]
+    if len(pool) == 0:
+        pool = norm_sep[norm_sep > 0]
     return float(np.percentile(pool, REF_PERCENTILE)) if len(pool) else 0.0
 
 
@@ -858,21 +875,26 @@ def solve_iben(
     G, gp = _shadow_grid(X0)
     st["G"], st["gp"] = G, gp
     _incidence(m0, st["F"], st["NF"], st["NFc"])
-    _update_all(n0, m0, st["X"], st["F"], st["S"], st["area"], st["nrm"], st["grad"], st["pr"],
-                st["NF"], st["NFc"], st["rho"], st["val"], st["vec"], st["crack_of"], G, gp)
+    gseed = params.seed % (1 << 52)
+
+    def update_all(nn: int, nf: int, stress: np.ndarray) -> None:
+        _update_all(nn, nf, st["X"], st["F"], stress, st["area"], st["nrm"], st["grad"],
+                    st["pr"], st["NF"], st["NFc"], st["rho"], st["val"], st["vec"],
+                    st["crack_of"], G, gp, GRAIN, gseed)
+
+    update_all(n0, m0, st["S"])
     if np.any(st["area"][:m0] <= 0):
         raise CrackbakeError("the simulation mesh has zero-area faces; clean the mesh first")
 
     val = st["val"]
     st["hn"] = _grown(h_node, ncap)
-    norm_sep = val[:n0] / np.maximum(h_node, 1e-300)
-    ref_pool = norm_sep[(~bnd) & (norm_sep > 0)]
-    if len(ref_pool) == 0:
-        ref_pool = norm_sep[norm_sep > 0]
-    ref = float(np.percentile(ref_pool, REF_PERCENTILE)) if len(ref_pool) else 0.0
+    ref = _percentile_ref(val[:n0] / np.maximum(h_node, 1e-300), bnd)
     if ref == 0.0 and has_growth:
         # No initial stress: toughness is relative to GROWTH_REF_STEPS steps of growth.
-        ref = GROWTH_REF_STEPS * _reference_from(X0, F0, st["GR"][:m0], h_node, bnd)
+        # The compiled kernels measure it, so the reference is the separation the loop sees.
+        update_all(n0, m0, st["GR"])
+        ref = GROWTH_REF_STEPS * _percentile_ref(val[:n0] / np.maximum(h_node, 1e-300), bnd)
+        update_all(n0, m0, st["S"])
     tau = params.toughness * ref
     st["taun"] = _grown(tau * h_node * _flaw(params.seed, X0), ncap)
     st["pid"] = np.arange(ncap, dtype=np.int64)
@@ -896,7 +918,7 @@ def solve_iben(
     st["prm"] = np.array([
         params.tip_factor, params.relax_rate, params.relax_steps, max_len,
         np.radians(SNAP_DEG), np.radians(SNAP_BOUNDARY_DEG), SNAP_T, RELAX_RINGS, SHADOW_GAIN,
-        np.radians(BACK_DEG), float(TIP_FIRST),
+        np.radians(BACK_DEG), float(TIP_FIRST), GRAIN, float(gseed),
     ], dtype=np.float64)
     if tau > 0:
         _rebuild_heap(st["hk"], st["hnode"], st["hv"], cnt, val, st["taun"], st["nver"],
@@ -927,8 +949,7 @@ def solve_iben(
     loop_seconds = _time.perf_counter() - t_loop
     nn, nf, ns = int(cnt[_NN]), int(cnt[_NF]), int(cnt[_NS])
     # Bring every face and node up to date with the final shadow (the heap was lazy).
-    _update_all(nn, nf, st["X"], st["F"], st["S"], st["area"], st["nrm"], st["grad"], st["pr"],
-                st["NF"], st["NFc"], st["rho"], st["val"], st["vec"], st["crack_of"], G, gp)
+    update_all(nn, nf, st["S"])
     steps = int(cnt[_STEP])
     alive = st["seg_alive"][:ns]
     X, taun, val = st["X"], st["taun"], st["val"]
