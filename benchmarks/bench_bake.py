@@ -122,7 +122,7 @@ def child(mesh_name: str, res: int) -> dict:
     from crackbake.export import write_exr, write_glb, write_png
     from crackbake.mesh import load_mesh
     from crackbake.network import segments
-    from crackbake.pipeline import _exr_channels, base_color
+    from crackbake.pipeline import GLB_TEXTURE_MAX, _exr_channels, base_color
     from crackbake.uv import prepare_uvs
 
     row: dict = {"mesh": mesh_name, "res": res}
@@ -168,7 +168,7 @@ def child(mesh_name: str, res: int) -> dict:
         row["png"] = time.perf_counter() - t
         t = time.perf_counter()
         write_glb(tmp / "m.glb", uvm.vertices, uvm.faces, uvm.uv, uvm.normals,
-                  base_color(maps.mask))
+                  base_color(maps.mask, GLB_TEXTURE_MAX))
         row["glb"] = time.perf_counter() - t
     row["peak_rss_GiB"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     return row

@@ -77,9 +77,24 @@ class RunResult:
         }
 
 
-def base_color(mask: np.ndarray) -> np.ndarray:
-    """sRGB uint8 (H, W, 3) preview colour: light surface, dark cracks."""
-    m = mask.astype(np.float32)[..., None]
+#: Largest edge of the GLB's embedded base colour: 8K textures make GLBs slow to write and too
+#: big for many viewers (WebGL/mobile limits); the EXR/PNG maps keep the full resolution.
+GLB_TEXTURE_MAX = 4096
+
+
+def base_color(mask: np.ndarray, max_size: int | None = None) -> np.ndarray:
+    """sRGB uint8 (H, W, 3) preview colour: light surface, dark cracks.
+
+    Parameters
+    ----------
+    mask : (H, W) crack coverage 0..1
+    max_size : int, optional
+        Box-filter the mask down by a power of two until its edge is at most this.
+    """
+    m = mask.astype(np.float32)
+    while max_size is not None and m.shape[0] > max_size and m.shape[0] % 2 == 0:
+        m = m.reshape(m.shape[0] // 2, 2, m.shape[1] // 2, 2).mean(axis=(1, 3))
+    m = m[..., None]
     rgb = SURFACE_RGB + (CRACK_RGB - SURFACE_RGB) * m
     return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
 
@@ -248,7 +263,7 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
                 uvmesh.faces,
                 uvmesh.uv,
                 uvmesh.normals,
-                base_color(maps.mask),
+                base_color(maps.mask, GLB_TEXTURE_MAX),
                 name=stem,
             )
         if "preview" in params.formats:

@@ -87,7 +87,7 @@ from crackbake.solver.topology import (
     spoke_count,
 )
 
-SNAP_DEG = 8.0
+SNAP_DEG = 10.0
 """Snap the cut to an existing vertex when it runs within this angle of an edge (degrees)."""
 SNAP_BOUNDARY_DEG = 25.0
 """Same, when the vertex lies on a crack or the mesh boundary (ends cracks cleanly there)."""

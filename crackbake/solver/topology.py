@@ -392,9 +392,11 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
     ``acc`` (2, 3, 3), ``ev`` (3, 3) are scratch.
     """
     t = acc[0]
+    u = acc[1]
     for i in range(3):
         for j in range(3):
             t[i, j] = 0.0
+            u[i, j] = 0.0
     sp0 = sp1 = sp2 = 0.0
     sm0 = sm1 = sm2 = 0.0
     vn0 = vn1 = vn2 = 0.0
@@ -428,9 +430,10 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
             sp0 += a0 + b0
             sp1 += a1 + b1
             sp2 += a2 + b2
+            _add_m(t, a0 + b0, a1 + b1, a2 + b2, 1.0)
             e1, e2 = _iso_m(l1, l2)
-            _add_dd(t, wc * e1, p[2], p[3], p[4])
-            _add_dd(t, wc * e2, p[5], p[6], p[7])
+            _add_dd(u, wc * e1, p[2], p[3], p[4])
+            _add_dd(u, wc * e2, p[5], p[6], p[7])
         elif l1 > 0:
             sp0 += a0
             sp1 += a1
@@ -438,30 +441,33 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
             sm0 += b0
             sm1 += b1
             sm2 += b2
+            _add_m(t, a0, a1, a2, 1.0)
+            _add_m(t, b0, b1, b2, -1.0)
             e1, _ = _iso_m(l1, 0.0)
             e2, _ = _iso_m(-l2, 0.0)
-            _add_dd(t, wc * e1, p[2], p[3], p[4])
-            _add_dd(t, -wc * e2, p[5], p[6], p[7])
+            _add_dd(u, wc * e1, p[2], p[3], p[4])
+            _add_dd(u, -wc * e2, p[5], p[6], p[7])
         else:
             sm0 += a0 + b0
             sm1 += a1 + b1
             sm2 += a2 + b2
+            _add_m(t, a0 + b0, a1 + b1, a2 + b2, -1.0)
             e1, e2 = _iso_m(-l1, -l2)
-            _add_dd(t, -wc * e1, p[2], p[3], p[4])
-            _add_dd(t, -wc * e2, p[5], p[6], p[7])
+            _add_dd(u, -wc * e1, p[2], p[3], p[4])
+            _add_dd(u, -wc * e2, p[5], p[6], p[7])
     _add_m(t, sp0, sp1, sp2, -1.0)
     _add_m(t, sm0, sm1, sm2, 1.0)
+    _add_m(u, sp0, sp1, sp2, -1.0)
+    _add_m(u, sm0, sm1, sm2, 1.0)
     r = rho[n]
     for i in range(3):
         for j in range(i, 3):
             t[i, j] = 0.5 * t[i, j] + r[i, j]
+            u[i, j] = 0.5 * u[i, j] + r[i, j]
     for i in range(3):
         for j in range(i):
             t[i, j] = t[j, i]
-    u = acc[1]
-    for i in range(3):
-        for j in range(3):
-            u[i, j] = t[i, j]
+            u[i, j] = u[j, i]
     v = eig_max_into(t, ev)
     val[n] = v
     for q in range(3):
