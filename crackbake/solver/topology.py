@@ -316,6 +316,7 @@ def raw_principal(f, X, F, S, nrm, fr, out):
 # Mid-point angles on a quarter circle for the mean over in-plane directions in
 # :func:`_iso_m`: eight points give the isotropic case exactly and the uniaxial one to 0.4 %.
 _QN = 8
+FAILMIX = 0.5
 _QC = np.cos((np.arange(_QN) + 0.5) * (0.5 * np.pi / _QN))
 _QS = np.sin((np.arange(_QN) + 0.5) * (0.5 * np.pi / _QN))
 
@@ -465,13 +466,14 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
             t[i, j] = 0.5 * t[i, j] + r[i, j]
             u[i, j] = 0.5 * u[i, j] + r[i, j]
     for i in range(3):
+        for j in range(3):
+            t[i, j] = FAILMIX * u[i, j] + (1.0 - FAILMIX) * t[i, j]
+    for i in range(3):
         for j in range(i):
             t[i, j] = t[j, i]
             u[i, j] = u[j, i]
     v = eig_max_into(t, ev)
     val[n] = v
-    for q in range(3):
-        vec[n, q] = ev[q, 0]
     lvn = np.sqrt(vn0 * vn0 + vn1 * vn1 + vn2 * vn2)
     if grain > 0.0 and v > 0.0 and lvn > 0.0:
         vn0 /= lvn
@@ -508,9 +510,9 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
         u[1, 0] = u[0, 1]
         u[2, 0] = u[0, 2]
         u[2, 1] = u[1, 2]
-        eig_max_into(u, ev)
-        for q in range(3):
-            vec[n, q] = ev[q, 0]
+    eig_max_into(u, ev)
+    for q in range(3):
+        vec[n, q] = ev[q, 0]
 
 
 # --------------------------------------------------------------------------- max-heap
