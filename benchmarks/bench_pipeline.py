@@ -40,7 +40,7 @@ def child(preset: str, faces: int) -> dict:
     ).validate().resolved()
     timings: dict[str, float] = {}
     t = time.perf_counter()
-    network, stats = solve(mesh, params, relative, lambda _m: None, timings)
+    network, stats, _ = solve(mesh, params, relative, lambda _m: None, timings)
     timings["total"] = time.perf_counter() - t
     st = network.stats()
     return {

@@ -42,6 +42,25 @@ CRACK_RGB = np.array([24, 20, 18], np.float32)
 ProgressFn = Callable[[str], None]
 
 
+@dataclass(eq=False)
+class Solved:
+    """The solve stages' own data, kept for stress maps and inspection.
+
+    Attributes
+    ----------
+    sim : crackbake.simmesh.SimMesh
+        The simulation mesh as built (before cracks split it).
+    field : crackbake.stress.StressField
+        The initial stress field on ``sim``.
+    result : crackbake.solver.SolverResult
+        Final (split) sim mesh, initial and final stress, separation values, polylines.
+    """
+
+    sim: object
+    field: object
+    result: object
+
+
 @dataclass
 class RunResult:
     """What a run produced.
@@ -62,6 +81,7 @@ class RunResult:
     mesh: Mesh | None = None
     network: CrackNetwork | None = None
     maps: CrackMaps | None = None
+    solved: Solved | None = None
     warnings: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
@@ -176,6 +196,7 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
     timings["load"] = time.perf_counter() - t
 
     solver_stats: dict = {}
+    solved = None
     if params.cracks is not None:
         if params.impacts:
             warnings.warn(
@@ -189,7 +210,7 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
         timings["cracks"] = time.perf_counter() - t
     else:
         params, relative = params.resolved()
-        network, solver_stats = solve(mesh, params, relative, say, timings)
+        network, solver_stats, solved = solve(mesh, params, relative, say, timings)
 
     say("preparing UVs")
     t = time.perf_counter()
@@ -312,7 +333,13 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
         Path(stage.path("manifest.json")).write_text(json.dumps(manifest, indent=2) + "\n")
         stage.commit(last=("manifest.json",))
     return RunResult(
-        out_dir=out_dir, files=files, manifest=manifest, mesh=mesh, network=network, maps=maps
+        out_dir=out_dir,
+        files=files,
+        manifest=manifest,
+        mesh=mesh,
+        network=network,
+        maps=maps,
+        solved=solved,
     )
 
 
@@ -400,10 +427,18 @@ def solve(
     relative: dict,
     say: ProgressFn,
     timings: dict[str, float],
-) -> tuple[CrackNetwork, dict]:
+) -> tuple[CrackNetwork, dict, Solved]:
     """Simulation mesh, stress field and crack solver: the network for a resolved run.
 
     Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).
+
+    Returns
+    -------
+    network : CrackNetwork
+    stats : dict
+        JSON-ready solver figures for the manifest.
+    solved : Solved
+        Sim mesh, stress field and the solver's full result.
     """
     from crackbake.simmesh import build_simmesh
     from crackbake.stress import stress_field
@@ -446,7 +481,7 @@ def solve(
     )
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
-    return network, jsonable(stats)
+    return network, jsonable(stats), Solved(sim=sim, field=field, result=result)
 
 
 def _sidecar_params(effective: dict) -> dict:

@@ -316,3 +316,19 @@ def test_thesis_method_and_shrinkage(plate, tmp_path):
         pts = np.array(crack["points"])
         assert (pts[:, 2] == 0).all()  # on the plate
         assert (np.array(crack["faces"]) < len(mesh.faces)).all()
+
+
+def test_library_run_keeps_the_stress_field_and_solver_result(plate, tmp_path):
+    obj, _, _ = plate
+    from crackbake.params import Impact
+
+    result = run(RunParams(mesh=obj, out=tmp_path / "lib", res=64, formats=("exr",),
+                           impacts=(Impact((1.0, 0.5, 0.0)),), preset="glass", sim_faces=3000))
+    solved = result.solved
+    assert solved is not None
+    m = len(solved.sim.faces)
+    assert solved.field.stress.shape == (m, 3, 3)
+    assert solved.result.stress_initial.shape == (m, 3, 3)
+    assert len(solved.result.stress_final) == len(solved.result.faces) >= m  # splits add faces
+    assert len(solved.result.separation) == len(solved.result.vertices)
+    assert result.network is not None and len(result.network.cracks) > 0
