@@ -48,7 +48,7 @@ OVERLAP_RES = 1024
 MIN_RES, MAX_RES = 16, 16384
 
 # Bump whenever the worker's output or the fitting changes, so old cache files are not reused.
-CACHE_FORMAT_VERSION = 1
+CACHE_FORMAT_VERSION = 2
 
 
 @dataclass(frozen=True, eq=False)
