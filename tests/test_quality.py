@@ -79,20 +79,25 @@ def orientation_histogram(results, bins: int = 12) -> np.ndarray:
     return h / h.sum()
 
 
-@pytest.mark.xfail(
-    reason="asset edges are straight constrained lines in the sim mesh and the iben crack "
-    "direction under isotropic stress follows them (measured: 45 % of the crack length within "
-    "15 deg of the fine plate's diagonals); solver work in progress",
-    strict=False,
-)
 def test_pattern_does_not_depend_on_the_asset_triangulation():
-    """A 2-triangle plate and a 9,800-triangle plate crack alike under the same shrinkage."""
-    coarse = [run(plate(1), [ShrinkSource(1.0)], faces=20000, seed=s) for s in (1, 2)]
-    fine = [run(plate(70), [ShrinkSource(1.0)], faces=20000, seed=s) for s in (1, 2)]
+    """A 2-triangle plate and a 20,000-triangle plate crack alike under the same shrinkage.
+
+    At the default 100,000 sim faces each fine asset face holds about five sim faces, so 92 %
+    of the sim nodes lie on asset edges, which are straight lines right across the plate (the
+    diagonals included).  Measured over seeds 1-4: crack length -3..-8 %, cracks -12..-17 %,
+    largest 15-degree bin 0.13-0.15 on the fine plate and 0.10-0.13 on the coarse one
+    (before the direction-averaged separation: 0.41 on the fine plate, cracks along the
+    diagonals).
+    """
+    coarse = [run(plate(1), [ShrinkSource(1.0)], faces=100_000, seed=s) for s in (1, 2)]
+    fine = [run(plate(100), [ShrinkSource(1.0)], faces=100_000, seed=s) for s in (1, 2)]
     lc = np.mean([total_length(r) for r in coarse])
     lf = np.mean([total_length(r) for r in fine])
     assert lc > 0 and lf > 0
     assert lf == pytest.approx(lc, rel=0.25)
+    nc = np.mean([r.stats["cracks"] for r in coarse])
+    nf = np.mean([r.stats["cracks"] for r in fine])
+    assert nf == pytest.approx(nc, rel=0.35)
     # No preferred direction: the uniform histogram has 1/12 = 0.083 per 15-degree bin.
     for results in (coarse, fine):
         assert orientation_histogram(results).max() < 0.2

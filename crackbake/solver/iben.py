@@ -6,7 +6,12 @@ Algorithm (../shared/research/method.md §A, gaps resolved as in §B):
    the world in-plane stress into tension and compression, per-corner forces
    ``f = -A S± g`` and per-node separation tensors
    ``ς = ½(−m(Σf⁺) + Σm(f⁺) + m(Σf⁻) − Σm(f⁻)) + ρ`` (ρ a persistent residual), their largest
-   eigenpair ``(v⁺, n̂⁺)``; failing nodes go into a max-heap with lazy invalidation.
+   eigenpair ``(v⁺, n̂⁺)``; failing nodes go into a max-heap with lazy invalidation.  The
+   crack normal ``n̂⁺`` comes from a *direction-averaged* tensor (each corner's ``m(f)``
+   replaced by its mean over the opposite edge's direction, plus a seeded per-node grain
+   where that is isotropic), and ``v⁺`` mostly from it, so that neither sees how the mesh is
+   laid out (see :func:`crackbake.solver.topology.node_update`): on a sim mesh refining a
+   regular asset grid the paper's tensor steered cracks along the asset's straight edge lines.
 2. Loop (compiled, sequential): pop the node with the largest ``v⁺/τ``; cut the plane through it
    normal to ``n̂⁺`` (projected on the tangent plane) through its triangle fan, splitting the two
    crossed opposite edges or snapping to a vertex when the cut runs within ``SNAP_DEG`` of an edge
@@ -24,8 +29,11 @@ Stress relief works on two levels, so that the pattern has a world scale rather 
 of the simulation mesh:
 
 * **Fine (near the crack, in rings).**  Method.md §A8 with the stability fix of §B5: per pass,
-  each node within ``RELAX_RINGS`` rings of the change moves by ``d = relax_rate · F_net / K``
-  with ``K = Σ A|g|²`` the diagonal stiffness (a damped Jacobi step of the equilibrium), and each
+  each node within ``RELAX_RINGS`` rings of the change moves by ``d = relax_rate · K⁻¹ F_net``
+  with ``K = ⅔ Σ A(|g|² I + g gᵀ)`` the node's diagonal stiffness block (a damped block-Jacobi
+  step of the equilibrium; on a fan with edges in all directions it is the scalar
+  ``Σ A|g|²``, and it does not over-relax across the dominant edge direction of an
+  anisotropic fan), and each
   face adds ``sym(Σ_i d_i g_iᵀ)``, capped at ``RELAX_CAP`` of its stress norm per pass; passes
   stop early once no face changes by more than ``RELAX_TOL``.  This shapes tips and junctions.
 * **Coarse (world-scale stress shadow).**  Global relaxation, as in the paper, would cost O(n) a
@@ -55,11 +63,17 @@ crack grows forward from its tip instead of forking behind it.
 
 Resolution independence (measured, tests/test_iben.py::test_resolution_independence): on unit
 plates (default parameters, shadow radius 0.14), halving the sim edge length (60 -> 120 cells)
-changes the total crack length by -2 % (glass impact) and +12 % (shrinkage) and the number of
-cracks started by +7 % and +25 %; ``RES_TOLERANCE`` (25 %) is the documented bound.  On the
-benchmark plates (100k -> 400k faces, halving again) the shrinkage figures are +14 % length and
-+1 % cracks.  What remains comes from the fine level (a few edge lengths wide), the crack paths'
-zig-zag along the mesh, and the small numbers of cracks.
+changes the total crack length by +13 % (glass impact) and +10 % (shrinkage) and the number of
+cracks started by +7 % and +23 % at the test's seed; over seeds 0-3 the means are +12 % / +14 %
+length and +10 % / +24 % cracks, single seeds ranging over about ±10 % of that (so the test is
+close to ``RES_TOLERANCE``, 25 %, the documented bound, for the shrinkage count).  On the
+benchmark plates (100k -> 400k faces, halving again) the shrinkage figures are +9 % length and
++28 % cracks.  What remains comes from the fine level (a few edge lengths wide), the crack
+paths' zig-zag along the mesh, and the small numbers of cracks.
+
+Independence from the asset triangulation (tests/test_quality.py): a 2-triangle and a
+20,000-triangle plate at 100k sim faces under shrinkage give crack lengths within 3-8 %,
+crack counts within 12-17 % and no preferred direction (largest 15-degree bin <= 0.15).
 
 Budgets: ``max_cracks`` bounds the distinct cracks started (nucleations; existing cracks keep
 growing), ``max_steps`` the solver steps (crack events plus growth steps).
@@ -88,7 +102,10 @@ from crackbake.solver.topology import (
 )
 
 SNAP_DEG = 10.0
-"""Snap the cut to an existing vertex when it runs within this angle of an edge (degrees)."""
+"""Snap the cut to an existing vertex when it runs within this angle of an edge (degrees).
+The paper's codes use 15; on a sim mesh whose vertices lie along long straight asset lines,
+15 locked cracks within that angle onto the lines (fine 100x100 asset plate, 4 seeds:
+largest 15-degree bin 0.16 at 15 degrees, 0.13 at 10, with the 2-triangle plate at 0.09-0.11)."""
 SNAP_BOUNDARY_DEG = 25.0
 """Same, when the vertex lies on a crack or the mesh boundary (ends cracks cleanly there)."""
 SNAP_T = 0.12
