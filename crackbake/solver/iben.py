@@ -22,7 +22,8 @@ Algorithm (../shared/research/method.md §A, gaps resolved as in §B):
    stress shadow (coarse level, below); re-queue the changed nodes.  The work per step does not
    grow with the mesh.
 3. Shrinkage growth (``field.growth``) is applied quasi-statically: whenever no node fails, the
-   growth is added to every face (one solver step), and the loop resumes.  Drying is slow
+   growth is added to every face (one solver step), and the loop resumes; once ``max_cracks``
+   cracks have started and no node fails, the run ends.  Drying is slow
    compared with cracking, so cracks run until the field is at rest before it grows again.
 
 Stress relief works on two levels, so that the pattern has a world scale rather than the scale
@@ -362,7 +363,9 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                 or cnt[_NCRACK] + 2 > clen.shape[0]):
             return _FULL
         if cnt[_HEAP] == 0:
-            if GR.shape[0] > 1:
+            # With the crack budget spent and the field at rest, more drying would only lengthen
+            # existing cracks step after step: stop (otherwise only max_steps would end the run).
+            if GR.shape[0] > 1 and cnt[_NCRACK] < max_cracks:
                 # Quasi-static shrinkage: nothing fails, so the material dries a step further.
                 nn, nf = cnt[_NN], cnt[_NF]
                 for f in range(nf):
