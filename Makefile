@@ -34,7 +34,7 @@ syslibs:
 	fi
 
 demo: setup
-	$(VENV)/bin/crackbake examples/spot.obj --preset glass --impact 0.45,0.1,0.3 --res 2048 -o spot_cracks
+	$(VENV)/bin/crackbake examples/spot.obj --preset glass --impact 0.334,0.044,0.287 --res 2048 -o spot_cracks
 	@echo
 	@echo "Outputs are in ./spot_cracks/ (README 'Output files'):"
 	@echo "  spot_cracks.exr  EXR master: crack.mask/width/depth/time/id/distance (linear, mesh units)"

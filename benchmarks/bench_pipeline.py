@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-IMPACT = (0.45, 0.1, 0.3)  # on spot's flank
+IMPACT = (0.334, 0.044, 0.287)  # on spot's flank
 
 
 def spot_path() -> Path:

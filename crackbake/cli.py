@@ -30,7 +30,7 @@ from crackbake.params import (
 EPILOG = """\b
 Examples:
   # glass impact on the cow's flank, 4096x4096 maps on its own UVs
-  crackbake examples/spot.obj --preset glass --impact 0.45,0.1,0.3 --res 4096
+  crackbake examples/spot.obj --preset glass --impact 0.334,0.044,0.287 --res 4096
 \b
   # drying mud over the whole surface, the simpler thesis method, a different seed
   crackbake examples/spot.obj --preset mud --method thesis --seed 7
