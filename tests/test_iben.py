@@ -161,10 +161,17 @@ def reference_separation(sim, stress: np.ndarray, iso_share: float | None = None
 
 
 def solver_separation(sim, fld, seed: int = 5) -> np.ndarray:
-    """The solver's initial v+ per node (it reports v+ / tau_n, tau_n = tau h_n flaw(x))."""
+    """The solver's initial v+ per node (it reports v+ / tau_n, tau_n = tau h_n flaw(x) fp(x)).
+
+    The footprint factor ``fp`` is set to 1 here (it is a function of v+ itself).
+    """
+    from unittest import mock
+
+    from crackbake.solver import iben
     from crackbake.solver.iben import _edges_boundary, _flaw
 
-    r = solve_iben(sim, fld, SolverParams(max_cracks=0, max_steps=0, seed=seed))
+    with mock.patch.object(iben, "_footprint_factor", lambda p, s, b: np.ones(len(p))):
+        r = solve_iben(sim, fld, SolverParams(max_cracks=0, max_steps=0, seed=seed))
     assert r.steps == 0 and r.cracks == [] and r.stats["tau"] > 0
     _, edges = _edges_boundary(sim.faces, len(sim.vertices))
     elen = np.linalg.norm(np.diff(sim.vertices[edges], axis=1)[:, 0], axis=1)
