@@ -51,6 +51,7 @@ test: setup
 bench: setup
 	$(VPY) benchmarks/bench_bake.py
 	$(VPY) benchmarks/bench_solver.py
+	$(VPY) benchmarks/bench_pipeline.py
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info spot_cracks
