@@ -261,47 +261,7 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
         }
     )
     with OutputStage(out_dir) as stage:
-        if "exr" in params.formats:
-            write_exr(
-                stage.path(f"{stem}_cracks.exr"),
-                _exr_channels(maps, params.float32),
-                attributes={
-                    "crackbake:version": __version__,
-                    "crackbake:units": "mesh",
-                    "crackbake:uvConvention": "texel (0,0) is UV (0,1): v up, top row first",
-                    "crackbake:depthProfile": f"V exponent {maps.profile_shape:g}",
-                    "crackbake:maxDistance": float(maps.max_distance),
-                },
-            )
-        if "png" in params.formats:
-            write_png(stage.path(f"{stem}_mask.png"), maps.mask, bits=8)
-            scale = depth_max if depth_max > 0 else 1.0
-            write_png(stage.path(f"{stem}_depth.png"), maps.depth / scale, bits=16)
-        if "glb" in params.formats:
-            write_glb(
-                stage.path(f"{stem}.glb"),
-                uvmesh.vertices,
-                uvmesh.faces,
-                uvmesh.uv,
-                uvmesh.normals,
-                base_color(maps.mask, GLB_TEXTURE_MAX),
-                name=stem,
-            )
-        if "preview" in params.formats:
-            write_png(
-                stage.path("preview.png"),
-                render_preview(
-                    uvmesh.vertices,
-                    uvmesh.faces,
-                    uvmesh.uv,
-                    uvmesh.normals,
-                    base_color(maps.mask),
-                    view_dir=preview_direction(mesh, network),
-                ),
-                bits=8,
-            )
-        write_sidecar(network, stage.path("cracks.json"))
-        write_obj(network, stage.path("cracks.obj"))
+        write_outputs(stage, stem, params, mesh, uvmesh, network, maps)
         files = stage.records()
         timings["write"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t_start
@@ -501,6 +461,72 @@ def _sidecar_params(effective: dict) -> dict:
         "cracks",
     }
     return jsonable({k: v for k, v in effective.items() if k not in drop})
+
+
+def write_outputs(
+    stage: OutputStage,
+    stem: str,
+    params: RunParams,
+    mesh: Mesh,
+    uvmesh: UVMesh,
+    network: CrackNetwork,
+    maps: CrackMaps,
+) -> None:
+    """Write the requested maps, the GLB, the preview and the network into ``stage``.
+
+    Parameters
+    ----------
+    stage : OutputStage
+        Staging folder; nothing reaches its final name until the caller commits.
+    stem : str
+        Prefix of the map file names (the mesh file's stem).
+    params : RunParams
+        ``formats`` and ``float32`` decide what is written.
+    mesh, uvmesh, network, maps
+        The stages' results.
+    """
+    depth_max = float(maps.depth.max())
+    if "exr" in params.formats:
+        write_exr(
+            stage.path(f"{stem}_cracks.exr"),
+            _exr_channels(maps, params.float32),
+            attributes={
+                "crackbake:version": __version__,
+                "crackbake:units": "mesh",
+                "crackbake:uvConvention": "texel (0,0) is UV (0,1): v up, top row first",
+                "crackbake:depthProfile": f"V exponent {maps.profile_shape:g}",
+                "crackbake:maxDistance": float(maps.max_distance),
+            },
+        )
+    if "png" in params.formats:
+        write_png(stage.path(f"{stem}_mask.png"), maps.mask, bits=8)
+        scale = depth_max if depth_max > 0 else 1.0
+        write_png(stage.path(f"{stem}_depth.png"), maps.depth / scale, bits=16)
+    if "glb" in params.formats:
+        write_glb(
+            stage.path(f"{stem}.glb"),
+            uvmesh.vertices,
+            uvmesh.faces,
+            uvmesh.uv,
+            uvmesh.normals,
+            base_color(maps.mask, GLB_TEXTURE_MAX),
+            name=stem,
+        )
+    if "preview" in params.formats:
+        write_png(
+            stage.path("preview.png"),
+            render_preview(
+                uvmesh.vertices,
+                uvmesh.faces,
+                uvmesh.uv,
+                uvmesh.normals,
+                base_color(maps.mask),
+                view_dir=preview_direction(mesh, network),
+            ),
+            bits=8,
+        )
+    write_sidecar(network, stage.path("cracks.json"))
+    write_obj(network, stage.path("cracks.obj"))
 
 
 def _inputs(params: RunParams) -> dict:
