@@ -15,7 +15,7 @@ from crackbake.solver.iben import RES_TOLERANCE, solve_iben
 from crackbake.stress import stress_field
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
-IMPACT = (0.45, 0.1, 0.3)  # on spot's flank, as in benchmarks/bench_pipeline.py
+IMPACT = (0.334, 0.044, 0.287)  # on spot's flank, as in benchmarks/bench_pipeline.py
 
 
 def _run(preset: str, faces: int) -> tuple[int, float]:
@@ -35,11 +35,17 @@ def _run(preset: str, faces: int) -> tuple[int, float]:
 
 @pytest.mark.slow
 @pytest.mark.filterwarnings("ignore")
-@pytest.mark.parametrize("preset", ["crackle", "mud"])
+@pytest.mark.parametrize("preset", ["crackle", "mud", "glass"])
 def test_spot_resolution_independence(preset):
-    """Doubling the sim faces keeps crack count and total length within RES_TOLERANCE."""
-    n0, l0 = _run(preset, 50_000)
-    n1, l1 = _run(preset, 100_000)
+    """Doubling the sim faces keeps crack count and total length within RES_TOLERANCE.
+
+    glass: an impact (ImpactSource at IMPACT, the preset's radius 0.15 x the bounding-box
+    diagonal) at 100k vs 200k sim faces, a localized field (the near-crack rule of
+    crackbake.solver.iben applies).
+    """
+    sizes = (100_000, 200_000) if preset == "glass" else (50_000, 100_000)
+    n0, l0 = _run(preset, sizes[0])
+    n1, l1 = _run(preset, sizes[1])
     print(preset, n0, n1, l0, l1)
     assert abs(l1 / l0 - 1) <= RES_TOLERANCE
     assert abs(n1 / n0 - 1) <= RES_TOLERANCE
