@@ -157,6 +157,9 @@ FOOTPRINT_CLIP = 2.0
 """Largest factor (and smallest, inverted) that :func:`_footprint_factor` applies."""
 FOOTPRINT_MIN_LOADED = 0.95
 """Least fraction of loaded interior nodes for which :func:`_footprint_factor` applies."""
+NUC_FOOTPRINT_REL = 0.0075
+"""Localized fields: a new crack nucleates only where the mean v+/h over the nodes within this
+(x bounding-box diagonal) exceeds their mean toughness (tips keep the per-node test)."""
 GRAIN = 0.05
 """Weight of a node's seeded grain direction, relative to v+, in choosing the crack normal; it
 only decides where the separation is nearly isotropic (see topology.node_update)."""
@@ -184,7 +187,7 @@ NEAR_QUEUE = 8192
 
 # Indices into the counter array shared by the kernels.
 (_HEAP, _NN, _NF, _NS, _STEP, _EVENTS, _STAMP, _NCRACK, _ABORT, _GROW, _DEP,
- _REFRESH, _NUC_EDGE) = range(13)
+ _REFRESH, _NUC_EDGE, _NUC_VETO) = range(14)
 # Return codes of _run.
 _MORE, _DONE, _FULL = 0, 1, 2
 
@@ -395,6 +398,39 @@ def _near_other(t, cid, d0, d1, d2, rad, cospar, X, F, NF, NFc, pid, pcid, segof
                     tail += 1
     return False
 
+@njit(cache=True)
+def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, queue):
+    """Whether the mean normalised separation ``v+ / h`` over the nodes within ``rad`` of node
+    ``c`` (breadth-first over the mesh) exceeds their mean normalised toughness."""
+    r2 = rad * rad
+    x0, x1, x2 = X[c, 0], X[c, 1], X[c, 2]
+    vst[c] = vstamp
+    queue[0] = c
+    head = 0
+    tail = 1
+    sv = 0.0
+    st = 0.0
+    while head < tail:
+        n = queue[head]
+        head += 1
+        if not dead[n] and taun[n] > 0.0 and hn[n] > 0.0:
+            sv += val[n] / hn[n]
+            st += taun[n] / hn[n]
+        for j in range(NFc[n]):
+            f = NF[n, j]
+            for q in range(3):
+                y = F[f, q]
+                if vst[y] == vstamp:
+                    continue
+                vst[y] = vstamp
+                e0 = X[y, 0] - x0
+                e1 = X[y, 1] - x1
+                e2 = X[y, 2] - x2
+                if e0 * e0 + e1 * e1 + e2 * e2 <= r2 and tail < queue.shape[0]:
+                    queue[tail] = y
+                    tail += 1
+    return sv > st
+
 
 @njit(cache=True)
 def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn, pid, onb,
@@ -410,6 +446,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
     gain, back, tip_first = prm[8], prm[9], prm[10] > 0
     grain, seed = prm[11], int(prm[12])
     near_rad, near_cos = prm[13], prm[14]
+    nuc_rad = prm[15]
     shadow = G.shape[0] >= 2
     W = NF.shape[1]
     ncap = X.shape[0]
@@ -431,7 +468,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
     split = np.empty(2, np.bool_)
     free_tip = np.empty(2, np.bool_)
     tipd = np.empty((2, 3))
-    vst = np.zeros(ncap if near_rad > 0 else 1, np.int64)
+    vst = np.zeros(ncap if near_rad > 0 or nuc_rad > 0 else 1, np.int64)
     vstamp = 0
     queue = np.empty(NEAR_QUEUE, np.int64)
     done = 0
@@ -482,6 +519,13 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                 continue
             if cnt[_HEAP] > 0 and _key(c, val, taun, crack_of, tip_first) < hk[0]:
                 _push(c, hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
+                continue
+        if nucleate and nuc_rad > 0:
+            vstamp += 1
+            if not _footprint_fails(c, nuc_rad, X, F, NF, NFc, val, taun, hn, dead, vst,
+                                    vstamp, queue):
+                nver[c] += 1
+                cnt[_NUC_VETO] += 1
                 continue
         # ---- crack plane: n-hat projected on the tangent plane; t runs along the crack.
         xc0, xc1, xc2 = X[c, 0], X[c, 1], X[c, 2]
@@ -1079,6 +1123,8 @@ def solve_iben(
     fac = _flaw(params.seed, X0) * _footprint_factor(X0, norm0, bnd)
     # The near-crack rule is for localized fields only (the footprint factor's criterion).
     near_rad = 0.0 if _surface_wide(norm0, bnd) else NEAR_REL * float(gp[4])
+    nuc_rad = 0.0 if near_rad == 0.0 else NUC_FOOTPRINT_REL * float(
+        np.linalg.norm(X0.max(0) - X0.min(0)))
     st["taun"] = _grown(tau * h_node * fac, ncap)
     st["pid"] = np.arange(ncap, dtype=np.int64)
     st["onb"] = _grown(bnd, ncap)
@@ -1095,7 +1141,7 @@ def solve_iben(
     st["seg_alive"] = np.zeros(scap, bool)
     st["seg_info"] = np.zeros((scap, 3))
     st["clen"] = np.zeros(min(1024, room))
-    cnt = np.zeros(13, np.int64)
+    cnt = np.zeros(14, np.int64)
     cnt[_NN], cnt[_NF] = n0, m0
     st["cnt"] = cnt
     max_len = np.inf if params.max_crack_length is None else float(params.max_crack_length)
@@ -1103,7 +1149,7 @@ def solve_iben(
         params.tip_factor, params.relax_rate, params.relax_steps, max_len,
         np.radians(SNAP_DEG), np.radians(SNAP_BOUNDARY_DEG), SNAP_T, RELAX_RINGS, SHADOW_GAIN,
         np.radians(BACK_DEG), float(TIP_FIRST), GRAIN, float(gseed),
-        near_rad, np.cos(np.radians(NEAR_PAR_DEG)),
+        near_rad, np.cos(np.radians(NEAR_PAR_DEG)), nuc_rad,
     ], dtype=np.float64)
     if tau > 0:
         _rebuild_heap(st["hk"], st["hnode"], st["hv"], cnt, val, st["taun"], st["nver"],
@@ -1163,6 +1209,7 @@ def solve_iben(
             "growth_steps": int(cnt[_GROW]),
             "refreshed": int(cnt[_REFRESH]),
             "edge_starts": int(cnt[_NUC_EDGE]),
+            "nucleations_vetoed": int(cnt[_NUC_VETO]),
             "shadow_radius": float(gp[4]),
             "loop_seconds": loop_seconds,
             "seconds": _time.perf_counter() - t0,
