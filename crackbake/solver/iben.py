@@ -364,6 +364,26 @@ def _relax(nrelax, rate, regf, nrf, regn, nrn, stamp, fst, F, S, NF, NFc, area, 
 
 
 @njit(cache=True)
+def _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail):
+    """Breadth-first step: queue the unvisited neighbours of ``n`` within ``sqrt(r2)`` of
+    ``(x0, x1, x2)``; returns the new queue tail."""
+    for j in range(NFc[n]):
+        f = NF[n, j]
+        for q in range(3):
+            y = F[f, q]
+            if vst[y] == vstamp:
+                continue
+            vst[y] = vstamp
+            e0 = X[y, 0] - x0
+            e1 = X[y, 1] - x1
+            e2 = X[y, 2] - x2
+            if e0 * e0 + e1 * e1 + e2 * e2 <= r2 and tail < queue.shape[0]:
+                queue[tail] = y
+                tail += 1
+    return tail
+
+
+@njit(cache=True)
 def _near_other(t, cid, d0, d1, d2, rad, cospar, X, F, NF, NFc, pid, pcid, segof, segp,
                 seg_alive, vst, vstamp, queue):
     """Whether a node of another crack lies within ``rad`` of node ``t`` (breadth-first over
@@ -392,20 +412,9 @@ def _near_other(t, cid, d0, d1, d2, rad, cospar, X, F, NF, NFc, pid, pcid, segof
                 lu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
                 if lu > 0.0 and abs(u0 * d0 + u1 * d1 + u2 * d2) >= cospar * lu * ld:
                     return True
-        for j in range(NFc[n]):
-            f = NF[n, j]
-            for q in range(3):
-                y = F[f, q]
-                if vst[y] == vstamp:
-                    continue
-                vst[y] = vstamp
-                e0 = X[y, 0] - x0
-                e1 = X[y, 1] - x1
-                e2 = X[y, 2] - x2
-                if e0 * e0 + e1 * e1 + e2 * e2 <= r2 and tail < queue.shape[0]:
-                    queue[tail] = y
-                    tail += 1
+        tail = _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail)
     return False
+
 
 @njit(cache=True)
 def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, queue):
@@ -425,19 +434,7 @@ def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, qu
         if not dead[n] and taun[n] > 0.0 and hn[n] > 0.0:
             sv += val[n] / hn[n]
             st += taun[n] / hn[n]
-        for j in range(NFc[n]):
-            f = NF[n, j]
-            for q in range(3):
-                y = F[f, q]
-                if vst[y] == vstamp:
-                    continue
-                vst[y] = vstamp
-                e0 = X[y, 0] - x0
-                e1 = X[y, 1] - x1
-                e2 = X[y, 2] - x2
-                if e0 * e0 + e1 * e1 + e2 * e2 <= r2 and tail < queue.shape[0]:
-                    queue[tail] = y
-                    tail += 1
+        tail = _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail)
     return sv > st
 
 
