@@ -361,23 +361,31 @@ def test_capacity_grows_and_progress_is_throttled(sim60, shrink_result, monkeypa
 # ------------------------------------------------------------------ pattern quality
 
 
-def test_impact_radial_near_concentric_further_out(impact_result):
+def test_impact_radial_near_concentric_further_out(impact_result, sim60):
+    """Length shares over three seeds (one run's handful of concentric links moves a lot)."""
+    import dataclasses
+
     radius = np.pi * 0.25 / 2
     rows = []
-    for c in impact_result.cracks:
-        p = c.points[:, :2]
-        for i in range(len(p) - 1):
-            m, d = 0.5 * (p[i] + p[i + 1]), p[i + 1] - p[i]
-            rr = m - 0.5
-            dist = np.linalg.norm(rr)
-            rows.append((dist / radius, abs(d @ rr) / (np.linalg.norm(d) * max(dist, 1e-12)),
-                         np.linalg.norm(d)))
+    results = [impact_result] + [solve_iben(sim, impact(sim), dataclasses.replace(PARAMS,
+                                                                                  seed=seed))
+                                 for seed, sim in ((1, plate(60, seed=2)), (2, plate(60, seed=3)))]
+    for result in results:
+        for c in result.cracks:
+            p = c.points[:, :2]
+            for i in range(len(p) - 1):
+                m, d = 0.5 * (p[i] + p[i + 1]), p[i + 1] - p[i]
+                rr = m - 0.5
+                dist = np.linalg.norm(rr)
+                rows.append((dist / radius,
+                             abs(d @ rr) / (np.linalg.norm(d) * max(dist, 1e-12)),
+                             np.linalg.norm(d)))
     rows = np.array(rows)
     near, far = rows[rows[:, 0] < 0.35], rows[rows[:, 0] > 0.5]
     radial_near = (near[:, 2] * (near[:, 1] > 0.7)).sum() / near[:, 2].sum()
     tangential_far = (far[:, 2] * (far[:, 1] < 0.5)).sum() / far[:, 2].sum()
-    assert radial_near > 0.45  # measured ~0.6
-    assert tangential_far > 0.15  # measured ~0.27: concentric links
+    assert radial_near > 0.45  # measured 0.77
+    assert tangential_far > 0.15  # measured 0.23: concentric links (60-cell plates)
     dens = [rows[(rows[:, 0] >= a) & (rows[:, 0] < b), 2].sum() / (b * b - a * a)
             for a, b in ((0, 0.33), (0.33, 0.66), (0.66, 1.2))]
     assert dens[0] > dens[1] > dens[2]
@@ -451,25 +459,13 @@ def test_straight_under_directional_stress():
     assert np.median(along) < 0.4
 
 
-@pytest.fixture(scope="module")
-def resolution_pairs():
-    """Glass and shrinkage on plates of 60 and 120 cells: the sim edge length halves."""
-    out = {}
-    for name, make in (("glass", impact), ("shrink", uniform)):
-        out[name] = []
-        for n in (60, 120):
-            sim = plate(n)
-            out[name].append(solve_iben(sim, make(sim), PARAMS))
-    return out
-
-
-@pytest.mark.parametrize("name", ["glass", "shrink"])
-def test_resolution_independence(resolution_pairs, name):
-    """Halving the edge length keeps the crack length and count within RES_TOLERANCE."""
-    from crackbake.solver.iben import RES_TOLERANCE
-
-    coarse, fine = resolution_pairs[name]
-    ratio_len = total_length(fine) / total_length(coarse)
-    ratio_cracks = fine.stats["cracks"] / coarse.stats["cracks"]
-    assert abs(ratio_len - 1) <= RES_TOLERANCE, ratio_len
-    assert abs(ratio_cracks - 1) <= RES_TOLERANCE, ratio_cracks
+def test_origins_record_every_crack_started(impact_result, shrink_result):
+    for r in (impact_result, shrink_result):
+        o = r.origins
+        assert o.shape == (r.stats["cracks"], 6)
+        # Started in order, on the plate, and their lengths add up to the network's.
+        assert (np.diff(o[:, 3]) >= 0).all()
+        assert ((o[:, :2] >= 0) & (o[:, :2] <= 1)).all() and np.allclose(o[:, 2], 0)
+        assert (o[:, 5] > 0).all()
+        assert o[:, 5].sum() == pytest.approx(total_length(r), rel=1e-9)
+        assert int(o[:, 4].sum()) == r.stats["edge_starts"]

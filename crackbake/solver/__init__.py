@@ -115,6 +115,10 @@ class SolverResult:
         Solver steps taken.
     stats : dict
         Method-specific figures (counts, timings) for reports.
+    origins : (K, 6) float64
+        Each distinct crack, in the order they started: ``x, y, z`` where it started (mesh
+        units), the solver step, 1 when it started on a crack or the mesh boundary (0 inside
+        the material), and its total length (mesh units, all its branches).
     """
 
     cracks: list[CrackPath]
@@ -126,3 +130,4 @@ class SolverResult:
     separation: np.ndarray
     steps: int
     stats: dict = field(default_factory=dict)
+    origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))

@@ -62,38 +62,57 @@ without this the number of nucleations between two tip steps would grow as the m
 Cutting back along an existing crack edge at the node (within ``BACK_DEG``) is not opened, so a
 crack grows forward from its tip instead of forking behind it.
 
-Resolution independence (measured, tests/test_iben.py::test_resolution_independence): on unit
-plates (default parameters, shadow radius 0.14), halving the sim edge length (60 -> 120 cells)
-changes the total crack length by +13 % (glass impact) and +10 % (shrinkage) and the number of
-cracks started by +7 % and +23 % at the test's seed; over seeds 0-3 the means are +12 % / +14 %
-length and +10 % / +24 % cracks, single seeds ranging over about ±10 % of that (so the test is
-close to ``RES_TOLERANCE``, 25 %, the documented bound, for the shrinkage count).  On the
-benchmark plates (100k -> 400k faces, halving again) the shrinkage figures are +9 % length and
-+28 % cracks.  What remains comes from the fine level (a few edge lengths wide), the crack
-paths' zig-zag along the mesh, and the small numbers of cracks.
+Resolution independence.  Whatever the simulation edge length h, the pattern should be the
+same, so the rules that decide where cracks start, how far they run and where they stop work
+at world lengths, not at "one node" or "one step".  Only the fine relaxation stays a few rings
+wide (a world-wide one would make a step's cost grow with the mesh), and what remains of the
+drift comes from it: at 400k faces 2 / 3 / 5 rings give 19.3 / 16.7 / 16.0 glass cracks.
+``RES_TOLERANCE`` (25 %) is the
+documented bound on the change of the number of cracks started and of the total length when h
+halves, from the default 100k sim faces upward (tests/test_resolution.py; coarser meshes are
+previews and drift more: cracks there cannot come closer than a few edges to each other).
+
+* Toughness is relative to the field's initial normalised separation ``v+/h`` (above), and
+  the flaws are a world-space field.
+* Tip momentum: ``alpha`` (the tip factor) is the share of the excess carried over a step of
+  ``tip_len``, the edge of a ``TIP_REF_FACES``-face equilateral mesh of the surface; a shorter
+  step carries ``alpha^(step / tip_len)``.  With a fixed share per step a crack coasted a
+  fixed number of steps into sub-critical stress, i.e. a shorter distance the finer the mesh,
+  and the stress it left started more cracks (plate glass 100k -> 1M: 15 -> 25 cracks).
+  Steps longer than ``tip_len`` keep ``alpha``.
+* Crack directions for the rules below are moving averages over ``DIR_SMOOTH`` x the
+  near-crack radius of path (``pdir`` per crack point, :func:`_smooth_dir`): one segment's
+  direction zig-zags across the sim triangles, more so the finer the mesh.
+* A new crack may not start within ``RELAX_RINGS x tip_len`` of an existing crack (the reach
+  of the fine relaxation at the default resolution, which on finer meshes shrinks with h), nor
+  within the near-crack radius ``NEAR_REL x`` the shadow radius of a crack running within
+  ``NEAR_PAR_DEG`` of its direction: finer meshes otherwise started ever more short cracks
+  right beside existing ones (plate shrinkage 1M: clusters of 0.003-0.01 long cracks at the
+  boundary; plate glass: stubs whose tips the near-crack rule ended at once).
 
 Near-crack rule (localized fields only).  Free tips read the raw stress, so nothing kept a
 radial impact crack from running alongside an existing one: at finer resolution tips ran
-~0.03-0.05 units from a neighbour over long stretches, and the glass impact on spot grew from
-33 to 52 cracks and 4.77 to 6.99 length (+45 %) from 100k to 400k faces.  Each recorded segment
-marks its points with its crack id (``pcid``); after each crack event a breadth-first search
-over the nodes within ``NEAR_REL`` x the shadow radius of each free tip (:func:`_near_other`)
-looks for another crack's node, and if that crack's segment there runs within ``NEAR_PAR_DEG``
-of the tip's direction the tip is ended like a tip that met a crack.  Measured on spot (glass,
-100k / 200k / 400k faces): 26 / 26 / 30 cracks, 4.95 / 5.19 / 5.99 length (+15 % / +21 %,
-tests/test_resolution.py at 100k vs 200k).  The rule applies only when fewer than
+~0.03-0.05 units from a neighbour over long stretches (glass on spot: 33 -> 52 cracks, length
++45 % from 100k to 400k faces, before this rule).  After each crack event a breadth-first
+search over the nodes within the near-crack radius of each free tip (:func:`_near_other`)
+looks for another crack's point whose direction runs within ``NEAR_PAR_DEG`` of the tip's; if
+found the tip is ended like a tip that met a crack, once its own crack is at least that radius
+long (a younger one would stay a stub).  The rule applies only when fewer than
 ``FOOTPRINT_MIN_LOADED`` of the interior nodes are loaded (the criterion of
-:func:`_footprint_factor`): on surface-wide fields (shrinkage, crackle, mud) it is off and
-they behave as before (on the unit plate it pushed the shrinkage count ratio to 1.27).
+:func:`_footprint_factor`): on surface-wide fields (shrinkage, crackle, mud) the shadow keeps
+parallel cracks apart.
 
 Footprint nucleation (localized fields only).  Single fine-mesh stress peaks next to existing
-cracks kept starting tiny new cracks, more of them the finer the mesh (plate glass, cracks
-started 20 / 49 at 100k / 400k faces).  A node now starts a *new* crack only when the summed
+cracks kept starting tiny new cracks.  A node starts a *new* crack only when the summed
 ``v+/h`` of the nodes within ``NUC_FOOTPRINT_REL`` x the bounding-box diagonal exceeds their
 summed toughness (current values, so peaks beside cracks are averaged away); crack tips keep
-the per-node test.  Measured: plate glass 18 / 22 / 53 cracks at 100k / 400k / 1M (length
-3.4 / 3.6 / 3.7: the jump at 1M is a known open problem), spot glass 21 / 23 / 17 cracks,
-length 4.6 / 5.7 / 4.6.
+the per-node test.
+
+Measured (``origins`` of the result, means over 3 seeds; benchmarks/bench_solver.py plates):
+glass impact 15.0 / 16.7 / 20.0 cracks started at 100k / 400k / 1M faces (length 3.53 / 3.64 /
+4.12), shrinkage 85.3 / 97.7 / 99.7 (length 17.1 / 19.2 / 18.8); before these rules glass
+went 18 / 22 / 53.  Spot through the real stages (3 seeds): glass 11.7 / 12.7 / 14.0 cracks,
+length 4.61 / 4.85 / 5.02.
 
 Independence from the asset triangulation (tests/test_quality.py): a 2-triangle and a
 20,000-triangle plate at 100k sim faces under shrinkage give crack lengths within 3-8 %,
@@ -109,7 +128,7 @@ import time as _time
 from collections.abc import Callable
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from crackbake.errors import CrackbakeError
 from crackbake.solver import CrackPath, SolverParams, SolverResult
@@ -150,7 +169,8 @@ clamp saturates it, widening the fully released strip to about half the radius."
 SHADOW_MAX_CELLS = 4_000_000
 """Largest shadow grid (cells); coarser cells are used on very elongated bounding boxes."""
 RES_TOLERANCE = 0.25
-"""Documented tolerance of the crack length / count when the sim edge length halves."""
+"""Documented tolerance of the change of the number of cracks started and of the total crack
+length when the sim edge length halves, from the default resolution (100k faces) upward."""
 REF_PERCENTILE = 90.0
 """Percentile of the initial normalised separation that toughness 1 corresponds to."""
 FLAW = 0.25
@@ -185,18 +205,23 @@ INITIAL_ROOM = 4096
 PROGRESS_SECONDS = 0.5
 """Least time between two progress messages."""
 NEAR_REL = 0.12
-"""A free tip of a localized field that comes within this fraction of the shadow radius of
-another crack running alongside it (within ``NEAR_PAR_DEG``) is ended there (see the module
-docstring, resolution independence)."""
+"""Near-crack radius, a fraction of the shadow radius: a free tip of a localized field that
+comes this close to another crack running alongside it (within ``NEAR_PAR_DEG``) is ended
+there, and no new crack starts this close to one running its way (module docstring)."""
 NEAR_PAR_DEG = 60.0
 """Largest angle between a free tip's direction and a nearby crack's segment for that crack to
 count as running alongside it."""
+TIP_REF_FACES = 100_000
+"""The tip factor is the share of the excess carried over one edge of a mesh of this many
+equilateral faces covering the surface; shorter steps carry more (see the module docstring)."""
+DIR_SMOOTH = 0.5
+"""Length of the crack direction's moving average, relative to the near-crack radius."""
 NEAR_QUEUE = 8192
 """Most nodes the near-crack search around one tip visits."""
 
 # Indices into the counter array shared by the kernels.
 (_HEAP, _NN, _NF, _NS, _STEP, _EVENTS, _STAMP, _NCRACK, _ABORT, _GROW, _DEP,
- _REFRESH, _NUC_EDGE, _NUC_VETO) = range(14)
+ _REFRESH, _NUC_EDGE, _NUC_VETO, _NUC_NEAR, _TIP_NEAR) = range(16)
 # Return codes of _run.
 _MORE, _DONE, _FULL = 0, 1, 2
 
@@ -206,16 +231,28 @@ def _scratch():
     return np.empty(8), np.empty((2, 3, 3)), np.empty((3, 3)), np.empty((2, 3)), np.empty(6)
 
 
-@njit(cache=True)
+UPDATE_CHUNK = 4096
+"""Faces or nodes per parallel work item of :func:`_update_all` (one set of scratch each)."""
+
+
+@njit(cache=True, parallel=True)
 def _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, crack_of, G, gp,
                 grain, seed):
-    """Recompute every face and every node (setup, growth steps, the final state)."""
-    sc, acc, ev, fr, r6 = _scratch()
-    for f in range(nf):
-        face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
-    for n in range(nn):
-        node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of[n] >= 0,
-                    grain, seed, sc, acc, ev)
+    """Recompute every face and every node (setup, growth steps, the final state).
+
+    Each face and each node writes only its own entries, so the chunks run in parallel and
+    the result does not depend on the thread count.  A growth step on a 1M-face sim mesh
+    costs about a second on one core, and drying runs take tens of them.
+    """
+    for ch in prange((nf + UPDATE_CHUNK - 1) // UPDATE_CHUNK):
+        _sc, _acc, _ev, fr, r6 = _scratch()
+        for f in range(ch * UPDATE_CHUNK, min(nf, (ch + 1) * UPDATE_CHUNK)):
+            face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
+    for ch in prange((nn + UPDATE_CHUNK - 1) // UPDATE_CHUNK):
+        sc, acc, ev, _fr, _r6 = _scratch()
+        for n in range(ch * UPDATE_CHUNK, min(nn, (ch + 1) * UPDATE_CHUNK)):
+            node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec,
+                        crack_of[n] >= 0, grain, seed, sc, acc, ev)
 
 
 @njit(cache=True)
@@ -384,36 +421,65 @@ def _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail):
 
 
 @njit(cache=True)
-def _near_other(t, cid, d0, d1, d2, rad, cospar, X, F, NF, NFc, pid, pcid, segof, segp,
-                seg_alive, vst, vstamp, queue):
-    """Whether a node of another crack lies within ``rad`` of node ``t`` (breadth-first over
-    the mesh) and that crack's segment there runs within ``acos(cospar)`` of ``d``."""
+def _near_other(t, cid, d0, d1, d2, rad, cospar, rad_any, X, F, NF, NFc, pid, pcid, pdir, vst,
+                vstamp, queue):
+    """Whether another crack comes near node ``t`` (breadth-first over the mesh).
+
+    Returns 1 when a point of another crack lies within ``rad_any`` of ``t``, 2 when one lies
+    within ``rad`` and that crack's smoothed direction there (``pdir``) runs within
+    ``acos(cospar)`` of ``d``, else 0.
+    """
     ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-    if ld == 0.0:
-        return False
-    r2 = rad * rad
+    r2 = max(rad, rad_any) ** 2
+    ra2 = rad_any * rad_any
     x0, x1, x2 = X[t, 0], X[t, 1], X[t, 2]
     vst[t] = vstamp
     queue[0] = t
     head = 0
     tail = 1
+    found = 0
     while head < tail:
         n = queue[head]
         head += 1
-        o = pcid[pid[n]]
+        p = pid[n]
+        o = pcid[p]
         if o >= 0 and o != cid:
-            s = segof[pid[n]]
-            if s >= 0 and seg_alive[s]:
-                a = segp[s, 0]
-                b = segp[s, 1]
-                u0 = X[b, 0] - X[a, 0]
-                u1 = X[b, 1] - X[a, 1]
-                u2 = X[b, 2] - X[a, 2]
-                lu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-                if lu > 0.0 and abs(u0 * d0 + u1 * d1 + u2 * d2) >= cospar * lu * ld:
-                    return True
+            e0 = X[n, 0] - x0
+            e1 = X[n, 1] - x1
+            e2 = X[n, 2] - x2
+            if e0 * e0 + e1 * e1 + e2 * e2 <= ra2:
+                return 1
+            u0, u1, u2 = pdir[p, 0], pdir[p, 1], pdir[p, 2]
+            lu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+            if lu > 0.0 and ld > 0.0 and abs(u0 * d0 + u1 * d1 + u2 * d2) >= cospar * lu * ld:
+                if rad_any == 0.0:
+                    return 2
+                found = 2
         tail = _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail)
-    return False
+    return found
+
+
+@njit(cache=True)
+def _smooth_dir(pc, pt, d0, d1, d2, length, pdir):
+    """Direction of a crack at its new point ``pt``: an exponential moving average over the
+    last ``length`` (mesh units) of its path, from the one at ``pc`` and the new segment ``d``.
+
+    A world-scale memory: a single segment's direction zig-zags across the sim triangles, and
+    the finer the mesh the more it does, so tests on it would depend on the resolution.
+    """
+    ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if ld == 0.0:
+        return
+    u0, u1, u2 = pdir[pc, 0], pdir[pc, 1], pdir[pc, 2]
+    w = np.exp(-ld / length) if length > 0.0 else 0.0
+    if u0 * d0 + u1 * d1 + u2 * d2 < 0.0:
+        w = -w
+    e0 = w * u0 + (1.0 - abs(w)) * d0 / ld
+    e1 = w * u1 + (1.0 - abs(w)) * d1 / ld
+    e2 = w * u2 + (1.0 - abs(w)) * d2 / ld
+    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if le > 0.0:
+        pdir[pt, 0], pdir[pt, 1], pdir[pt, 2] = e0 / le, e1 / le, e2 / le
 
 
 @njit(cache=True)
@@ -440,8 +506,8 @@ def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, qu
 
 @njit(cache=True)
 def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn, pid, onb,
-         crack_of, nver, dead, fst, nst, nevl, segof, pcid, hk, hn_, hv, segp, seg_alive,
-         seg_info, clen, G, gp, cnt, prm, max_cracks, max_steps, chunk):
+         crack_of, nver, dead, nonuc, fst, nst, nevl, segof, pcid, pdir, hk, hn_, hv, segp,
+         seg_alive, seg_info, clen, corig, G, gp, cnt, prm, max_cracks, max_steps, chunk):
     """Advance the crack loop by at most ``chunk`` steps.
 
     Returns ``_MORE`` (chunk done), ``_DONE`` (finished) or ``_FULL`` (the state arrays need more
@@ -453,6 +519,10 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
     grain, seed = prm[11], int(prm[12])
     near_rad, near_cos = prm[13], prm[14]
     nuc_rad = prm[15]
+    dir_len = prm[16]
+    tip_len = prm[17]
+    tip_near = prm[18] > 0
+    nuc_any = RELAX_RINGS * tip_len
     shadow = G.shape[0] >= 2
     W = NF.shape[1]
     ncap = X.shape[0]
@@ -473,7 +543,6 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
     tip = np.empty(2, np.int64)
     split = np.empty(2, np.bool_)
     free_tip = np.empty(2, np.bool_)
-    tipd = np.empty((2, 3))
     vst = np.zeros(ncap if near_rad > 0 or nuc_rad > 0 else 1, np.int64)
     vstamp = 0
     queue = np.empty(NEAR_QUEUE, np.int64)
@@ -509,8 +578,8 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
         if ver != nver[c] or dead[c] or not val[c] > taun[c]:
             continue
         nucleate = crack_of[c] < 0
-        if nucleate and cnt[_NCRACK] >= max_cracks:
-            # The crack budget is spent: only existing cracks may grow.
+        if nucleate and (cnt[_NCRACK] >= max_cracks or nonuc[c]):
+            # The crack budget is spent (only existing cracks may grow), or c lies beside one.
             continue
         if shadow and nevl[c] != cnt[_DEP]:
             # Lazy heap: the shadow grew since this node was evaluated; refresh and re-check.
@@ -565,6 +634,19 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
         tc0 = vn1 * nc2 - vn2 * nc1
         tc1 = vn2 * nc0 - vn0 * nc2
         tc2 = vn0 * nc1 - vn1 * nc0
+        if nucleate and near_rad > 0:
+            # No new crack right beside an existing one (permanently: cracks never heal), nor
+            # where the near-crack rule would end both its tips at once (see the module
+            # docstring); such starts only multiplied short cracks as the mesh refined.
+            vstamp += 1
+            near = _near_other(c, -1, tc0, tc1, tc2, near_rad, near_cos, nuc_any, X, F, NF,
+                               NFc, pid, pcid, pdir, vst, vstamp, queue)
+            if near > 0:
+                nver[c] += 1
+                cnt[_NUC_NEAR] += 1
+                if near == 1:
+                    nonuc[c] = True
+                continue
         # Normal stress across the cut (effective, so overlapping shadows do not double count).
         sig_n = 0.0
         for j in range(NFc[c]):
@@ -732,6 +814,11 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             cnt[_NCRACK] += 1
             if not interior:
                 cnt[_NUC_EDGE] += 1
+            corig[cid, 0] = xc0
+            corig[cid, 1] = xc1
+            corig[cid, 2] = xc2
+            corig[cid, 3] = cnt[_STEP]
+            corig[cid, 4] = 0.0 if interior else 1.0
         release = val[c] / hn[c]
         excess = val[c] - taun[c]
         crack_of[c] = -1
@@ -757,18 +844,21 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             segof[pid[t]] = s
             pcid[pid[c]] = cid
             pcid[pid[t]] = cid
+            # A new crack's first segments start its direction afresh (c may lie on another).
+            _smooth_dir(pid[c], pid[t], X[t, 0] - xc0, X[t, 1] - xc1, X[t, 2] - xc2,
+                        0.0 if nucleate else dir_len, pdir)
             d0 = X[t, 0] - xc0
             d1 = X[t, 1] - xc1
             d2 = X[t, 2] - xc2
-            tipd[side, 0] = d0
-            tipd[side, 1] = d1
-            tipd[side, 2] = d2
             seglen = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             clen[cid] += seglen
             if shadow and sig_n > 0.0:
                 shadow_add(xc0 + 0.5 * d0, xc1 + 0.5 * d1, xc2 + 0.5 * d2,
                            gain * seglen * sig_n, nc0, nc1, nc2, G, gp)
                 cnt[_DEP] += 1
+        pc = pid[c]
+        if pdir[pc, 0] == 0.0 and pdir[pc, 1] == 0.0 and pdir[pc, 2] == 0.0:
+            pdir[pc, 0], pdir[pc, 1], pdir[pc, 2] = tc0, tc1, tc2
         # ---- recompute the changed faces and nodes (1-ring of the centres).
         nrf = 0
         for q in range(ncen):
@@ -783,26 +873,35 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                     nrf += 1
         for i in range(nrf):
             face_update(regf[i], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
-        if near_rad > 0:
-            # Localized fields: a free tip running alongside another crack ends there.
+        if tip_near and clen[cid] >= near_rad:
+            # Localized fields: a free tip running alongside another crack ends there (once
+            # its crack is a world length long: a younger one would stay a resolution-sized
+            # stub).
             for side in range(2):
                 t = tip[side]
                 if t >= 0 and free_tip[side]:
                     vstamp += 1
-                    if _near_other(t, cid, tipd[side, 0], tipd[side, 1], tipd[side, 2],
-                                   near_rad, near_cos, X, F, NF, NFc, pid, pcid, segof, segp,
-                                   seg_alive, vst, vstamp, queue):
+                    p = pid[t]
+                    if _near_other(t, cid, pdir[p, 0], pdir[p, 1], pdir[p, 2], near_rad,
+                                   near_cos, 0.0, X, F, NF, NFc, pid, pcid, pdir, vst, vstamp,
+                                   queue) > 0:
                         free_tip[side] = False
+                        cnt[_TIP_NEAR] += 1
         for side in range(2):
             t = tip[side]
             if t >= 0 and free_tip[side]:
                 crack_of[t] = cid
                 if clen[cid] < max_len:
+                    # alpha is the share carried over a step of tip_len: per step it is
+                    # alpha^(step / tip_len), so the momentum lasts a world distance.
+                    sl = np.sqrt((X[t, 0] - xc0) ** 2 + (X[t, 1] - xc1) ** 2
+                                 + (X[t, 2] - xc2) ** 2)
+                    a_eff = alpha ** min(sl / tip_len, 1.0) if tip_len > 0.0 else alpha
                     for i in range(3):
                         ni = nc0 if i == 0 else (nc1 if i == 1 else nc2)
                         for j in range(3):
                             nj = nc0 if j == 0 else (nc1 if j == 1 else nc2)
-                            rho[t, i, j] += alpha * excess * ni * nj
+                            rho[t, i, j] += a_eff * excess * ni * nj
         # ---- fine relaxation: grow the region by rings, then damped Jacobi passes.
         lo = 0
         hi = nrf
@@ -985,13 +1084,13 @@ def _shadow_grid(X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # State arrays, in _run's argument order, and the capacity each is sized by.
 _NODE_ARRAYS = ("X", "NF", "NFc", "rho", "val", "vec", "taun", "hn", "pid", "onb", "crack_of",
-                "nver", "dead", "nst", "nevl", "segof", "pcid")
+                "nver", "dead", "nonuc", "nst", "nevl", "segof", "pcid", "pdir")
 _FACE_ARRAYS = ("F", "S", "AF", "area", "nrm", "grad", "pr", "fst")
 _SEG_ARRAYS = ("segp", "seg_alive", "seg_info")
 _RUN_ORDER = ("X", "F", "S", "AF", "GR", "area", "nrm", "grad", "pr", "NF", "NFc", "rho", "val",
-              "vec", "taun", "hn", "pid", "onb", "crack_of", "nver", "dead", "fst", "nst", "nevl",
-              "segof", "pcid", "hk", "hnode", "hv", "segp", "seg_alive", "seg_info", "clen", "G",
-              "gp", "cnt", "prm")
+              "vec", "taun", "hn", "pid", "onb", "crack_of", "nver", "dead", "nonuc", "fst", "nst",
+              "nevl", "segof", "pcid", "pdir", "hk", "hnode", "hv", "segp", "seg_alive", "seg_info",
+              "clen", "corig", "G", "gp", "cnt", "prm")
 
 
 def _grown(a: np.ndarray, size: int) -> np.ndarray:
@@ -1023,6 +1122,7 @@ def _grow(state: dict, has_growth: bool) -> None:
         for k in _SEG_ARRAYS:
             state[k] = _grown(state[k], 2 * len(state["segp"]))
     if cnt[_NCRACK] + 2 > len(state["clen"]):
+        state["corig"] = _grown(state["corig"], 2 * len(state["clen"]))
         state["clen"] = _grown(state["clen"], 2 * len(state["clen"]))
 
 
@@ -1050,8 +1150,11 @@ def solve_iben(
         ``stats`` holds ``tau`` (separation per unit edge length at toughness 1 x toughness),
         ``events``, ``cracks`` (distinct cracks started), ``aborted``, ``growth_steps``,
         ``refreshed`` (lazy heap re-evaluations), ``edge_starts`` (cracks started on a crack
-        or the boundary), ``shadow_radius``, ``loop_seconds`` (the crack
-        loop alone), ``seconds``.
+        or the boundary), ``nucleations_vetoed`` (refused by the footprint test),
+        ``nucleations_near`` (refused beside an existing crack), ``tips_ended_near`` (by the
+        near-crack rule), ``tips_arrested`` (free tips left below the toughness),
+        ``shadow_radius``, ``loop_seconds`` (the crack loop alone), ``seconds``; and
+        ``origins``, where and when each crack started and its length.
     """
     _check(params)
     t0 = _time.perf_counter()
@@ -1128,17 +1231,26 @@ def solve_iben(
         update_all(n0, m0, st["S"])
     fac = _flaw(params.seed, X0) * _footprint_factor(X0, norm0, bnd)
     # The near-crack rule is for localized fields only (the footprint factor's criterion).
-    near_rad = 0.0 if _surface_wide(norm0, bnd) else NEAR_REL * float(gp[4])
-    nuc_rad = 0.0 if near_rad == 0.0 else NUC_FOOTPRINT_REL * float(
+    localized = not _surface_wide(norm0, bnd)
+    near_rad = NEAR_REL * float(gp[4])
+    nuc_rad = 0.0 if not localized else NUC_FOOTPRINT_REL * float(
         np.linalg.norm(X0.max(0) - X0.min(0)))
     st["taun"] = _grown(tau * h_node * fac, ncap)
+    # The tip factor's reference step: the edge of an equilateral triangle of a
+    # TIP_REF_FACES-face mesh of this surface (about the default simulation's edge length).
+    total_area = 0.5 * float(np.linalg.norm(
+        np.cross(X0[F0[:, 1]] - X0[F0[:, 0]], X0[F0[:, 2]] - X0[F0[:, 0]]), axis=1).sum())
+    tip_len = (float(np.sqrt(4.0 * total_area / (np.sqrt(3.0) * TIP_REF_FACES)))
+               if TIP_REF_FACES else 0.0)
     st["pid"] = np.arange(ncap, dtype=np.int64)
     st["onb"] = _grown(bnd, ncap)
     for k in ("nver", "nst", "nevl"):
         st[k] = np.zeros(ncap, np.int64)
     st["dead"] = np.zeros(ncap, bool)
+    st["nonuc"] = np.zeros(ncap, bool)
     st["segof"] = np.full(ncap, -1, np.int64)
     st["pcid"] = np.full(ncap, -1, np.int64)
+    st["pdir"] = np.zeros((ncap, 3))
     hcap = ncap + 65536
     st["hk"] = np.zeros(hcap)
     st["hnode"] = np.zeros(hcap, np.int64)
@@ -1147,7 +1259,8 @@ def solve_iben(
     st["seg_alive"] = np.zeros(scap, bool)
     st["seg_info"] = np.zeros((scap, 3))
     st["clen"] = np.zeros(min(1024, room))
-    cnt = np.zeros(14, np.int64)
+    st["corig"] = np.zeros((len(st["clen"]), 5))
+    cnt = np.zeros(16, np.int64)
     cnt[_NN], cnt[_NF] = n0, m0
     st["cnt"] = cnt
     max_len = np.inf if params.max_crack_length is None else float(params.max_crack_length)
@@ -1155,7 +1268,8 @@ def solve_iben(
         params.tip_factor, params.relax_rate, params.relax_steps, max_len,
         np.radians(SNAP_DEG), np.radians(SNAP_BOUNDARY_DEG), SNAP_T, RELAX_RINGS, SHADOW_GAIN,
         np.radians(BACK_DEG), float(TIP_FIRST), GRAIN, float(gseed),
-        near_rad, np.cos(np.radians(NEAR_PAR_DEG)), nuc_rad,
+        near_rad, np.cos(np.radians(NEAR_PAR_DEG)), nuc_rad, DIR_SMOOTH * near_rad,
+        tip_len, float(localized),
     ], dtype=np.float64)
     if tau > 0:
         _rebuild_heap(st["hk"], st["hnode"], st["hv"], cnt, val, st["taun"], st["nver"],
@@ -1206,6 +1320,8 @@ def solve_iben(
         stress_final=s_final,
         separation=sep,
         steps=steps,
+        origins=np.column_stack([st["corig"][: int(cnt[_NCRACK])],
+                                 st["clen"][: int(cnt[_NCRACK])]]),
         stats={
             "tau": float(tau),
             "events": int(cnt[_EVENTS]),
@@ -1216,6 +1332,9 @@ def solve_iben(
             "refreshed": int(cnt[_REFRESH]),
             "edge_starts": int(cnt[_NUC_EDGE]),
             "nucleations_vetoed": int(cnt[_NUC_VETO]),
+            "nucleations_near": int(cnt[_NUC_NEAR]),
+            "tips_ended_near": int(cnt[_TIP_NEAR]),
+            "tips_arrested": int(np.count_nonzero(st["crack_of"][:nn] >= 0)),
             "shadow_radius": float(gp[4]),
             "loop_seconds": loop_seconds,
             "seconds": _time.perf_counter() - t0,
