@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -316,6 +317,36 @@ def test_determinism(sim60, impact_result):
     assert np.array_equal(again.faces, impact_result.faces)
 
 
+def test_determinism_does_not_depend_on_the_thread_count(tmp_path):
+    """Growth steps recompute the field in parallel: one thread must give the same cracks."""
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import sys, numpy as np\n"
+        f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
+        "from test_iben import plate, uniform\n"
+        "from crackbake.solver import SolverParams\n"
+        "from crackbake.solver.iben import solve_iben\n"
+        "sim = plate(40)\n"
+        "f = uniform(sim); f.growth = 0.02 * f.stress; f.stress = 0.0 * f.stress\n"
+        "r = solve_iben(sim, f, SolverParams(max_cracks=40, max_steps=3000))\n"
+        "np.save(sys.argv[1], np.concatenate([c.points for c in r.cracks]))\n"
+        "print(r.stats['growth_steps'])\n"
+    )
+    outs = []
+    for threads in ("1", "2"):
+        env = {**os.environ, "NUMBA_NUM_THREADS": threads}
+        out = tmp_path / f"t{threads}.npy"
+        run = subprocess.run([sys.executable, str(script), str(out)], env=env,
+                             capture_output=True, text=True, check=True)
+        assert int(run.stdout.split()[-1]) > 1  # growth steps ran
+        outs.append(np.load(out))
+    assert np.array_equal(outs[0], outs[1])
+
+
 def test_no_stress_no_cracks(sim60):
     r = solve_iben(sim60, uniform(sim60, 0.0), PARAMS)
     assert r.cracks == [] and r.steps == 0
@@ -341,6 +372,21 @@ def test_budget_and_growth(sim60):
                                                            relax_rate=0.6, toughness=0.7))
     assert r.stats["growth_steps"] > 0 and r.steps == 80
     assert r.stats["events"] + r.stats["growth_steps"] == 80
+    assert r.stats["stopped"] == "max steps"
+
+
+def test_drying_stops_when_saturated():
+    """A growing field with an unreachable crack budget ends once nothing can crack any more
+    (it used to dry on, one whole-mesh step at a time, until max_steps)."""
+    sim = plate(30)
+    st = uniform(sim, 0.0).stress
+    grow = uniform(sim, 0.05).stress
+    r = solve_iben(sim, field(st, grow), SolverParams(max_cracks=100_000, max_steps=100_000))
+    assert r.stats["stopped"] == "saturated"
+    assert 0 < r.stats["cracks"] < 100_000 and r.steps < 20_000
+    # The budget, when it binds, is reported as such.
+    r = solve_iben(sim, field(st, grow), SolverParams(max_cracks=3))
+    assert r.stats["cracks"] == 3 and r.stats["stopped"] == "max cracks"
 
 
 def test_capacity_grows_and_progress_is_throttled(sim60, shrink_result, monkeypatch):

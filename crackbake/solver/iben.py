@@ -23,7 +23,9 @@ Algorithm (../shared/research/method.md §A, gaps resolved as in §B):
    grow with the mesh.
 3. Shrinkage growth (``field.growth``) is applied quasi-statically: whenever no node fails, the
    growth is added to every face (one solver step), and the loop resumes; once ``max_cracks``
-   cracks have started and no node fails, the run ends.  Drying is slow
+   cracks have started and no node fails, the run ends, and so it does once the material has
+   dried ``GROWTH_REF_STEPS`` steps longer without a crack event than the fresh material took
+   to crack (saturated: no place is left where a crack may start or grow).  Drying is slow
    compared with cracking, so cracks run until the field is at rest before it grows again.
 
 Stress relief works on two levels, so that the pattern has a world scale rather than the scale
@@ -67,10 +69,10 @@ same, so the rules that decide where cracks start, how far they run and where th
 at world lengths, not at "one node" or "one step".  Only the fine relaxation stays a few rings
 wide (a world-wide one would make a step's cost grow with the mesh), and what remains of the
 drift comes from it: at 400k faces 2 / 3 / 5 rings give 19.3 / 16.7 / 16.0 glass cracks.
-``RES_TOLERANCE`` (25 %) is the
-documented bound on the change of the number of cracks started and of the total length when h
-halves, from the default 100k sim faces upward (tests/test_resolution.py; coarser meshes are
-previews and drift more: cracks there cannot come closer than a few edges to each other).
+``RES_TOLERANCE`` (25 %) is the documented bound on the change of the number of cracks started
+and of the total length when h halves, from the default 100k sim faces upward
+(tests/test_resolution.py; coarser meshes are previews and drift more: cracks there cannot
+come closer than a few edges to each other).
 
 * Toughness is relative to the field's initial normalised separation ``v+/h`` (above), and
   the flaws are a world-space field.
@@ -221,7 +223,7 @@ NEAR_QUEUE = 8192
 
 # Indices into the counter array shared by the kernels.
 (_HEAP, _NN, _NF, _NS, _STEP, _EVENTS, _STAMP, _NCRACK, _ABORT, _GROW, _DEP,
- _REFRESH, _NUC_EDGE, _NUC_VETO, _NUC_NEAR, _TIP_NEAR) = range(16)
+ _REFRESH, _NUC_EDGE, _NUC_VETO, _NUC_NEAR, _TIP_NEAR, _IDLE, _FIRST, _SATURATED) = range(19)
 # Return codes of _run.
 _MORE, _DONE, _FULL = 0, 1, 2
 
@@ -559,7 +561,14 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             # With the crack budget spent and the field at rest, more drying would only lengthen
             # existing cracks step after step: stop (otherwise only max_steps would end the run).
             if GR.shape[0] > 1 and cnt[_NCRACK] < max_cracks:
-                # Quasi-static shrinkage: nothing fails, so the material dries a step further.
+                # Quasi-static shrinkage: nothing fails, so the material dries a step further;
+                # unless it has dried longer without a crack event than the fresh material took
+                # to crack, plus GROWTH_REF_STEPS: then no place is left where a crack may
+                # start or grow (saturated), and only max_steps would end the run.
+                if cnt[_IDLE] > max(cnt[_FIRST], 0) + GROWTH_REF_STEPS:
+                    cnt[_SATURATED] = 1
+                    return _DONE
+                cnt[_IDLE] += 1
                 nn, nf = cnt[_NN], cnt[_NF]
                 for f in range(nf):
                     S[f] += GR[f]
@@ -944,6 +953,9 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             _push(n, hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
         cnt[_STEP] += 1
         cnt[_EVENTS] += 1
+        if cnt[_FIRST] < 0:
+            cnt[_FIRST] = cnt[_GROW]
+        cnt[_IDLE] = 0
         done += 1
 
 
@@ -1153,7 +1165,9 @@ def solve_iben(
         or the boundary), ``nucleations_vetoed`` (refused by the footprint test),
         ``nucleations_near`` (refused beside an existing crack), ``tips_ended_near`` (by the
         near-crack rule), ``tips_arrested`` (free tips left below the toughness),
-        ``shadow_radius``, ``loop_seconds`` (the crack loop alone), ``seconds``; and
+        ``shadow_radius``, ``stopped`` (why the run ended: ``max steps``, ``max cracks``,
+        ``saturated`` or ``at rest``), ``loop_seconds`` (the crack loop alone),
+        ``seconds``; and
         ``origins``, where and when each crack started and its length.
     """
     _check(params)
@@ -1260,7 +1274,8 @@ def solve_iben(
     st["seg_info"] = np.zeros((scap, 3))
     st["clen"] = np.zeros(min(1024, room))
     st["corig"] = np.zeros((len(st["clen"]), 5))
-    cnt = np.zeros(16, np.int64)
+    cnt = np.zeros(19, np.int64)
+    cnt[_FIRST] = -1
     cnt[_NN], cnt[_NF] = n0, m0
     st["cnt"] = cnt
     max_len = np.inf if params.max_crack_length is None else float(params.max_crack_length)
@@ -1329,6 +1344,10 @@ def solve_iben(
             "paths": len(cracks),
             "aborted": int(cnt[_ABORT]),
             "growth_steps": int(cnt[_GROW]),
+            "stopped": ("max steps" if steps >= params.max_steps
+                        else "saturated" if cnt[_SATURATED]
+                        else "max cracks" if cnt[_NCRACK] >= params.max_cracks
+                        else "at rest"),
             "refreshed": int(cnt[_REFRESH]),
             "edge_starts": int(cnt[_NUC_EDGE]),
             "nucleations_vetoed": int(cnt[_NUC_VETO]),
