@@ -423,7 +423,17 @@ def solve(
         from crackbake.solver.iben import solve_iben
 
         result = solve_iben(sim, field, sp, progress=say)
+        if result.stats.get("stopped") == "max steps":
+            warnings.warn(
+                f"the solver stopped at --max-steps {sp.max_steps} with cracks still growing; "
+                "raise --max-steps for the complete pattern",
+                CrackbakeWarning,
+                stacklevel=2,
+            )
     timings["solve"] = time.perf_counter() - t
+    say(f"{result.stats.get('cracks', len(result.cracks))} cracks started, "
+        f"{len(result.cracks)} polylines, {result.steps} steps"
+        + (f" ({result.stats['stopped']})" if "stopped" in result.stats else ""))
     effective = params.to_dict()
     effective.update(
         {

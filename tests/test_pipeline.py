@@ -6,6 +6,7 @@ import json
 import struct
 import subprocess
 import sys
+import warnings
 from io import BytesIO
 from pathlib import Path
 
@@ -332,3 +333,19 @@ def test_library_run_keeps_the_stress_field_and_solver_result(plate, tmp_path):
     assert len(solved.result.stress_final) == len(solved.result.faces) >= m  # splits add faces
     assert len(solved.result.separation) == len(solved.result.vertices)
     assert result.network is not None and len(result.network.cracks) > 0
+
+
+def test_a_run_cut_short_by_max_steps_warns(plate, tmp_path):
+    from crackbake.mesh import CrackbakeWarning
+    from crackbake.params import Impact
+
+    obj, _, _ = plate
+    base = dict(mesh=obj, res=64, formats=("exr",), impacts=(Impact((1.0, 0.5, 0.0)),),
+                preset="glass", sim_faces=3000)
+    with pytest.warns(CrackbakeWarning, match="--max-steps 5 with cracks still growing"):
+        short = run(RunParams(out=tmp_path / "short", max_steps=5, **base))
+    assert short.solved.result.stats["stopped"] == "max steps"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CrackbakeWarning)
+        full = run(RunParams(out=tmp_path / "full", **base))
+    assert full.solved.result.stats["stopped"] in ("at rest", "max cracks", "saturated")
