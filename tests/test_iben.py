@@ -515,3 +515,22 @@ def test_origins_record_every_crack_started(impact_result, shrink_result):
         assert (o[:, 5] > 0).all()
         assert o[:, 5].sum() == pytest.approx(total_length(r), rel=1e-9)
         assert int(o[:, 4].sum()) == r.stats["edge_starts"]
+
+
+@pytest.mark.parametrize("make", [uniform, impact], ids=["shrink", "glass"])
+def test_no_crack_starts_right_beside_another(make):
+    """A new crack starts no closer than RELAX_RINGS reference edges to any crack point that
+    existed then (the reference edge: that of a TIP_REF_FACES-face mesh of the surface)."""
+    from crackbake.solver import iben
+
+    sim = plate(150)
+    r = solve_iben(sim, make(sim), PARAMS)
+    ref = np.sqrt(4.0 * 1.0 / (np.sqrt(3.0) * iben.TIP_REF_FACES))  # unit plate, area 1
+    pts = np.concatenate([c.points for c in r.cracks])
+    born = np.concatenate([c.time for c in r.cracks]) * r.steps
+    assert len(r.origins) > 5
+    for x, y, z, step, _edge, _length in r.origins[1:]:
+        older = pts[born < step - 0.5]
+        if len(older):
+            d = np.linalg.norm(older - [x, y, z], axis=1).min()
+            assert d >= iben.RELAX_RINGS * ref * (1 - 1e-9), (step, d)
