@@ -121,8 +121,8 @@ two of them should lose its hoop stress and keep its radial tension, which then 
 concentric cracks.  The shadow sums each crack's release ``n̂n̂ᵀ`` with its own normal, so at a
 point inside a wedge the radial cracks two or three wedges away (normals 30-60 degrees off)
 release a large part of the radial stress too; real cracks nearer to the point shield it.
-Measured on the plate at 100k faces: final radial stress 0.5-0.8 at 0.15-0.3 from the impact
-(initially 1.0-1.6) against a threshold of about 1.2, so concentric cracks seldom start; the
+Measured on the plate at 100k faces: final radial stress 0.5-0.8 at 0.1-0.28 from the impact
+(initially 1.8-1.0) against a threshold of about 1.2, so concentric cracks seldom start; the
 tangential share of the crack length beyond half the impact radius is 0.03-0.10 at 100k-1M
 faces (0.23 on 7k-face plates).  Sharpening the summed release towards its major direction
 brings the links back but suppresses each link's own release (crack counts triple and depend on
