@@ -12,11 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from scipy.spatial import Delaunay
+from test_iben import impact, plate, uniform
 
 from crackbake.mesh import load_mesh
 from crackbake.params import Impact, RunParams
@@ -35,37 +34,9 @@ PARAMS = {
                            max_steps=200_000),
 }
 CELLS = {"100k": 224, "400k": 447, "1M": 707}  # 2 n^2 faces on an n x n grid
-
-
-def plate(n: int, seed: int) -> SimpleNamespace:
-    """Unit plate, n x n jittered grid points, Delaunay triangulated, normals +z."""
-    h = 1.0 / n
-    x, y = np.meshgrid(np.arange(n + 1) * h, np.arange(n + 1) * h, indexing="ij")
-    p = np.stack([x.ravel(), y.ravel()], 1)
-    inner = (p > 1e-9).all(1) & (p < 1 - 1e-9).all(1)
-    p[inner] += np.random.default_rng(seed).uniform(-0.35, 0.35, (inner.sum(), 2)) * h
-    tri = Delaunay(p).simplices.astype(np.int64)
-    v = np.concatenate([p, np.zeros((len(p), 1))], 1)
-    cr = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
-    tri[cr < 0] = tri[cr < 0][:, [0, 2, 1]]
-    tri = tri[np.abs(cr) > 1e-12 * h * h]
-    return SimpleNamespace(vertices=v, faces=tri, asset_face=np.arange(len(tri)))
-
-
-def plate_field(sim, name: str) -> SimpleNamespace:
-    c = sim.vertices[sim.faces].mean(1)
-    if name == "shrink":
-        s = np.zeros((len(c), 3, 3))
-        s[:, 0, 0] = s[:, 1, 1] = 1.0
-    else:  # glass impact: w (r r^T + 1.25 t t^T), w = 2 cos(d / r), radius 0.25
-        c = c - np.array([0.5, 0.5, 0.0])
-        d = np.linalg.norm(c, axis=1)
-        w = np.where(d <= np.pi * 0.25 / 2, 2 * np.cos(d / 0.25), 0.0)
-        r = c / np.maximum(d, 1e-12)[:, None]
-        t = np.cross([0.0, 0.0, 1.0], r)
-        s = w[:, None, None] * (np.einsum("ea,eb->eab", r, r)
-                                + 1.25 * np.einsum("ea,eb->eab", t, t))
-    return SimpleNamespace(stress=s, growth=None)
+# The jittered unit plates and fields of test_iben: a glass impact (radius 0.25, hoop 1.25) and
+# uniform shrinkage.
+FIELDS = {"glass": impact, "shrink": uniform}
 
 
 def _length(res) -> float:
@@ -78,9 +49,9 @@ def plate_runs():
     """(field, size) -> (mean cracks started, mean total length) over seeds 0 and 1."""
     out = {}
     for size, n in CELLS.items():
-        sims = [plate(n, seed + 1) for seed in (0, 1)]
+        sims = [plate(n, seed=seed + 1) for seed in (0, 1)]
         for name in PARAMS:
-            runs = [solve_iben(sim, plate_field(sim, name),
+            runs = [solve_iben(sim, FIELDS[name](sim),
                                dataclasses.replace(PARAMS[name], seed=seed))
                     for seed, sim in enumerate(sims)]
             out[name, size] = (np.mean([r.stats["cracks"] for r in runs]),

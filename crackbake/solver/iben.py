@@ -557,6 +557,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
     tip = np.empty(2, np.int64)
     split = np.empty(2, np.bool_)
     free_tip = np.empty(2, np.bool_)
+    segl = np.empty(2)
     vst = np.zeros(ncap if near_rad > 0 or nuc_rad > 0 else 1, np.int64)
     vstamp = 0
     queue = np.empty(NEAR_QUEUE, np.int64)
@@ -872,6 +873,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             d1 = X[t, 1] - xc1
             d2 = X[t, 2] - xc2
             seglen = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            segl[side] = seglen
             clen[cid] += seglen
             if shadow and sig_n > 0.0:
                 shadow_add(xc0 + 0.5 * d0, xc1 + 0.5 * d1, xc2 + 0.5 * d2,
@@ -915,9 +917,8 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                 if clen[cid] < max_len:
                     # alpha is the share carried over a step of tip_len: per step it is
                     # alpha^(step / tip_len), so the momentum lasts a world distance.
-                    sl = np.sqrt((X[t, 0] - xc0) ** 2 + (X[t, 1] - xc1) ** 2
-                                 + (X[t, 2] - xc2) ** 2)
-                    a_eff = alpha ** min(sl / tip_len, 1.0) if tip_len > 0.0 else alpha
+                    a_eff = (alpha ** min(segl[side] / tip_len, 1.0) if tip_len > 0.0
+                             else alpha)
                     for i in range(3):
                         ni = nc0 if i == 0 else (nc1 if i == 1 else nc2)
                         for j in range(3):

@@ -93,16 +93,10 @@ def eig_max_sym3(a):
 
 @njit(cache=True)
 def _add_m(acc, f0, f1, f2, sign):
-    """acc += sign * f f^T / |f| (the paper's m(f); m(0) = 0)."""
+    """acc += sign * f f^T / |f| (the paper's m(f); m(0) = 0), upper triangle only."""
     n = np.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
     if n > 0.0:
-        s = sign / n
-        acc[0, 0] += s * f0 * f0
-        acc[0, 1] += s * f0 * f1
-        acc[0, 2] += s * f0 * f2
-        acc[1, 1] += s * f1 * f1
-        acc[1, 2] += s * f1 * f2
-        acc[2, 2] += s * f2 * f2
+        _add_dd(acc, sign / n, f0, f1, f2)
 
 
 # --------------------------------------------------------------------------- shadow grid
@@ -508,13 +502,7 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
         d0 = c * x0 + s * y0
         d1 = c * x1 + s * y1
         d2 = c * x2 + s * y2
-        w = grain * v
-        u[0, 0] += w * d0 * d0
-        u[0, 1] += w * d0 * d1
-        u[0, 2] += w * d0 * d2
-        u[1, 1] += w * d1 * d1
-        u[1, 2] += w * d1 * d2
-        u[2, 2] += w * d2 * d2
+        _add_dd(u, grain * v, d0, d1, d2)
         u[1, 0] = u[0, 1]
         u[2, 0] = u[0, 2]
         u[2, 1] = u[1, 2]
