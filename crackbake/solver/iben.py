@@ -46,8 +46,14 @@ of the simulation mesh:
   grid's release interpolated at its centroid, projected on its plane and never pushed into new
   compression.  A long crack thus releases its normal stress fully along itself, fading to zero
   at distance R, while stress parallel to it is untouched: parallel cracks keep a world spacing,
-  and perpendicular ones still form T-junctions.  Free crack tips read the *raw* stress (their
-  own crack's shadow would otherwise stall them; their growth is a near-field matter).  The
+  and perpendicular ones still form T-junctions.  Free crack tips see the shadow without its
+  component along their own crack normal (:func:`crackbake.solver.topology.tip_principal`):
+  their own crack's shadow (and that of cracks parallel to it) would otherwise stall them, so
+  their opening stress stays raw, but the release of other cracks across their path counts.
+  Before, tips read the raw stress: a concentric link started between two radial impact
+  cracks, in a wedge whose hoop stress they had released, then saw the raw hoop stress and
+  turned back into a radial crack (plate glass, tangential share of the crack length 0.35-0.5
+  impact radii from the centre: 0.10 at 100k and 400k faces, now 0.22 and 0.20).  The
   heap is lazy: a popped node is re-evaluated against the current shadow and re-queued if it no
   longer is the most critical, so nodes far from the last event are never touched.
 
@@ -92,15 +98,15 @@ come closer than a few edges to each other).
   right beside existing ones (plate shrinkage 1M: clusters of 0.003-0.01 long cracks at the
   boundary; plate glass: stubs whose tips the near-crack rule ended at once).
 
-Near-crack rule (localized fields only).  Free tips read the raw stress, so nothing kept a
-radial impact crack from running alongside an existing one: at finer resolution tips ran
-~0.03-0.05 units from a neighbour over long stretches (glass on spot: 33 -> 52 cracks, length
-+45 % from 100k to 400k faces, before this rule).  After each crack event a breadth-first
-search over the nodes within the near-crack radius of each free tip (:func:`_near_other`)
-looks for another crack's point whose direction runs within ``NEAR_PAR_DEG`` of the tip's; if
-found the tip is ended like a tip that met a crack, once its own crack is at least that radius
-long (a younger one would stay a stub).  The rule applies only when fewer than
-``FOOTPRINT_MIN_LOADED`` of the interior nodes are loaded (the criterion of
+Near-crack rule (localized fields only). Free tips do not see the shadow of cracks parallel to
+their own, so nothing kept a radial impact crack from running alongside an existing one: at
+finer resolution tips ran ~0.03-0.05 units from a neighbour over long stretches (glass on spot:
+33 -> 52 cracks, length +45 % from 100k to 400k faces, before this rule). After each crack event
+a breadth-first search over the nodes within the near-crack radius of each free tip
+(:func:`_near_other`) looks for another crack's point whose direction runs within
+``NEAR_PAR_DEG`` of the tip's; if found the tip is ended like a tip that met a crack, once its
+own crack is at least that radius long (a younger one would stay a stub). The rule applies only
+when fewer than ``FOOTPRINT_MIN_LOADED`` of the interior nodes are loaded (the criterion of
 :func:`_footprint_factor`): on surface-wide fields (shrinkage, crackle, mud) the shadow keeps
 parallel cracks apart.
 
@@ -242,7 +248,7 @@ _MORE, _DONE, _FULL = 0, 1, 2
 
 @njit(cache=True)
 def _scratch():
-    return np.empty(8), np.empty((2, 3, 3)), np.empty((3, 3)), np.empty((2, 3)), np.empty(6)
+    return np.empty(14), np.empty((2, 3, 3)), np.empty((3, 3)), np.empty((2, 3)), np.empty(6)
 
 
 UPDATE_CHUNK = 4096
@@ -251,7 +257,7 @@ UPDATE_CHUNK = 4096
 
 @njit(cache=True, parallel=True)
 def _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, crack_of, G, gp,
-                grain, seed):
+                grain, seed, tipn):
     """Recompute every face and every node (setup, growth steps, the final state).
 
     Each face and each node writes only its own entries, so the chunks run in parallel and
@@ -266,7 +272,7 @@ def _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, cr
         sc, acc, ev, _fr, _r6 = _scratch()
         for n in range(ch * UPDATE_CHUNK, min(nn, (ch + 1) * UPDATE_CHUNK)):
             node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec,
-                        crack_of[n] >= 0, grain, seed, sc, acc, ev)
+                        crack_of[n] >= 0, grain, seed, sc, acc, ev, G, gp, tipn)
 
 
 @njit(cache=True)
@@ -520,7 +526,7 @@ def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, qu
 
 @njit(cache=True)
 def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn, pid, onb,
-         crack_of, nver, dead, nonuc, fst, nst, nevl, segof, pcid, pdir, hk, hn_, hv, segp,
+         crack_of, nver, dead, nonuc, fst, nst, nevl, segof, pcid, pdir, tipn, hk, hn_, hv, segp,
          seg_alive, seg_info, clen, corig, G, gp, cnt, prm, max_cracks, max_steps, chunk):
     """Advance the crack loop by at most ``chunk`` steps.
 
@@ -586,7 +592,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                 for f in range(nf):
                     S[f] += GR[f]
                 _update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec,
-                            crack_of, G, gp, grain, seed)
+                            crack_of, G, gp, grain, seed, tipn)
                 for n in range(nn):
                     nver[n] += 1
                     nevl[n] = cnt[_DEP]
@@ -608,7 +614,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             for j in range(NFc[c]):
                 face_update(NF[c, j], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
             node_update(c, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, not nucleate,
-                        grain, seed, sc, acc, ev)
+                        grain, seed, sc, acc, ev, G, gp, tipn)
             nevl[c] = cnt[_DEP]
             cnt[_REFRESH] += 1
             if not val[c] > taun[c]:
@@ -914,6 +920,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             t = tip[side]
             if t >= 0 and free_tip[side]:
                 crack_of[t] = cid
+                tipn[t, 0], tipn[t, 1], tipn[t, 2] = nc0, nc1, nc2
                 if clen[cid] < max_len:
                     # alpha is the share carried over a step of tip_len: per step it is
                     # alpha^(step / tip_len), so the momentum lasts a world distance.
@@ -961,7 +968,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
         for i in range(nrn):
             n = regn[i]
             node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec,
-                        crack_of[n] >= 0, grain, seed, sc, acc, ev)
+                        crack_of[n] >= 0, grain, seed, sc, acc, ev, G, gp, tipn)
             nevl[n] = cnt[_DEP]
             _push(n, hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
         cnt[_STEP] += 1
@@ -1109,13 +1116,13 @@ def _shadow_grid(X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # State arrays, in _run's argument order, and the capacity each is sized by.
 _NODE_ARRAYS = ("X", "NF", "NFc", "rho", "val", "vec", "taun", "hn", "pid", "onb", "crack_of",
-                "nver", "dead", "nonuc", "nst", "nevl", "segof", "pcid", "pdir")
+                "nver", "dead", "nonuc", "nst", "nevl", "segof", "pcid", "pdir", "tipn")
 _FACE_ARRAYS = ("F", "S", "AF", "area", "nrm", "grad", "pr", "fst")
 _SEG_ARRAYS = ("segp", "seg_alive", "seg_info")
 _RUN_ORDER = ("X", "F", "S", "AF", "GR", "area", "nrm", "grad", "pr", "NF", "NFc", "rho", "val",
               "vec", "taun", "hn", "pid", "onb", "crack_of", "nver", "dead", "nonuc", "fst", "nst",
-              "nevl", "segof", "pcid", "pdir", "hk", "hnode", "hv", "segp", "seg_alive", "seg_info",
-              "clen", "corig", "G", "gp", "cnt", "prm")
+              "nevl", "segof", "pcid", "pdir", "tipn", "hk", "hnode", "hv", "segp", "seg_alive",
+              "seg_info", "clen", "corig", "G", "gp", "cnt", "prm")
 
 
 def _grown(a: np.ndarray, size: int) -> np.ndarray:
@@ -1227,6 +1234,7 @@ def solve_iben(
     st["val"] = np.zeros(ncap)
     st["vec"] = np.zeros((ncap, 3))
     st["crack_of"] = np.full(ncap, -1, np.int64)
+    st["tipn"] = np.zeros((ncap, 3))
     G, gp = _shadow_grid(X0)
     st["G"], st["gp"] = G, gp
     _incidence(m0, st["F"], st["NF"], st["NFc"])
@@ -1235,7 +1243,7 @@ def solve_iben(
     def update_all(nn: int, nf: int, stress: np.ndarray) -> None:
         _update_all(nn, nf, st["X"], st["F"], stress, st["area"], st["nrm"], st["grad"],
                     st["pr"], st["NF"], st["NFc"], st["rho"], st["val"], st["vec"],
-                    st["crack_of"], G, gp, GRAIN, gseed)
+                    st["crack_of"], G, gp, GRAIN, gseed, st["tipn"])
 
     update_all(n0, m0, st["S"])
     if np.any(st["area"][:m0] <= 0):

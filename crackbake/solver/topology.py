@@ -290,14 +290,48 @@ def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
 
 
 @njit(cache=True)
-def raw_principal(f, X, F, S, nrm, fr, out):
-    """Principal split of the raw (un-shadowed) stress of face f -> out[8] (``pr`` layout)."""
+def tip_principal(f, X, F, S, nrm, G, gp, n0, n1, n2, fr, out):
+    """Principal split of the stress a crack tip with normal ``n`` sees in face f -> out[:8].
+
+    The stress minus the shadow-grid release with the component along the tip's own crack
+    normal projected out (``P R P``, ``P = I - n̂n̂ᵀ`` in the face plane): the tip's own crack
+    (and cracks parallel to it) must not stall it, so its opening stress ``n̂·S·n̂`` stays raw,
+    but the release of other cracks across its path is seen.  A concentric link between two
+    radial impact cracks then keeps running along the wedge, whose hoop stress they released,
+    instead of turning back into the raw hoop direction.  Clamped like :func:`face_update`.
+    ``out`` needs 14 entries (8 to 13 are scratch).
+    """
     face_frame(f, X, F, nrm, fr)
     u = fr[0]
     w = fr[1]
     s = S[f]
-    l1, l2, th = _principal(_quad(s, u, u), 0.5 * (_quad(s, u, w) + _quad(s, w, u)),
-                            _quad(s, w, w))
+    a = _quad(s, u, u)
+    b = 0.5 * (_quad(s, u, w) + _quad(s, w, u))
+    c = _quad(s, w, w)
+    l1, l2, th = _principal(a, b, c)
+    p0 = n0 * u[0] + n1 * u[1] + n2 * u[2]
+    p1 = n0 * w[0] + n1 * w[1] + n2 * w[2]
+    lp = np.sqrt(p0 * p0 + p1 * p1)
+    if G.shape[0] >= 2 and lp > 0.0:
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        r6 = out[8:14]
+        shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
+                  (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, r6)
+        ra = _quad6(r6, u, u)
+        rb = _quad6(r6, u, w)
+        rc = _quad6(r6, w, w)
+        if ra != 0.0 or rc != 0.0:
+            # In the face frame, P = I - p p^T with p the tip normal; P R P keeps only the
+            # release along the tip's direction of travel q = (-p1, p0).
+            p0 /= lp
+            p1 /= lp
+            q0, q1 = -p1, p0
+            rq = q0 * q0 * ra + 2.0 * q0 * q1 * rb + q1 * q1 * rc
+            l1e, l2e, the = _principal(a - rq * q0 * q0, b - rq * q0 * q1, c - rq * q1 * q1)
+            floor = min(0.0, l2)
+            l1 = max(l1e, floor)
+            l2 = max(l2e, floor)
+            th = the
     ct = np.cos(th)
     st = np.sin(th)
     out[0] = l1
@@ -368,7 +402,7 @@ def grain_angle(seed, n):
 
 @njit(cache=True)
 def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, grain, seed, sc,
-                acc, ev):
+                acc, ev, G, gp, tipn):
     """Separation tensor (plus residual) of node ``n``; stores its largest eigenpair.
 
     The paper's ``ς = ½(−m(Σf⁺) + Σm(f⁺) + m(Σf⁻) − Σm(f⁻))`` sees how the mesh is laid out
@@ -390,9 +424,10 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
       never makes a node fail.
 
     Corner forces ``f = -A (l1 (d1.g) d1 [+ or -] l2 (d2.g) d2)`` are rebuilt from the principal
-    split, the effective one from ``pr`` unless ``raw`` (crack tips: they grow from the local
-    stress, not from the world-scale shadow that their own crack casts over them).  ``sc`` (8,),
-    ``acc`` (2, 3, 3), ``ev`` (3, 3) are scratch.
+    split, the effective one from ``pr`` unless ``raw`` (crack tips: :func:`tip_principal`
+    with the tip's crack normal ``tipn[n]``, so the world-scale shadow that their own crack
+    casts over them does not stall them).  ``sc`` (14,), ``acc`` (2, 3, 3), ``ev`` (3, 3) are
+    scratch; ``G``, ``gp`` the shadow grid.
     """
     t = acc[0]
     u = acc[1]
@@ -409,7 +444,7 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
         while F[f, k] != n:
             k += 1
         if raw:
-            raw_principal(f, X, F, S, nrm, ev, sc)
+            tip_principal(f, X, F, S, nrm, G, gp, tipn[n, 0], tipn[n, 1], tipn[n, 2], ev, sc)
             p = sc
         else:
             p = pr[f]
