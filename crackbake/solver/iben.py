@@ -52,10 +52,11 @@ of the simulation mesh:
   their opening stress stays raw, but the release of other cracks across their path counts.
   Before, tips read the raw stress: a concentric link started between two radial impact
   cracks, in a wedge whose hoop stress they had released, then saw the raw hoop stress and
-  turned back into a radial crack (plate glass, tangential share of the crack length 0.35-0.5
-  impact radii from the centre: 0.10 at 100k and 400k faces, now 0.22 and 0.20).  The
-  heap is lazy: a popped node is re-evaluated against the current shadow and re-queued if it no
-  longer is the most critical, so nodes far from the last event are never touched.
+  turned back into a radial crack (plate glass, tangential share of the crack length 0.35-0.65
+  reaches from the centre at 100k / 400k / 1M faces: 0.11 / 0.07 / 0.06, now 0.18 / 0.17 /
+  0.16).  The heap is lazy: a popped node is re-evaluated against the current shadow and
+  re-queued if it no longer is the most critical, so nodes far from the last event are never
+  touched.
 
 Toughness is resolution independent: a node's separation scales with its edge length h, so the
 failure test compares ``v⁺ / h_n`` with ``τ = toughness × P90`` where ``P90`` is the 90th
@@ -127,22 +128,27 @@ summed toughness (current values, so peaks beside cracks are averaged away); cra
 the per-node test.
 
 Measured (``origins`` of the result, means over 3 seeds; benchmarks/bench_solver.py plates):
-glass impact 15.0 / 16.7 / 20.0 cracks started at 100k / 400k / 1M faces (length 3.53 / 3.64 /
-4.12), shrinkage 85.3 / 97.7 / 99.7 (length 17.1 / 19.2 / 18.8); before these rules glass
-went 18 / 22 / 53.  Spot through the real stages (3 seeds): glass 11.7 / 12.7 / 14.0 cracks,
-length 4.61 / 4.85 / 5.02.
+glass impact 14.0 / 14.0 / 13.7 cracks started at 100k / 400k / 1M faces (length 3.10 / 3.18 /
+3.05), shrinkage 87.3 / 91.3 / 93.7 (length 16.4 / 16.4 / 16.7); before these rules glass
+went 18 / 22 / 53.  Spot through the real stages (3 seeds): glass 10.3 / 12.0 / 12.7 cracks,
+length 3.96 / 4.43 / 4.63.
 
-Known limitation: concentric links in a glass impact.  After the radial cracks, a wedge between
-two of them should lose its hoop stress and keep its radial tension, which then opens the
-concentric cracks.  The shadow sums each crack's release ``n̂n̂ᵀ`` with its own normal, so at a
-point inside a wedge the radial cracks two or three wedges away (normals 30-60 degrees off)
-release a large part of the radial stress too; real cracks nearer to the point shield it.
-Measured on the plate at 100k faces: final radial stress 0.5-0.8 at 0.1-0.28 from the impact
-(initially 1.8-1.0) against a threshold of about 1.2, so concentric cracks seldom start; the
-tangential share of the crack length beyond half the impact radius is 0.03-0.10 at 100k-1M
-faces (0.23 on 7k-face plates).  Sharpening the summed release towards its major direction
-brings the links back but suppresses each link's own release (crack counts triple and depend on
-the resolution); a shielded or coarse-level global relief is needed.
+Concentric links in a glass impact.  After the radial cracks, a wedge between two of them
+loses its hoop stress and keeps its radial tension, which opens the concentric links; the tip
+view (above) keeps a link running along the wedge and ligament failure joins it to the radial
+crack it reaches.  Links can only form where the radial stress left exceeds the toughness:
+with ``w = 2cos(d/r)`` and hoop 1.25, radial stress alone reaches the glass toughness at
+``w`` about 1.5 (1.1 at the weakest flaws), i.e. within about 0.6 of the impact's reach
+``pi r / 2``.  Measured on plates (tests/test_resolution.py, 2 seeds): the tangential share
+of the crack length 0.35-0.65 reaches from the centre is 0.18 / 0.17 / 0.16 at 100k / 400k /
+1M faces (0.39 and 0.29 in the two halves of that annulus on 7k-face plates, where the fine
+relaxation spans a wider world distance).  The shadow still sums each crack's release
+``n̂n̂ᵀ`` with its own normal, so radial cracks one wedge away leak some radial release into a
+wedge (final radial stress 0.4-0.7 at 0.1-0.25 from the impact, initially 1.8-1.0), and a
+link's release is not confined to its wedge; a crack-aware (shielded) coarse level would
+give denser rings.  Tried and not kept: releasing along the shadow cell's principal axes
+(no clear gain), a shadow radius growing with the crack length (links 0.28 but shrinkage
+crack counts +75 %).
 
 Independence from the asset triangulation (tests/test_quality.py): a 2-triangle and a
 20,000-triangle plate at 100k sim faces under shrinkage give crack lengths within 3-8 %,
