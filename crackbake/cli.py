@@ -360,6 +360,9 @@ def main(
         err(f"wrote {len(result.files) + 1} files to {result.out_dir}/")
         for f in result.files:
             err(f"  {f['name']:<28} {f['bytes'] / 1e6:8.2f} MB")
+        manifest = Path(result.out_dir) / "manifest.json"
+        if manifest.is_file():
+            err(f"  {'manifest.json':<28} {manifest.stat().st_size / 1e6:8.2f} MB")
 
 
 if __name__ == "__main__":
