@@ -464,14 +464,17 @@ def _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail):
 
 @njit(cache=True)
 def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb, val, vec,
-            taun, vst, vstamp, queue):
+            taun, vst, vstamp, queue, own_len):
     """Ligament failure: when the free tip ``t`` is arrested (its separation is below the
     toughness) and another crack or the mesh boundary lies ahead of it within ``rad`` (inside
     the cone ``acos(coscone)`` around its smoothed direction), the thin ligament between them
     breaks: the tip is made to fail (``val`` just above ``taun``) with its cut aimed at the
     nearest such point.  Returns whether it did.  Without this a crack stopped a few edges
-    short of the crack it was running into, a gap that shows in the textures.
+    short of the crack it was running into, a gap that shows in the textures.  The boundary
+    counts only once the tip's crack (``own_len`` long) is at least ``rad`` long: short cracks
+    starting beside an open boundary otherwise curled back onto it at both ends (hooks).
     """
+    to_boundary = own_len >= rad
     p = pid[t]
     d0, d1, d2 = pdir[p, 0], pdir[p, 1], pdir[p, 2]
     ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
@@ -488,7 +491,7 @@ def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb
     while head < tail:
         n = queue[head]
         head += 1
-        if n != t and ((pcid[pid[n]] >= 0 and pcid[pid[n]] != cid) or onb[n]):
+        if n != t and ((pcid[pid[n]] >= 0 and pcid[pid[n]] != cid) or (onb[n] and to_boundary)):
             e0 = X[n, 0] - x0
             e1 = X[n, 1] - x1
             e2 = X[n, 2] - x2
@@ -666,7 +669,8 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
                     lchk[n] = cnt[_EVENTS] + 1
                     vstamp += 1
                     if _bridge(n, crack_of[n], lig_rad, lig_cos, X, F, NF, NFc, nrm, area, pid,
-                               pcid, pdir, onb, val, vec, taun, vst, vstamp, queue):
+                               pcid, pdir, onb, val, vec, taun, vst, vstamp, queue,
+                               clen[crack_of[n]]):
                         cnt[_BRIDGE] += 1
                         nevl[n] = cnt[_DEP]
                         _push(n, hk, hn_, hv, cnt, val, taun, nver, dead, crack_of, tip_first)
@@ -714,7 +718,7 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             if not nucleate and not val[c] > taun[c] and lig_rad > 0:
                 vstamp += 1
                 if _bridge(c, crack_of[c], lig_rad, lig_cos, X, F, NF, NFc, nrm, area, pid, pcid,
-                           pdir, onb, val, vec, taun, vst, vstamp, queue):
+                           pdir, onb, val, vec, taun, vst, vstamp, queue, clen[crack_of[c]]):
                     cnt[_BRIDGE] += 1
             if not val[c] > taun[c]:
                 nver[c] += 1
@@ -1079,7 +1083,8 @@ def _run(X, F, S, AF, GR, area, nrm, grad, pr, NF, NFc, rho, val, vec, taun, hn,
             if mine and crack_of[n] >= 0 and (ended or not val[n] > taun[n]) and lig_rad > 0:
                 vstamp += 1
                 if _bridge(n, crack_of[n], lig_rad, lig_cos, X, F, NF, NFc, nrm, area, pid,
-                           pcid, pdir, onb, val, vec, taun, vst, vstamp, queue):
+                           pcid, pdir, onb, val, vec, taun, vst, vstamp, queue,
+                           clen[crack_of[n]]):
                     cnt[_BRIDGE] += 1
                     ended = False
             if ended:
