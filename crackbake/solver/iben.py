@@ -111,15 +111,16 @@ when fewer than ``FOOTPRINT_MIN_LOADED`` of the interior nodes are loaded (the c
 :func:`_footprint_factor`): on surface-wide fields (shrinkage, crackle, mud) the shadow keeps
 parallel cracks apart.
 
-Ligament failure (all fields).  A free tip that stops short of another crack or the mesh
-boundary ahead of it (within ``LIGAMENT_REL`` x the shadow radius, inside ``LIGAMENT_CONE_DEG``
-of its smoothed direction) breaks through the thin ligament between them (:func:`_bridge`): it
-is made to fail with its cut aimed at the nearest such point, step after step, until it meets
-it.  This covers tips arrested below the toughness and tips the near-crack rule would end
-while converging on the crack they run into.  Before, such tips stopped a few edges short and
-left a gap that shows in the textures: on 60-cell plates (3 seeds, glass and shrinkage) 15
-free ends had a crack ahead within that reach, now 1; the radial cracks of a glass impact
-now run into the first cracks at the centre instead of stopping beside them.
+Ligament failure (all fields). A free tip that stops short of another crack or the mesh boundary
+ahead of it (within ``LIGAMENT_REL`` x the shadow radius, inside ``LIGAMENT_CONE_DEG`` of its
+smoothed direction) breaks through the thin ligament between them (:func:`_bridge`): it is made
+to fail with its cut aimed at the nearest such point, step after step, until it meets it. This
+covers tips arrested below the toughness and tips the near-crack rule would end while converging
+on the crack they run into. The boundary counts once the tip's crack is that radius long (short
+cracks beside an open boundary otherwise curled back onto it). Before, such tips stopped a few
+edges short and left a gap that shows in the textures: on 60-cell plates (3 seeds, glass and
+shrinkage) 15 free ends had a crack ahead within that reach, now 1; the radial cracks of a glass
+impact now run into the first cracks at the centre instead of stopping beside them.
 
 Footprint nucleation (localized fields only).  Single fine-mesh stress peaks next to existing
 cracks kept starting tiny new cracks.  A node starts a *new* crack only when the summed
@@ -129,7 +130,7 @@ the per-node test.
 
 Measured (``origins`` of the result, means over 3 seeds; benchmarks/bench_solver.py plates):
 glass impact 14.0 / 14.0 / 13.7 cracks started at 100k / 400k / 1M faces (length 3.10 / 3.18 /
-3.05), shrinkage 87.3 / 91.3 / 93.7 (length 16.4 / 16.4 / 16.7); before these rules glass
+3.05), shrinkage 86.7 / 91.0 / 91.7 (length 16.3 / 16.5 / 16.8); before these rules glass
 went 18 / 22 / 53.  Spot through the real stages (3 seeds): glass 10.3 / 12.0 / 12.7 cracks,
 length 3.96 / 4.43 / 4.63.
 
