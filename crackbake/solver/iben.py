@@ -464,6 +464,23 @@ def _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail):
 
 
 @njit(cache=True)
+def _ball(c, rad, X, F, NF, NFc, vst, vstamp, queue):
+    """The nodes connected to ``c`` over the mesh within ``rad`` of it (breadth-first; cracks
+    separate): ``queue[:count]``, ``c`` first; returns ``count``."""
+    r2 = rad * rad
+    x0, x1, x2 = X[c, 0], X[c, 1], X[c, 2]
+    vst[c] = vstamp
+    queue[0] = c
+    head = 0
+    tail = 1
+    while head < tail:
+        tail = _enqueue_near(queue[head], x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue,
+                             tail)
+        head += 1
+    return tail
+
+
+@njit(cache=True)
 def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb, val, vec,
             taun, vst, vstamp, queue, own_len):
     """Ligament failure: when the free tip ``t`` is arrested (its separation is below the
@@ -482,17 +499,11 @@ def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb
     if ld == 0.0 or rad <= 0.0:
         return False
     x0, x1, x2 = X[t, 0], X[t, 1], X[t, 2]
-    r2 = rad * rad
-    vst[t] = vstamp
-    queue[0] = t
-    head = 0
-    tail = 1
     best = -1
     bd = np.inf
-    while head < tail:
-        n = queue[head]
-        head += 1
-        if n != t and ((pcid[pid[n]] >= 0 and pcid[pid[n]] != cid) or (onb[n] and to_boundary)):
+    for i in range(1, _ball(t, rad, X, F, NF, NFc, vst, vstamp, queue)):
+        n = queue[i]
+        if (pcid[pid[n]] >= 0 and pcid[pid[n]] != cid) or (onb[n] and to_boundary):
             e0 = X[n, 0] - x0
             e1 = X[n, 1] - x1
             e2 = X[n, 2] - x2
@@ -500,7 +511,6 @@ def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb
             if 0.0 < le < bd and (e0 * d0 + e1 * d1 + e2 * d2) >= coscone * le * ld:
                 best = n
                 bd = le
-        tail = _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail)
     if best < 0:
         return False
     vn0 = vn1 = vn2 = 0.0
@@ -590,21 +600,13 @@ def _smooth_dir(pc, pt, d0, d1, d2, length, pdir):
 def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, queue):
     """Whether the mean normalised separation ``v+ / h`` over the nodes within ``rad`` of node
     ``c`` (breadth-first over the mesh) exceeds their mean normalised toughness."""
-    r2 = rad * rad
-    x0, x1, x2 = X[c, 0], X[c, 1], X[c, 2]
-    vst[c] = vstamp
-    queue[0] = c
-    head = 0
-    tail = 1
     sv = 0.0
     st = 0.0
-    while head < tail:
-        n = queue[head]
-        head += 1
+    for i in range(_ball(c, rad, X, F, NF, NFc, vst, vstamp, queue)):
+        n = queue[i]
         if not dead[n] and taun[n] > 0.0 and hn[n] > 0.0:
             sv += val[n] / hn[n]
             st += taun[n] / hn[n]
-        tail = _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail)
     return sv > st
 
 

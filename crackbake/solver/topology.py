@@ -132,6 +132,14 @@ def shadow_at(x0, x1, x2, G, gp, out):
 
 
 @njit(cache=True)
+def face_shadow(f, X, F, G, gp, out):
+    """Released stress at the centroid of face f -> out[6] (see :func:`shadow_at`)."""
+    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
+              (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, out)
+
+
+@njit(cache=True)
 def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
     """Deposit ``amount * n n^T * k(r)`` with a compact kernel around p into the grid.
 
@@ -271,8 +279,7 @@ def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
     c = _quad(s, w, w)
     l1r, l2r, th = _principal(a, b, c)
     if G.shape[0] >= 2:
-        shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
-                  (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, r6)
+        face_shadow(f, X, F, G, gp, r6)
         ra = _quad6(r6, u, u)
         rc = _quad6(r6, w, w)
         if ra != 0.0 or rc != 0.0:
@@ -313,10 +320,8 @@ def tip_principal(f, X, F, S, nrm, G, gp, n0, n1, n2, fr, out):
     p1 = n0 * w[0] + n1 * w[1] + n2 * w[2]
     lp = np.sqrt(p0 * p0 + p1 * p1)
     if G.shape[0] >= 2 and lp > 0.0:
-        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
         r6 = out[8:14]
-        shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
-                  (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, r6)
+        face_shadow(f, X, F, G, gp, r6)
         ra = _quad6(r6, u, u)
         rb = _quad6(r6, u, w)
         rc = _quad6(r6, w, w)
