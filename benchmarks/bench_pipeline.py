@@ -31,7 +31,7 @@ def spot_path() -> Path:
 
 
 def child(preset: str, faces: int) -> dict:
-    from crackbake.mesh import load_mesh
+    from crackbake.io.mesh import load_mesh
     from crackbake.params import Impact, RunParams
     from crackbake.pipeline import solve
 

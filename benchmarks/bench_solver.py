@@ -19,8 +19,8 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.spatial import Delaunay
 
-from crackbake.solver import SolverParams
-from crackbake.solver.iben import solve_iben
+from crackbake.simulate.solver import SolverParams
+from crackbake.simulate.solver.iben import solve_iben
 
 
 def plate(n_faces: int, seed: int = 1) -> SimpleNamespace:

@@ -261,7 +261,7 @@ def main(
     as_json: bool,
 ) -> None:
     """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
-    from crackbake.mesh import CrackbakeWarning
+    from crackbake.errors import CrackbakeWarning
     from crackbake.pipeline import run
 
     t0 = time.perf_counter()

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning, Mesh
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import Mesh
 
 FORMAT = "crackbake-cracks"
 VERSION = 1
@@ -685,7 +685,7 @@ def from_solver(
 
     Parameters
     ----------
-    paths : list of crackbake.solver.CrackPath
+    paths : list of crackbake.simulate.solver.CrackPath
         Polylines with per-point asset faces, time, width and depth.
     mesh : Mesh
         The asset mesh the faces index.

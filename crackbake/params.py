@@ -174,10 +174,10 @@ class RunParams:
         Simulation mesh target edge length (mesh units) or face count.
     toughness, tip_factor, relax_steps, relax_rate, relax_share, max_cracks, max_steps,
     max_crack_length, crack_width, depth_ratio
-        Solver settings (:class:`crackbake.solver.SolverParams`).
+        Solver settings (:class:`crackbake.simulate.solver.SolverParams`).
     shrink, shrink_rate, directions, curvature_bias, curvature_density, weight_map,
     weight_attribute, weight_invert, noise, hoop
-        Stress sources (:mod:`crackbake.stress`); ``directions`` holds (x, y, z, strength).
+        Stress sources (:mod:`crackbake.simulate.stress`); ``directions`` holds (x, y, z, strength).
     """
 
     mesh: Path

@@ -16,11 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from crackbake import __version__
-from crackbake.bake import CHANNELS, CrackMaps, bake_cracks
-from crackbake.errors import CrackbakeError
-from crackbake.export import OutputStage, sha256_file, write_exr, write_glb, write_png
-from crackbake.gl import create_context, renderer_info
-from crackbake.mesh import CrackbakeWarning, Mesh, load_mesh
+from crackbake.bake.context import create_context, renderer_info
+from crackbake.bake.preview import render_preview
+from crackbake.bake.raster import CHANNELS, CrackMaps, bake_cracks
+from crackbake.bake.uv import UVMesh, prepare_uvs
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.exchange.export import OutputStage, sha256_file, write_exr, write_glb, write_png
+from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.network import (
     CrackNetwork,
     from_solver,
@@ -31,9 +33,7 @@ from crackbake.network import (
     write_sidecar,
 )
 from crackbake.params import RunParams, preset_names
-from crackbake.preview import render_preview
-from crackbake.solver import SolverParams
-from crackbake.uv import UVMesh, prepare_uvs
+from crackbake.simulate.solver import SolverParams
 
 #: Base colour of the GLB preview material: intact surface and crack interior (sRGB, 0..255).
 SURFACE_RGB = np.array([200, 196, 188], np.float32)
@@ -48,11 +48,11 @@ class Solved:
 
     Attributes
     ----------
-    sim : crackbake.simmesh.SimMesh
+    sim : crackbake.simulate.simmesh.SimMesh
         The simulation mesh as built (before cracks split it).
-    field : crackbake.stress.StressField
+    field : crackbake.simulate.stress.StressField
         The initial stress field on ``sim``.
-    result : crackbake.solver.SolverResult
+    result : crackbake.simulate.solver.SolverResult
         Final (split) sim mesh, initial and final stress, separation values, polylines.
     """
 
@@ -311,7 +311,7 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
     CrackbakeError
         When nothing would load the surface, or a preset needs an impact that is missing.
     """
-    from crackbake.stress import (
+    from crackbake.simulate.stress import (
         CurvatureSource,
         DirectionalSource,
         ImpactSource,
@@ -400,8 +400,8 @@ def solve(
     solved : Solved
         Sim mesh, stress field and the solver's full result.
     """
-    from crackbake.simmesh import build_simmesh
-    from crackbake.stress import stress_field
+    from crackbake.simulate.simmesh import build_simmesh
+    from crackbake.simulate.stress import stress_field
 
     sources = stress_sources(params, mesh, relative)
     say("building the simulation mesh")
@@ -416,11 +416,11 @@ def solve(
     say(f"growing cracks ({sp.method})")
     t = time.perf_counter()
     if sp.method == "thesis":
-        from crackbake.solver.thesis import solve_thesis
+        from crackbake.simulate.solver.thesis import solve_thesis
 
         result = solve_thesis(sim, field, sp, progress=say)
     else:
-        from crackbake.solver.iben import solve_iben
+        from crackbake.simulate.solver.iben import solve_iben
 
         result = solve_iben(sim, field, sp, progress=say)
         if result.stats.get("stopped") == "max steps":

@@ -16,7 +16,7 @@ import trimesh
 from scipy.spatial import cKDTree
 from trimesh.triangles import closest_point
 
-from crackbake.mesh import load_mesh
+from crackbake.io.mesh import load_mesh
 from crackbake.network import Crack, CrackNetwork, mesh_info, write_sidecar
 
 MAX_WIDTH = 0.004  # mesh units; spot is about 2 units tall

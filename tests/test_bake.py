@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crackbake.bake import bake_cracks, face_candidates
-from crackbake.dilation import dilate, nearest_island
+from crackbake.bake.context import create_context
+from crackbake.bake.dilation import dilate, nearest_island
+from crackbake.bake.raster import bake_cracks, face_candidates
 from crackbake.errors import CrackbakeError
-from crackbake.gl import create_context
 from crackbake.network import Segments
 
 

@@ -1,4 +1,4 @@
-"""Round trips of the writers in crackbake.export, checked with independent readers.
+"""Round trips of the writers in crackbake.exchange.export, checked with independent readers.
 
 EXR files are written with the OpenEXR bindings and re-read with OpenImageIO; PNGs are read with
 Pillow; GLBs are parsed here by hand (header, JSON chunk, BIN chunk) and loaded with trimesh.
@@ -18,8 +18,8 @@ import OpenImageIO as oiio
 import pytest
 from PIL import Image
 
-from crackbake.errors import CrackbakeError
-from crackbake.export import (
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.exchange.export import (
     OutputStage,
     read_exr,
     sha256_file,
@@ -27,7 +27,6 @@ from crackbake.export import (
     write_glb,
     write_png,
 )
-from crackbake.mesh import CrackbakeWarning
 
 H, W = 24, 40  # not square, so a transposed image cannot pass
 MARK_ROW, MARK_COL = 3, 29

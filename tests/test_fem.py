@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crackbake.solver.fem import (
+from crackbake.simulate.solver.fem import (
     face_frames,
     face_geometry,
     largest_eigen,

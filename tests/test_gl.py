@@ -12,10 +12,10 @@ import sys
 
 import pytest
 
-from crackbake.gl import create_context, renderer_info, shader_dir, shader_source
+from crackbake.bake.context import create_context, renderer_info, shader_dir, shader_source
 
 PROBE = (
-    "from crackbake.gl import create_context\n"
+    "from crackbake.bake.context import create_context\n"
     "from crackbake.errors import CrackbakeError\n"
     "try:\n"
     "    create_context()\n"

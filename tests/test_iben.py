@@ -10,8 +10,8 @@ import pytest
 from scipy.spatial import Delaunay
 
 from crackbake.errors import CrackbakeError
-from crackbake.solver import SolverParams
-from crackbake.solver.fem import (
+from crackbake.simulate.solver import SolverParams
+from crackbake.simulate.solver.fem import (
     face_frames,
     face_geometry,
     largest_eigen,
@@ -20,8 +20,8 @@ from crackbake.solver.fem import (
     separation_tensors,
     split_tension,
 )
-from crackbake.solver.iben import solve_iben
-from crackbake.solver.topology import eig_max_sym3
+from crackbake.simulate.solver.iben import solve_iben
+from crackbake.simulate.solver.topology import eig_max_sym3
 
 PARAMS = SolverParams(toughness=0.7, relax_steps=10, relax_rate=0.6, max_cracks=5000)
 
@@ -131,7 +131,7 @@ def reference_separation(sim, stress: np.ndarray, iso_share: float | None = None
     ``m(f)`` replaced by ``A|g| E[m(Sĝ)]``, the mean over in-plane directions ĝ, here by a
     dense quadrature over the circle (the solver uses a closed quarter-circle rule).
     """
-    from crackbake.solver.topology import ISO_FAILURE
+    from crackbake.simulate.solver.topology import ISO_FAILURE
 
     share = ISO_FAILURE if iso_share is None else iso_share
     X, F = sim.vertices, sim.faces
@@ -168,8 +168,8 @@ def solver_separation(sim, fld, seed: int = 5) -> np.ndarray:
     """
     from unittest import mock
 
-    from crackbake.solver import iben
-    from crackbake.solver.iben import _edges_boundary, _flaw
+    from crackbake.simulate.solver import iben
+    from crackbake.simulate.solver.iben import _edges_boundary, _flaw
 
     with mock.patch.object(iben, "_footprint_factor", lambda p, s, b: np.ones(len(p))):
         r = solve_iben(sim, fld, SolverParams(max_cracks=0, max_steps=0, seed=seed))
@@ -328,8 +328,8 @@ def test_determinism_does_not_depend_on_the_thread_count(tmp_path):
         "import sys, numpy as np\n"
         f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
         "from test_iben import plate, uniform\n"
-        "from crackbake.solver import SolverParams\n"
-        "from crackbake.solver.iben import solve_iben\n"
+        "from crackbake.simulate.solver import SolverParams\n"
+        "from crackbake.simulate.solver.iben import solve_iben\n"
         "sim = plate(40)\n"
         "f = uniform(sim); f.growth = 0.02 * f.stress; f.stress = 0.0 * f.stress\n"
         "r = solve_iben(sim, f, SolverParams(max_cracks=40, max_steps=3000))\n"
@@ -393,7 +393,7 @@ def test_capacity_grows_and_progress_is_throttled(sim60, shrink_result, monkeypa
     """Runs longer than the initial room grow the state (same result); progress is throttled."""
     import time
 
-    import crackbake.solver.iben as iben
+    import crackbake.simulate.solver.iben as iben
 
     monkeypatch.setattr(iben, "INITIAL_ROOM", 8)
     times = []
@@ -521,7 +521,7 @@ def test_origins_record_every_crack_started(impact_result, shrink_result):
 def test_no_crack_starts_right_beside_another(make):
     """A new crack starts no closer than RELAX_RINGS reference edges to any crack point that
     existed then (the reference edge: that of a TIP_REF_FACES-face mesh of the surface)."""
-    from crackbake.solver import iben
+    from crackbake.simulate.solver import iben
 
     sim = plate(150)
     r = solve_iben(sim, make(sim), PARAMS)
@@ -540,7 +540,7 @@ def _stops_short(r, rad: float) -> int:
     """Free crack ends (touching no other crack, off the plate boundary) with another crack's
     point ahead of them within ``rad``, inside the solver's ligament cone around the direction
     the crack arrived from (its last 0.02 units)."""
-    from crackbake.solver.iben import LIGAMENT_CONE_DEG
+    from crackbake.simulate.solver.iben import LIGAMENT_CONE_DEG
 
     cos = np.cos(np.radians(LIGAMENT_CONE_DEG))
     count = 0
@@ -567,7 +567,7 @@ def test_arrested_tips_break_through_to_a_crack_ahead():
     """A tip that stops a few edges short of a crack it runs into breaks the ligament between
     them: on 60-cell plates (3 seeds, glass and shrinkage) measured 1 such free end in all,
     15 with the ligament rule off (LIGAMENT_REL = 0)."""
-    from crackbake.solver import iben
+    from crackbake.simulate.solver import iben
 
     assert iben.LIGAMENT_REL == 0.25
     total = broken = 0

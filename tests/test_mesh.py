@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning, load_mesh, vertex_normals, weld_by_position
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import load_mesh, vertex_normals, weld_by_position
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 

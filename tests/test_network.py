@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning, Mesh, load_mesh
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.network import (
     Crack,
     CrackNetwork,

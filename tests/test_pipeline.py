@@ -18,7 +18,7 @@ from PIL import Image
 
 from crackbake import __version__
 from crackbake.cli import main
-from crackbake.mesh import load_mesh
+from crackbake.io.mesh import load_mesh
 from crackbake.network import Crack, CrackNetwork, mesh_info, write_sidecar
 from crackbake.params import RunParams
 from crackbake.pipeline import run
@@ -336,7 +336,7 @@ def test_library_run_keeps_the_stress_field_and_solver_result(plate, tmp_path):
 
 
 def test_a_run_cut_short_by_max_steps_warns(plate, tmp_path):
-    from crackbake.mesh import CrackbakeWarning
+    from crackbake.errors import CrackbakeWarning
     from crackbake.params import Impact
 
     obj, _, _ = plate

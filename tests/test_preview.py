@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from crackbake.preview import render_preview
+from crackbake.bake.preview import render_preview
 
 
 def test_dark_texture_corner_shows_in_the_matching_corner_of_the_picture():

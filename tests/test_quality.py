@@ -10,12 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crackbake.mesh import Mesh, vertex_normals
-from crackbake.simmesh import build_simmesh
-from crackbake.solver import SolverParams
-from crackbake.solver.iben import solve_iben
-from crackbake.solver.thesis import solve_thesis, turning_angle_per_length
-from crackbake.stress import CurvatureSource, DirectionalSource, ShrinkSource, stress_field
+from crackbake.io.mesh import Mesh, vertex_normals
+from crackbake.simulate.simmesh import build_simmesh
+from crackbake.simulate.solver import SolverParams
+from crackbake.simulate.solver.iben import solve_iben
+from crackbake.simulate.solver.thesis import solve_thesis, turning_angle_per_length
+from crackbake.simulate.stress import CurvatureSource, DirectionalSource, ShrinkSource, stress_field
 
 
 def make_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> Mesh:

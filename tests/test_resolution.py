@@ -1,7 +1,7 @@
 """Resolution independence: the crack pattern must not depend on the simulation edge length.
 
-``RES_TOLERANCE`` (crackbake.solver.iben) is the documented bound on the change of the number
-of cracks started and of the total crack length when the sim edge length halves, from the
+``RES_TOLERANCE`` (crackbake.simulate.solver.iben) is the documented bound on the change of the
+number of cracks started and of the total crack length when the sim edge length halves, from the
 default resolution (100k sim faces) upward.  Plates: a glass impact and uniform shrinkage at
 about 100k, 400k and 1M faces (2 seeds each, compared by their means: a single run's count
 moves by a crack or two either way).  Spot: every surface-wide preset and the glass impact
@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 from test_iben import impact, plate, uniform
 
-from crackbake.mesh import load_mesh
+from crackbake.io.mesh import load_mesh
 from crackbake.params import Impact, RunParams
 from crackbake.pipeline import solver_params, stress_sources
-from crackbake.simmesh import build_simmesh
-from crackbake.solver import SolverParams
-from crackbake.solver.iben import RES_TOLERANCE, solve_iben
-from crackbake.stress import stress_field
+from crackbake.simulate.simmesh import build_simmesh
+from crackbake.simulate.solver import SolverParams
+from crackbake.simulate.solver.iben import RES_TOLERANCE, solve_iben
+from crackbake.simulate.stress import stress_field
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 IMPACT = (0.334, 0.044, 0.287)  # on spot's flank, as in benchmarks/bench_pipeline.py

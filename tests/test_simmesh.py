@@ -10,8 +10,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from crackbake.errors import CrackbakeError
-from crackbake.mesh import Mesh, load_mesh, vertex_normals
-from crackbake.simmesh import SimMesh, asset_barycentric, build_simmesh, target_edge_length
+from crackbake.io.mesh import Mesh, load_mesh, vertex_normals
+from crackbake.simulate.simmesh import SimMesh, asset_barycentric, build_simmesh, target_edge_length
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 

@@ -8,11 +8,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from crackbake import stress as st
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning, Mesh, vertex_normals
-from crackbake.solver.fem import face_geometry
-from crackbake.stress import (
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import Mesh, vertex_normals
+from crackbake.simulate import stress as st
+from crackbake.simulate.solver.fem import face_geometry
+from crackbake.simulate.stress import (
     CurvatureSource,
     DirectionalSource,
     ImpactSource,

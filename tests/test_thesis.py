@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from crackbake.solver import SolverParams
-from crackbake.solver.thesis import (
+from crackbake.simulate.solver import SolverParams
+from crackbake.simulate.solver.thesis import (
     relative_toughness,
     solve_thesis,
     turning_angle_per_length,

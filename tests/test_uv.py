@@ -13,9 +13,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from crackbake import uv as U
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning, Mesh, vertex_normals
+from crackbake.bake import uv as U
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import Mesh, vertex_normals
 
 
 def make_mesh(vertices, faces, uv=None, source="test.obj") -> Mesh:

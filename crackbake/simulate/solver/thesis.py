@@ -3,7 +3,7 @@
 What it does (method.md §C, with the published file's defects fixed):
 
 1. Node forces and separation tensors are computed **once** from the initial stress
-   (:mod:`crackbake.solver.fem`; the radial/hoop field and its unit vectors are the stress
+   (:mod:`crackbake.simulate.solver.fem`; the radial/hoop field and its unit vectors are the stress
    module's business, and the compressive terms of the separation tensor carry their correct
    signs there).  Each node gets its largest eigenvalue ``v+`` and eigenvector ``n+``.
 2. A crack starts at the un-cracked node with the largest ``v+`` (if it exceeds the toughness
@@ -40,8 +40,8 @@ import numpy as np
 from numba import njit
 
 from crackbake.errors import CrackbakeError
-from crackbake.solver import CrackPath, SolverParams, SolverResult
-from crackbake.solver.fem import (
+from crackbake.simulate.solver import CrackPath, SolverParams, SolverResult
+from crackbake.simulate.solver.fem import (
     face_frames,
     face_geometry,
     node_forces,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from crackbake.gl import create_context, shader_source
+from crackbake.bake.context import create_context, shader_source
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:

@@ -28,8 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 
 PathLike = str | os.PathLike
 
@@ -267,7 +266,7 @@ def write_png(
         Output file; its folder must exist.
     image : (H, W) or (H, W, C) ndarray, C in 1..4
         Floats in [0, 1], row 0 = top of the image.  Values outside are clipped, with a
-        :class:`~crackbake.mesh.CrackbakeWarning` when any was outside by more than 1e-3 (NaN
+        :class:`~crackbake.io.mesh.CrackbakeWarning` when any was outside by more than 1e-3 (NaN
         is written as 0, also with the warning).  Already-quantised ``uint8`` (``bits=8``) or
         ``uint16`` (``bits=16``) arrays are written unchanged.  (H, W) and (H, W, 1) give a
         one-channel grey PNG.

@@ -3,7 +3,7 @@
 Everything here works on a preallocated *state* (plain arrays) so the sequential crack loop can
 run compiled without touching Python objects, and without allocating inside the hot loops (small
 temporaries are scalars or scratch rows passed in).  The arrays are described in
-:func:`crackbake.solver.iben.solve_iben`; briefly
+:func:`crackbake.simulate.solver.iben.solve_iben`; briefly
 
 * ``X (Ncap, 3)`` node positions (nodes never move during the simulation);
 * ``F (Mcap, 3)`` faces, ``S (Mcap, 3, 3)`` world in-plane stress per face (tension positive),
@@ -16,7 +16,7 @@ temporaries are scalars or scratch rows passed in).  The arrays are described in
 * ``G (nx, ny, nz, 6)`` the shadow grid: released stress (symmetric, xx xy xz yy yz zz) sampled
   at cell centres; ``gp`` = ``origin (3), cell size, kernel radius``.
 
-The FEM formulas are those of :mod:`crackbake.solver.fem` (tested against it in
+The FEM formulas are those of :mod:`crackbake.simulate.solver.fem` (tested against it in
 tests/test_iben.py), written per element for use inside the loop: corner forces
 ``f_i = -A S± g_i`` are rebuilt from the stored principal split whenever a node needs them,
 which is cheaper in memory than storing them and costs only a few flops.

@@ -1,7 +1,7 @@
-"""Child-process entry point running xatlas: ``python -m crackbake._xatlas_worker IN OUT``.
+"""Child-process entry point running xatlas: ``python -m crackbake.bake.xatlas_worker IN OUT``.
 
 xatlas can segfault (regular closed meshes, upstream jpcy/xatlas#146) or run for minutes, and
-either would take the calling process with it; :func:`crackbake.uv.unwrap` therefore runs this
+either would take the calling process with it; :func:`crackbake.bake.uv.unwrap` therefore runs this
 module in a child process with a time limit.  It imports only numpy and xatlas so the child
 starts fast.
 
@@ -122,7 +122,7 @@ def _utilization(uv: np.ndarray, faces: np.ndarray) -> float:
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 2:
-        print("usage: python -m crackbake._xatlas_worker in.npz out.npz", file=sys.stderr)
+        print("usage: python -m crackbake.bake.xatlas_worker in.npz out.npz", file=sys.stderr)
         return 2
     with np.load(args[0]) as data:
         vertices = np.ascontiguousarray(data["vertices"], dtype=np.float64)

@@ -1,7 +1,8 @@
 """Initial stress fields on the simulation mesh (method.md §A2, §B6).
 
 Every source adds (or multiplies) a symmetric 3x3 **world-space** tensor per sim face lying in the
-face plane (``S @ n == 0``), tension positive: the convention of :mod:`crackbake.solver.fem`.
+face plane (``S @ n == 0``), tension positive: the convention of
+:mod:`crackbake.simulate.solver.fem`.
 Additive sources (impact, shrinkage, directional, curvature) are summed; painted weights then
 multiply the sum, and noise perturbs what is left, so a zero weight always means zero stress.
 
@@ -24,9 +25,9 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning, Mesh
-from crackbake.solver.fem import face_frames, face_geometry
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import Mesh
+from crackbake.simulate.solver.fem import face_frames, face_geometry
 
 # Curvature ratios are clipped at this multiple of the mesh's mean curvature so that a few sharp
 # creases cannot swamp every other source.
@@ -597,7 +598,7 @@ def _asset_barycentrics(sim, mesh: Mesh, geo: _Geometry) -> tuple[np.ndarray, np
             "simulation mesh does not match the asset mesh (asset_face out of range); "
             "rebuild it from this mesh"
         )
-    from crackbake.simmesh import asset_barycentric
+    from crackbake.simulate.simmesh import asset_barycentric
 
     bary = np.clip(asset_barycentric(mesh, af, geo.centroid), 0.0, None)
     bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
@@ -892,7 +893,7 @@ def vertex_weights(
         Named vertex attribute (a PLY vertex property, or a glTF ``_NAME`` attribute; the
         leading underscore may be left out).  ``None`` reads the vertex colours' luminance.
     object_name : str, optional
-        The same ``--object`` pick given to :func:`crackbake.mesh.load_mesh`, so the values line
+        The same ``--object`` pick given to :func:`crackbake.io.mesh.load_mesh`, so the values line
         up with its vertices.
 
     Returns
@@ -909,7 +910,7 @@ def vertex_weights(
     """
     import trimesh
 
-    from crackbake.mesh import _scene_geometries
+    from crackbake.io.mesh import _scene_geometries
 
     path = Path(mesh_path)
     if not path.is_file():

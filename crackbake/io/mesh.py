@@ -14,13 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
-
-
-class CrackbakeWarning(UserWarning):
-    """Something was adjusted or looks wrong but the run can go on."""
 
 
 @dataclass(frozen=True, eq=False)

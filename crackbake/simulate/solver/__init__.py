@@ -1,15 +1,15 @@
 """Crack solvers: grow a crack network on the simulation mesh from a stress field.
 
-Two methods share the FEM kernels of :mod:`crackbake.solver.fem`:
+Two methods share the FEM kernels of :mod:`crackbake.simulate.solver.fem`:
 
 * ``iben`` (default): Iben & O'Brien 2006/2009 — separation tensors, a max-priority queue, cracks
   cut through triangles (edge splits, node splits), residual pushed to the tips, local
-  quasi-static relaxation.  :mod:`crackbake.solver.iben`.
+  quasi-static relaxation.  :mod:`crackbake.simulate.solver.iben`.
 * ``thesis``: the 2023 NCCA MSc variant — tensors computed once, each crack grown to its end along
-  mesh edges, scalar relaxation between cracks.  :mod:`crackbake.solver.thesis`.
+  mesh edges, scalar relaxation between cracks.  :mod:`crackbake.simulate.solver.thesis`.
 
-Both take a :class:`crackbake.simmesh.SimMesh` and a :class:`crackbake.stress.StressField` and
-return a :class:`SolverResult`.
+Both take a :class:`crackbake.simulate.simmesh.SimMesh` and a
+:class:`crackbake.simulate.stress.StressField` and return a :class:`SolverResult`.
 """
 
 from __future__ import annotations

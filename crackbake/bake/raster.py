@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from crackbake.dilation import dilate
-from crackbake.errors import CrackbakeError
-from crackbake.gl import create_context, shader_source
-from crackbake.mesh import CrackbakeWarning
+from crackbake.bake.context import create_context, shader_source
+from crackbake.bake.dilation import dilate
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 
 #: Channels of :class:`CrackMaps` in EXR order, with their storage type.

@@ -70,8 +70,8 @@ def shader_dir() -> Path:
     An installed wheel carries them as ``crackbake/shaders``; a source checkout (editable install)
     has them at the repository's top level.
     """
-    here = Path(__file__).resolve().parent
-    for candidate in (here / "shaders", here.parent / "shaders"):
+    package = Path(__file__).resolve().parents[1]
+    for candidate in (package / "shaders", package.parent / "shaders"):
         if candidate.is_dir():
             return candidate
     raise CrackbakeError(

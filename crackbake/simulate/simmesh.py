@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackbake.errors import CrackbakeError
-from crackbake.mesh import Mesh, weld_by_position
+from crackbake.io.mesh import Mesh, weld_by_position
 
 #: Refuse sim meshes estimated above this many faces (memory and solver time explode).
 MAX_SIM_FACES = 20_000_000

@@ -2,8 +2,8 @@
 
 Most game assets come with good UVs, and xatlas is slow (about 45 s for 100k faces) and can
 crash, so :func:`prepare_uvs` keeps the asset's UVs whenever :func:`check_uvs` finds them usable.
-An unwrap runs in a child process (:mod:`crackbake._xatlas_worker`) with a time limit, packs every
-chart into ONE square page with square texels and a gutter, and is cached by mesh content.
+An unwrap runs in a child process (:mod:`crackbake.bake.xatlas_worker`) with a time limit, packs
+every chart into ONE square page with square texels and a gutter, and is cached by mesh content.
 
 Conventions: UVs are in [0, 1] with ``v`` pointing up (OBJ/Blender); texel ``(i, j)`` of a
 ``res`` x ``res`` page covers ``u`` in ``[i, i+1] / res`` and ``v`` in ``[j, j+1] / res`` (GL's
@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from crackbake.errors import CrackbakeError
-from crackbake.mesh import CrackbakeWarning, Mesh
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import Mesh
 
 UV_MODES = ("auto", "keep", "unwrap")
 
@@ -155,7 +155,7 @@ def uv_overlap_fraction(uv: np.ndarray, faces: np.ndarray, res: int = 1024) -> f
     """
     import moderngl
 
-    from crackbake.gl import create_context, shader_source
+    from crackbake.bake.context import create_context, shader_source
 
     uv = np.ascontiguousarray(uv, dtype=np.float32)
     faces = np.ascontiguousarray(faces, dtype=np.int32)
@@ -460,13 +460,13 @@ def _run_worker(
         np.savez(inp, vertices=vertices, faces=faces, res=np.int64(res), padding=np.int64(padding))
         env = os.environ.copy()
         # The child must import this very crackbake, installed or not.
-        package_parent = str(Path(__file__).resolve().parent.parent)
+        package_parent = str(Path(__file__).resolve().parents[2])
         env["PYTHONPATH"] = os.pathsep.join(
             p for p in (package_parent, env.get("PYTHONPATH", "")) if p
         )
         try:
             proc = subprocess.run(
-                [sys.executable, "-m", "crackbake._xatlas_worker", str(inp), str(out)],
+                [sys.executable, "-m", "crackbake.bake.xatlas_worker", str(inp), str(out)],
                 capture_output=True,
                 text=True,
                 timeout=timeout,

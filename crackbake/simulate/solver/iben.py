@@ -10,7 +10,7 @@ Algorithm (../shared/research/method.md §A, gaps resolved as in §B):
    crack normal ``n̂⁺`` comes from a *direction-averaged* tensor (each corner's ``m(f)``
    replaced by its mean over the opposite edge's direction, plus a seeded per-node grain
    where that is isotropic), and ``v⁺`` mostly from it, so that neither sees how the mesh is
-   laid out (see :func:`crackbake.solver.topology.node_update`): on a sim mesh refining a
+   laid out (see :func:`crackbake.simulate.solver.topology.node_update`): on a sim mesh refining a
    regular asset grid the paper's tensor steered cracks along the asset's straight edge lines.
 2. Loop (compiled, sequential): pop the node with the largest ``v⁺/τ``; cut the plane through it
    normal to ``n̂⁺`` (projected on the tangent plane) through its triangle fan, splitting the two
@@ -47,7 +47,7 @@ of the simulation mesh:
   compression.  A long crack thus releases its normal stress fully along itself, fading to zero
   at distance R, while stress parallel to it is untouched: parallel cracks keep a world spacing,
   and perpendicular ones still form T-junctions.  Free crack tips see the shadow without its
-  component along their own crack normal (:func:`crackbake.solver.topology.tip_principal`):
+  component along their own crack normal (:func:`crackbake.simulate.solver.topology.tip_principal`):
   their own crack's shadow (and that of cracks parallel to it) would otherwise stall them, so
   their opening stress stays raw, but the release of other cracks across their path counts.
   Before, tips read the raw stress: a concentric link started between two radial impact
@@ -168,8 +168,8 @@ import numpy as np
 from numba import njit, prange
 
 from crackbake.errors import CrackbakeError
-from crackbake.solver import CrackPath, SolverParams, SolverResult
-from crackbake.solver.topology import (
+from crackbake.simulate.solver import CrackPath, SolverParams, SolverResult
+from crackbake.simulate.solver.topology import (
     face_update,
     heap_pop,
     heap_push,

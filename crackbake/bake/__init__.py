@@ -1,0 +1,1 @@
+"""Baking: UVs (kept or unwrapped), the headless GL context, the GPU raster of the crack maps."""

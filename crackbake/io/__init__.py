@@ -1,0 +1,1 @@
+"""Reading and writing the pipeline's own inputs: asset meshes, images, the crack sidecar."""
