@@ -18,6 +18,13 @@ FORMATS = ("exr", "png", "glb", "preview")
 UV_MODES = ("auto", "keep", "unwrap")
 METHODS = ("iben", "thesis")
 RES_MIN, RES_MAX = 64, 16384
+#: Largest framebuffer edge of one bake pass (the bake tiles bigger textures): default, range.
+TILE_DEFAULT, TILE_MIN, TILE_MAX = 4096, 256, 16384
+#: Simulation mesh size in faces when neither ``--detail`` nor ``--sim-faces`` is given.
+SIM_FACES_DEFAULT = 100_000
+#: Impact radius, as a fraction of the bounding-box diagonal, when neither the impact nor the
+#: preset gives one.
+IMPACT_RADIUS_REL_DEFAULT = 0.15
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
 
 #: Solver and stress defaults when neither the command line nor a preset sets them.
@@ -39,7 +46,7 @@ SOLVER_DEFAULTS: dict = {
     "noise": 0.0,
     "curvature_bias": None,
     "curvature_density": None,
-    "sim_faces": 100_000,
+    "sim_faces": SIM_FACES_DEFAULT,
     "detail": None,
 }
 

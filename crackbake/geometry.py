@@ -1,0 +1,153 @@
+"""Small geometry helpers shared by every stage: normals, areas, barycentrics, edges.
+
+Plain functions over numpy arrays, in the spirit of ``trimesh.triangles``.  Vertices are
+``(V, 3)`` float64 in mesh units, faces ``(F, 3)`` int64 indices, counter-clockwise seen from
+the front.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Edge cross products ``(b - a) x (c - a)`` per face, (F, 3): twice the area times the
+    unit normal."""
+    tri = vertices[faces]
+    return np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Triangle areas, (F,), mesh units squared."""
+    return 0.5 * np.linalg.norm(face_cross(vertices, faces), axis=1)
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unit face normals, (F, 3); zero for degenerate faces."""
+    n = face_cross(vertices, faces)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def unit_rows(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``v`` (N, 3) scaled to unit length (zero rows stay zero) and their lengths (N,)."""
+    length = np.linalg.norm(v, axis=1)
+    return v / np.where(length > 0, length, 1.0)[:, None], length
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals, (V, 3); zero at vertices no face uses.
+
+    Vertices are not welded here: call :func:`weld_by_position` first where UV-seam copies of
+    a position must share one normal.
+    """
+    cross = face_cross(vertices, faces)  # 2 A n
+    n = len(vertices)
+    idx = faces.reshape(-1)
+    acc = np.empty((n, 3))
+    for a in range(3):
+        acc[:, a] = np.bincount(idx, weights=np.repeat(cross[:, a], 3), minlength=n)
+    return unit_rows(acc)[0]
+
+
+def weld_by_position(
+    vertices: np.ndarray, faces: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Merge vertices with identical positions (the copies made by UV seams).
+
+    Returns
+    -------
+    welded_vertices : (W, 3) float64
+    welded_faces : (F, 3) int64
+        Same faces, same order, indexing ``welded_vertices``.
+    inverse : (V,) int64
+        ``welded_vertices[inverse] == vertices``.
+    """
+    welded, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1).astype(np.int64)
+    return welded, inverse[faces], inverse
+
+
+def barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates of points ``p`` (K, D) in triangles ``tri`` (K, 3, D), D = 2 or 3.
+
+    A least-squares solve in each triangle's plane: points off the plane are projected onto
+    it, points outside the triangle get coordinates outside [0, 1] (no clamping), degenerate
+    triangles give (1, 0, 0).  Returns (K, 3), rows summing to 1.
+    """
+    e1 = tri[:, 1] - tri[:, 0]
+    e2 = tri[:, 2] - tri[:, 0]
+    d = p - tri[:, 0]
+    d11 = np.einsum("ij,ij->i", e1, e1)
+    d12 = np.einsum("ij,ij->i", e1, e2)
+    d22 = np.einsum("ij,ij->i", e2, e2)
+    p1 = np.einsum("ij,ij->i", d, e1)
+    p2 = np.einsum("ij,ij->i", d, e2)
+    det = d11 * d22 - d12 * d12
+    det = np.where(det != 0, det, 1.0)
+    b1 = (d22 * p1 - d12 * p2) / det
+    b2 = (d11 * p2 - d12 * p1) / det
+    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+
+
+def closest_on_triangles(
+    p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closest point to ``p`` on each triangle ``(a, b, c)``, each (K, 3) (``p`` may be (3,)).
+
+    Returns
+    -------
+    points : (K, 3)
+    bary : (K, 3)
+        Barycentric coordinates of ``points``, each in [0, 1].
+    """
+    ab, ac, ap = b - a, c - a, p - a
+    d00 = np.einsum("ka,ka->k", ab, ab)
+    d01 = np.einsum("ka,ka->k", ab, ac)
+    d11 = np.einsum("ka,ka->k", ac, ac)
+    d20 = np.einsum("ka,ka->k", ap, ab)
+    d21 = np.einsum("ka,ka->k", ap, ac)
+    den = d00 * d11 - d01 * d01
+    ok = den > 1e-300 * np.maximum(d00 * d11, 1e-300)
+    safe = np.where(ok, den, 1.0)
+    v = (d11 * d20 - d01 * d21) / safe
+    w = (d00 * d21 - d01 * d20) / safe
+    u = 1.0 - v - w
+    inside = ok & (u >= 0) & (v >= 0) & (w >= 0)
+    bary = np.stack([u, v, w], axis=1)
+    best = a + v[:, None] * ab + w[:, None] * ac
+    best_d = np.where(inside, np.einsum("ka,ka->k", best - p, best - p), np.inf)
+    # Projection outside the triangle: the closest point lies on one of its edges.
+    for i, (s, e) in enumerate(((a, b), (b, c), (c, a))):
+        se = e - s
+        ll = np.einsum("ka,ka->k", se, se)
+        t = np.clip(np.einsum("ka,ka->k", p - s, se) / np.where(ll > 0, ll, 1.0), 0.0, 1.0)
+        q = s + t[:, None] * se
+        dq = np.einsum("ka,ka->k", q - p, q - p)
+        better = dq < best_d
+        if better.any():
+            bb = np.zeros((better.sum(), 3))
+            bb[:, i] = 1.0 - t[better]
+            bb[:, (i + 1) % 3] = t[better]
+            bary[better] = bb
+            best[better] = q[better]
+            best_d = np.where(better, dq, best_d)
+    return best, bary
+
+
+def edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges (E, 2), sorted, low index first, and how many faces use each (E,)."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e.sort(axis=1)
+    # One int64 key per edge: a 1-D unique is far faster than np.unique(axis=0).
+    key = e[:, 0] * np.int64(n_vertices) + e[:, 1]
+    uniq, counts = np.unique(key, return_counts=True)
+    return np.stack([uniq // n_vertices, uniq % n_vertices], axis=1), counts
+
+
+def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Per-vertex flag (V,) bool: the vertex lies on an edge used by exactly one face."""
+    e, counts = edges(faces, n_vertices)
+    flag = np.zeros(n_vertices, bool)
+    flag[e[counts == 1].ravel()] = True
+    return flag

@@ -1,0 +1,89 @@
+"""Shared test factories and the session's EGL context.
+
+Factories build meshes in memory (the project's tests never read ``../shared``):
+
+* :func:`plate_mesh`: a square plate as a :class:`crackbake.io.mesh.Mesh`, an n x n grid of
+  squares (2 n^2 triangles), optionally with moved inner vertices, UVs = (x, y) / size;
+* :func:`sim_plate`: a jittered, Delaunay-triangulated unit plate duck-typed as a
+  :class:`crackbake.simulate.simmesh.SimMesh`, what the solver tests run on.
+
+``gl_ctx`` is one headless EGL context for the whole session; every test that uses it is
+checked for a pending GL error afterwards, as moderngl's own test suite does.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from crackbake.geometry import vertex_normals, weld_by_position
+from crackbake.io.mesh import Mesh
+
+
+def grid_faces(nx: int, ny: int) -> np.ndarray:
+    """Faces of an (nx+1) x (ny+1) vertex grid indexed ``i * (ny + 1) + j``, counter-clockwise
+    in the (i, j) plane: (2 nx ny, 3) int64."""
+    idx = np.arange((nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    return np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]).reshape(-1, 3)
+
+
+def plate_mesh(cells: int, size: float = 1.0, wobble: float = 0.0, seed: int = 0,
+               uv: bool = True, name: str = "plate") -> Mesh:
+    """Flat square plate in z = 0 from (0, 0) to (size, size), 2 cells^2 triangles.
+
+    ``wobble`` moves inner vertices by up to ±wobble/2 of a cell (seeded).
+    """
+    t = np.linspace(0.0, size, cells + 1)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    xy = np.stack([x.ravel(), y.ravel()], 1)
+    inner = ((xy > 0) & (xy < size)).all(axis=1)
+    if wobble:
+        rng = np.random.default_rng(seed)
+        xy[inner] += wobble * (size / cells) * rng.uniform(-0.5, 0.5, (int(inner.sum()), 2))
+    vertices = np.column_stack([xy, np.zeros(len(xy))])
+    faces = grid_faces(cells, cells).astype(np.int64)
+    wv, wf, inverse = weld_by_position(vertices, faces)
+    return Mesh(vertices=vertices, faces=faces, uv=xy / size if uv else None,
+                normals=vertex_normals(wv, wf)[inverse], source=f"{name}.obj", name=name)
+
+
+def sim_plate(n: int, jitter: float = 0.35, seed: int = 1) -> SimpleNamespace:
+    """Unit plate, n x n jittered grid points, Delaunay triangulated, normals +z.
+
+    Duck-typed sim mesh: ``vertices``, ``faces``, ``asset_face`` (two sim faces per asset face
+    where possible, so asset faces are not all distinct), ``edge_length``, ``boundary=None``
+    (the solver finds it).
+    """
+    h = 1.0 / n
+    x, y = np.meshgrid(np.arange(n + 1) * h, np.arange(n + 1) * h, indexing="ij")
+    p = np.stack([x.ravel(), y.ravel()], 1)
+    inner = (p > 1e-9).all(1) & (p < 1 - 1e-9).all(1)
+    p[inner] += np.random.default_rng(seed).uniform(-jitter, jitter, (inner.sum(), 2)) * h
+    tri = Delaunay(p).simplices.astype(np.int64)
+    v = np.concatenate([p, np.zeros((len(p), 1))], 1)
+    cr = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
+    tri[cr < 0] = tri[cr < 0][:, [0, 2, 1]]
+    tri = tri[np.abs(cr) > 1e-12 * h * h]
+    return SimpleNamespace(vertices=v, faces=tri, asset_face=np.arange(len(tri)) // 2,
+                           edge_length=h, boundary=None)
+
+
+@pytest.fixture(scope="session")
+def gl_session():
+    from crackbake.bake.context import create_context
+
+    ctx = create_context()
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture
+def gl_ctx(gl_session):
+    """The session's EGL context; fails the test if it left a GL error behind."""
+    assert gl_session.error == "GL_NO_ERROR"
+    yield gl_session
+    assert gl_session.error == "GL_NO_ERROR"
