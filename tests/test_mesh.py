@@ -143,3 +143,32 @@ def test_errors(tmp_path):
     garbage.write_bytes(b"not a glb at all")
     with pytest.raises(CrackbakeError, match="could not read"):
         load_mesh(garbage)
+
+
+def test_vertex_attributes_are_read_with_the_mesh(tmp_path):
+    """A PLY with a per-vertex scalar and colours: the weights come from the loaded Mesh, with
+    no second read of the file (it is gone by then)."""
+    from crackbake.io.mesh import VERTEX_COLOURS
+    from crackbake.simulate.stress import vertex_weights
+
+    box = trimesh.creation.box()
+    n = len(box.vertices)
+    wt = np.arange(n) / n
+    header = [
+        "ply", "format ascii 1.0", f"element vertex {n}",
+        *[f"property float {c}" for c in ("x", "y", "z", "wt")],
+        *[f"property uchar {c}" for c in ("red", "green", "blue")],
+        f"element face {len(box.faces)}", "property list uchar int vertex_indices", "end_header",
+    ]
+    rows = [f"{x} {y} {z} {w} 255 0 0" for (x, y, z), w in zip(box.vertices, wt, strict=True)]
+    rows += [f"3 {a} {b} {c}" for a, b, c in box.faces]
+    path = tmp_path / "painted.ply"
+    path.write_text("\n".join(header + rows) + "\n")
+    mesh = load_mesh(path)
+    path.unlink()
+    assert {"wt", "red", VERTEX_COLOURS} <= set(mesh.attributes)
+    assert all(len(a) == len(mesh.vertices) for a in mesh.attributes.values())
+    assert np.allclose(vertex_weights(mesh, "wt"), wt)
+    assert np.allclose(vertex_weights(mesh, None), 0.2126)  # luminance of pure red
+    with pytest.raises(CrackbakeError, match=r"no vertex attribute 'paint'; available: .*wt"):
+        vertex_weights(mesh, "paint")

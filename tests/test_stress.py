@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.io.mesh import Mesh, vertex_normals
+from crackbake.io.mesh import Mesh, load_mesh, vertex_normals
 from crackbake.simulate.solver.fem import face_geometry
 from crackbake.simulate.stress import (
     CurvatureSource,
@@ -452,12 +452,16 @@ def test_vertex_weights_from_ply_and_glb(tmp_path):
     lines += [f"{x} {y} {z} {w} 255 255 255" for (x, y, z), w in zip(box.vertices, wt, strict=True)]
     lines += [f"3 {a} {b} {c}" for a, b, c in box.faces]
     (tmp_path / "m.ply").write_text("\n".join(lines) + "\n")
-    assert np.allclose(vertex_weights(tmp_path / "m.ply", "wt"), wt)
-    assert np.allclose(vertex_weights(tmp_path / "m.ply", None), 1.0)
+    ply = load_mesh(tmp_path / "m.ply")
+    assert np.allclose(vertex_weights(ply, "wt"), wt)
+    assert np.allclose(vertex_weights(ply, None), 1.0)
     with pytest.raises(CrackbakeError, match="available: .*wt"):
-        vertex_weights(tmp_path / "m.ply", "paint")
+        vertex_weights(ply, "paint")
 
     box.vertex_attributes["_paint"] = wt.astype(np.float32)
     box.export(tmp_path / "m.glb")
+    glb = load_mesh(tmp_path / "m.glb")
+    assert np.allclose(vertex_weights(glb, "paint"), wt, atol=1e-6)
+    assert vertex_weights(glb, None) is None  # no vertex colours
+    # A path still works (the pipeline's older call): the file is loaded once more.
     assert np.allclose(vertex_weights(tmp_path / "m.glb", "paint"), wt, atol=1e-6)
-    assert vertex_weights(tmp_path / "m.glb", None) is None  # no vertex colours

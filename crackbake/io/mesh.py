@@ -9,7 +9,7 @@ never cut cracks or stress.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +17,10 @@ import numpy as np
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+# Key of the vertex colours in :attr:`Mesh.attributes` (also how error messages list them).
+VERTEX_COLOURS = "(vertex colours)"
+# PLY vertex properties that are geometry, not painted attributes.
+_PLY_GEOMETRY = {"x", "y", "z", "nx", "ny", "nz"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +42,13 @@ class Mesh:
         Path the mesh was read from.
     name : str
         Object name (file stem, or the picked/concatenated object names).
+    attributes : dict of str to (V, ...) array
+        Per-vertex attributes read with the mesh, in the file's dtype, rows aligned with
+        ``vertices``: PLY vertex properties other than position and normal, glTF custom
+        attributes (names as stored, e.g. ``_NAME``), and the vertex colours (RGBA) under
+        :data:`VERTEX_COLOURS`.  Only attributes every concatenated object has are kept.
+    objects : int
+        How many objects of the file were concatenated into this mesh.
     """
 
     vertices: np.ndarray
@@ -46,6 +57,8 @@ class Mesh:
     normals: np.ndarray
     source: str = ""
     name: str = "mesh"
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    objects: int = 1
 
     @property
     def bbox_min(self) -> np.ndarray:
@@ -272,6 +285,8 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
         normals=normals,
         source=str(path),
         name=name,
+        attributes=_concatenate_attributes([_vertex_attributes(g) for g in geoms]),
+        objects=len(geoms),
     )
 
 
@@ -293,3 +308,36 @@ def _file_normals(geom) -> np.ndarray | None:
     if not np.isfinite(n).all() or (length < 1e-12).any():
         return None
     return n / length
+
+
+def _vertex_attributes(geom) -> dict[str, np.ndarray]:
+    """Per-vertex attributes of one trimesh geometry, one row per vertex, the file's dtype.
+
+    trimesh's own ``vertex_attributes`` (glTF custom attributes) win over the raw PLY
+    properties of the same name; vertex colours are stored under :data:`VERTEX_COLOURS`.
+    """
+    n = len(geom.vertices)
+    out: dict[str, np.ndarray] = {}
+    raw = (geom.metadata or {}).get("_ply_raw", {}).get("vertex", {}).get("data", {})
+    if isinstance(raw, dict):
+        for key in set(raw) - _PLY_GEOMETRY:
+            out[key] = np.asarray(raw[key])
+    for key, values in (getattr(geom, "vertex_attributes", {}) or {}).items():
+        out[key] = np.asarray(values)
+    if getattr(geom.visual, "kind", None) == "vertex":
+        out[VERTEX_COLOURS] = np.asarray(geom.visual.vertex_colors)
+    return {k: v for k, v in out.items() if v.ndim >= 1 and len(v) == n}
+
+
+def _concatenate_attributes(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The attributes every object has, stacked in object order (those that do not stack are
+    left out)."""
+    if len(parts) == 1:
+        return parts[0]
+    out = {}
+    for key in set.intersection(*(set(p) for p in parts)):
+        try:
+            out[key] = np.concatenate([p[key] for p in parts])
+        except ValueError:  # different trailing shapes: not one attribute
+            continue
+    return out

@@ -14,7 +14,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.images import LUMA
-from crackbake.io.mesh import Mesh
+from crackbake.io.mesh import VERTEX_COLOURS, Mesh, load_mesh
 from crackbake.simulate.simmesh import asset_barycentric
 from crackbake.simulate.stress.sources import WeightSource
 
@@ -91,25 +91,15 @@ def weight_field(
 
 
 
-def _attribute_names(geom) -> list[str]:
-    names = set(getattr(geom, "vertex_attributes", {}) or {})
-    raw = (geom.metadata or {}).get("_ply_raw", {}).get("vertex", {}).get("data", {})
-    if isinstance(raw, dict):
-        names |= set(raw) - {"x", "y", "z", "nx", "ny", "nz"}
-    if getattr(geom.visual, "kind", None) == "vertex":
-        names.add("(vertex colours)")
-    return sorted(names)
+def _attribute_names(attributes: dict) -> list[str]:
+    return sorted(attributes)
 
 
-def _attribute_values(geom, name: str) -> np.ndarray | None:
-    attrs = getattr(geom, "vertex_attributes", {}) or {}
-    raw = (geom.metadata or {}).get("_ply_raw", {}).get("vertex", {}).get("data", {})
+def _attribute_values(attributes: dict, name: str) -> np.ndarray | None:
     # glTF requires custom attributes to start with '_'; accept the name with or without it.
     for key in (name, "_" + name, name.lstrip("_")):
-        if key in attrs:
-            return np.asarray(attrs[key])
-        if isinstance(raw, dict) and key in raw:
-            return np.asarray(raw[key])
+        if key in attributes and key != VERTEX_COLOURS:
+            return attributes[key]
     return None
 
 
@@ -127,74 +117,57 @@ def _to_scalar(values: np.ndarray, n: int, what: str, path: Path) -> np.ndarray:
 
 
 def vertex_weights(
-    mesh_path, attribute: str | None = None, object_name: str | None = None
+    mesh: Mesh | str | Path, attribute: str | None = None, object_name: str | None = None
 ) -> np.ndarray | None:
-    """Per-asset-vertex weights painted in a mesh file.
+    """Per-asset-vertex weights painted in the mesh file, from the attributes read with it.
 
     Parameters
     ----------
-    mesh_path : str or Path
-        The asset file (PLY or glTF/GLB; any trimesh-readable format with vertex colours works).
+    mesh : Mesh
+        The asset as :func:`crackbake.io.mesh.load_mesh` returned it (its ``attributes`` hold the
+        painted values; nothing is read again).  A path still works: the file is then loaded
+        with ``object_name``.
     attribute : str, optional
         Named vertex attribute (a PLY vertex property, or a glTF ``_NAME`` attribute; the
         leading underscore may be left out).  ``None`` reads the vertex colours' luminance.
     object_name : str, optional
-        The same ``--object`` pick given to :func:`crackbake.io.mesh.load_mesh`, so the values line
-        up with its vertices.
+        Only with a path: the same ``--object`` pick given to ``load_mesh``.
 
     Returns
     -------
     (V,) float64 or None
-        One weight per vertex of ``load_mesh(mesh_path, object_name)``, used as is (1 = full
-        strength; colours map to [0, 1]).  ``None`` only when ``attribute`` is ``None`` and the
-        file has no vertex colours.
+        One weight per vertex of ``mesh``, used as is (1 = full strength; colours map to
+        [0, 1]).  ``None`` only when ``attribute`` is ``None`` and the mesh has no vertex
+        colours.
 
     Raises
     ------
     CrackbakeError
-        Unreadable file, or no attribute of that name (the message lists those available).
+        No attribute of that name (the message lists those available), or values that are not
+        one finite number per vertex.
     """
-    import trimesh
-
-    from crackbake.io.mesh import _scene_geometries
-
-    path = Path(mesh_path)
-    if not path.is_file():
-        raise CrackbakeError(f"{path}: file not found; check the path")
-    try:
-        loaded = trimesh.load(str(path), file_type=path.suffix.lower()[1:], process=False)
-    except Exception as exc:  # trimesh raises many types for corrupt input
-        raise CrackbakeError(f"{path}: could not read vertex weights ({exc})") from exc
-    if isinstance(loaded, trimesh.Scene):
+    if not isinstance(mesh, Mesh):
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", CrackbakeWarning)  # load_mesh already warned
-            geoms = _scene_geometries(loaded, object_name, path)
+            warnings.simplefilter("ignore", CrackbakeWarning)  # the caller's load_mesh warned
+            mesh = load_mesh(mesh, object_name)
+    path = Path(mesh.source)
+    n = len(mesh.vertices)
+    if attribute is None:
+        colours = mesh.attributes.get(VERTEX_COLOURS)
+        if colours is None:
+            if mesh.objects == 1:
+                return None
+            raise CrackbakeError(
+                f"{path}: some objects have no vertex colours; paint all of them or pick "
+                "one with --object"
+            )
+        weights = _to_scalar(colours, n, "vertex colours", path)
     else:
-        geoms = [loaded]
-    geoms = [g for g in geoms if isinstance(g, trimesh.Trimesh) and len(g.faces) > 0]
-    if not geoms:
-        raise CrackbakeError(f"{path}: no triangle mesh to read vertex weights from")
-
-    parts = []
-    for g in geoms:
-        n = len(g.vertices)
-        if attribute is None:
-            if getattr(g.visual, "kind", None) != "vertex":
-                if len(geoms) == 1:
-                    return None
-                raise CrackbakeError(
-                    f"{path}: some objects have no vertex colours; paint all of them or pick "
-                    "one with --object"
-                )
-            colours = np.asarray(g.visual.vertex_colors)
-            parts.append(_to_scalar(colours, n, "vertex colours", path))
-            continue
-        values = _attribute_values(g, attribute)
+        values = _attribute_values(mesh.attributes, attribute)
         if values is None:
-            names = ", ".join(_attribute_names(g)) or "none"
+            names = ", ".join(_attribute_names(mesh.attributes)) or "none"
             raise CrackbakeError(f"{path}: no vertex attribute '{attribute}'; available: {names}")
-        parts.append(_to_scalar(values, n, f"attribute '{attribute}'", path))
-    weights = np.concatenate(parts)
+        weights = _to_scalar(values, n, f"attribute '{attribute}'", path)
     if not np.isfinite(weights).all():
         raise CrackbakeError(f"{path}: vertex weights hold NaN or infinite values; fix them")
     return weights
