@@ -9,7 +9,8 @@ import pytest
 import trimesh
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.io.mesh import load_mesh, vertex_normals, weld_by_position
+from crackbake.geometry import weld_by_position, welded_vertex_normals
+from crackbake.io.mesh import load_mesh
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 
@@ -108,7 +109,7 @@ def test_gltf_with_uvs_and_scene_objects(tmp_path):
 
 def test_vertex_normals_are_smooth_across_seams():
     m = load_mesh(EXAMPLE)
-    n = vertex_normals(m.vertices, m.faces)
+    n = welded_vertex_normals(m.vertices, m.faces)
     _, _, inverse = weld_by_position(m.vertices, m.faces)
     # Seam copies (same welded index) get the same normal.
     for idx in np.flatnonzero(np.bincount(inverse) > 1)[:50]:

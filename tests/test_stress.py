@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.io.mesh import Mesh, load_mesh, vertex_normals
+from crackbake.geometry import welded_vertex_normals
+from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.simulate.solver.fem import face_geometry
 from crackbake.simulate.stress import (
     CurvatureSource,
@@ -43,7 +44,7 @@ def make(vertices, faces, uv=None):
     """An asset Mesh and a sim mesh that is the same triangles (duck-typed SimMesh)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    mesh = Mesh(vertices, faces, uv, vertex_normals(vertices, faces))
+    mesh = Mesh(vertices, faces, uv, welded_vertex_normals(vertices, faces))
     # Each node sits on a corner of some face holding it (stress only reads asset_face).
     node_face = np.zeros(len(vertices), dtype=np.int64)
     bary = np.zeros((len(vertices), 3))

@@ -15,6 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.geometry import face_cross, weld_by_position, welded_vertex_normals
+
+# Still importable from here for callers outside io/ (tests/test_uv.py imports vertex_normals);
+# the implementations live in crackbake.geometry.
+vertex_normals = welded_vertex_normals
+__all__ = ["Mesh", "load_mesh", "vertex_normals", "weld_by_position", "SUPPORTED_SUFFIXES",
+           "VERTEX_COLOURS"]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 # Key of the vertex colours in :attr:`Mesh.attributes` (also how error messages list them).
@@ -83,49 +90,6 @@ class Mesh:
             "bbox_max": [float(x) for x in self.bbox_max],
             "has_uv": self.uv is not None,
         }
-
-
-def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Unit face normals, (F, 3); zero for degenerate faces."""
-    tri = vertices[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals, (V, 3), accumulated over positions.
-
-    Vertices that share a position (UV-seam splits) get the same normal, so shading is smooth
-    across UV seams.
-    """
-    wv, wf, inverse = weld_by_position(vertices, faces)
-    tri = wv[wf]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 * area
-    acc = np.zeros_like(wv)
-    for k in range(3):
-        np.add.at(acc, wf[:, k], n)
-    length = np.linalg.norm(acc, axis=1, keepdims=True)
-    acc = np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
-    return acc[inverse]
-
-
-def weld_by_position(
-    vertices: np.ndarray, faces: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Merge vertices with identical positions (the copies made by UV seams).
-
-    Returns
-    -------
-    welded_vertices : (W, 3) float64
-    welded_faces : (F, 3) int64
-        Same faces, same order, indexing ``welded_vertices``.
-    inverse : (V,) int64
-        ``welded_vertices[inverse] == vertices``.
-    """
-    welded, inverse = np.unique(vertices, axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1).astype(np.int64)
-    return welded, inverse[faces], inverse
 
 
 def _scene_geometries(scene, object_name: str | None, path: Path):
@@ -260,10 +224,9 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     if all(n is not None for n in normal_parts):
         normals = np.concatenate(normal_parts)
     else:
-        normals = vertex_normals(vertices, faces)
+        normals = welded_vertex_normals(vertices, faces)
 
-    tri = vertices[faces]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area2 = np.linalg.norm(face_cross(vertices, faces), axis=1)
     if not (area2 > 0).any():
         raise CrackbakeError(f"{path}: every face has zero area; crackbake needs a surface")
     n_degenerate = int((area2 <= 0).sum())
