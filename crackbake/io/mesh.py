@@ -123,6 +123,57 @@ def _scene_geometries(scene, object_name: str | None, path: Path):
     return [g for _, _, g in items]
 
 
+def _read_file(path: Path):
+    """The trimesh object of a mesh file, after the path and format checks."""
+    import trimesh
+
+    if not path.exists():
+        raise CrackbakeError(f"{path}: file not found; check the path")
+    if path.is_dir():
+        raise CrackbakeError(f"{path}: is a directory; pass a mesh file")
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise CrackbakeError(
+            f"{path}: unsupported format '{suffix or '(none)'}'; "
+            f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
+        )
+    try:
+        loaded = trimesh.load(str(path), file_type=suffix[1:], process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt input
+        raise CrackbakeError(
+            f"{path}: could not read the {suffix[1:].upper()} file ({exc}); "
+            "check that it is a valid mesh"
+        ) from exc
+    return loaded
+
+
+def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
+    """Vertices (V, 3) and faces (F, 3) of the objects concatenated and checked, with the
+    per-object UV and file-normal parts."""
+    vertices, faces, uv_parts, normal_parts = [], [], [], []
+    offset = 0
+    for g, u in zip(geoms, uvs, strict=True):
+        v = np.asarray(g.vertices, dtype=np.float64)
+        f = np.asarray(g.faces, dtype=np.int64)
+        vertices.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+        if keep_uv:
+            uv_parts.append(u)
+        normal_parts.append(_file_normals(g))
+    vertices = np.concatenate(vertices)
+    faces = np.concatenate(faces)
+
+    if not np.isfinite(vertices).all():
+        bad = int((~np.isfinite(vertices).all(axis=1)).sum())
+        raise CrackbakeError(
+            f"{path}: {bad} vertices have NaN or infinite coordinates; repair the mesh first"
+        )
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
+    return vertices, faces, uv_parts, normal_parts
+
+
 def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     """Load a triangle mesh from OBJ, PLY, STL, OFF, glTF or GLB.
 
@@ -144,24 +195,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     import trimesh
 
     path = Path(path)
-    if not path.exists():
-        raise CrackbakeError(f"{path}: file not found; check the path")
-    if path.is_dir():
-        raise CrackbakeError(f"{path}: is a directory; pass a mesh file")
-    suffix = path.suffix.lower()
-    if suffix not in SUPPORTED_SUFFIXES:
-        raise CrackbakeError(
-            f"{path}: unsupported format '{suffix or '(none)'}'; "
-            f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
-        )
-    try:
-        loaded = trimesh.load(str(path), file_type=suffix[1:], process=False)
-    except Exception as exc:  # trimesh raises many types for corrupt input
-        raise CrackbakeError(
-            f"{path}: could not read the {suffix[1:].upper()} file ({exc}); "
-            "check that it is a valid mesh"
-        ) from exc
-
+    loaded = _read_file(path)
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):
@@ -190,27 +224,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
             stacklevel=2,
         )
 
-    vertices, faces, uv_parts, normal_parts = [], [], [], []
-    offset = 0
-    for g, u in zip(geoms, uvs, strict=True):
-        v = np.asarray(g.vertices, dtype=np.float64)
-        f = np.asarray(g.faces, dtype=np.int64)
-        vertices.append(v)
-        faces.append(f + offset)
-        offset += len(v)
-        if keep_uv:
-            uv_parts.append(u)
-        normal_parts.append(_file_normals(g))
-    vertices = np.concatenate(vertices)
-    faces = np.concatenate(faces)
-
-    if not np.isfinite(vertices).all():
-        bad = int((~np.isfinite(vertices).all(axis=1)).sum())
-        raise CrackbakeError(
-            f"{path}: {bad} vertices have NaN or infinite coordinates; repair the mesh first"
-        )
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
+    vertices, faces, uv_parts, normal_parts = _stack(geoms, uvs, keep_uv, path)
 
     uv = np.concatenate(uv_parts) if keep_uv else None
     if uv is not None and not np.isfinite(uv).all():
@@ -237,10 +251,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
             stacklevel=2,
         )
 
-    if object_name is not None:
-        name = object_name
-    else:
-        name = path.stem
+    name = object_name if object_name is not None else path.stem
     return Mesh(
         vertices=vertices,
         faces=faces,
