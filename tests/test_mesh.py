@@ -9,7 +9,8 @@ import pytest
 import trimesh
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.io.mesh import load_mesh, vertex_normals, weld_by_position
+from crackbake.geometry import weld_by_position, welded_vertex_normals
+from crackbake.io.mesh import load_mesh
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 
@@ -108,7 +109,7 @@ def test_gltf_with_uvs_and_scene_objects(tmp_path):
 
 def test_vertex_normals_are_smooth_across_seams():
     m = load_mesh(EXAMPLE)
-    n = vertex_normals(m.vertices, m.faces)
+    n = welded_vertex_normals(m.vertices, m.faces)
     _, _, inverse = weld_by_position(m.vertices, m.faces)
     # Seam copies (same welded index) get the same normal.
     for idx in np.flatnonzero(np.bincount(inverse) > 1)[:50]:
@@ -143,3 +144,32 @@ def test_errors(tmp_path):
     garbage.write_bytes(b"not a glb at all")
     with pytest.raises(CrackbakeError, match="could not read"):
         load_mesh(garbage)
+
+
+def test_vertex_attributes_are_read_with_the_mesh(tmp_path):
+    """A PLY with a per-vertex scalar and colours: the weights come from the loaded Mesh, with
+    no second read of the file (it is gone by then)."""
+    from crackbake.io.mesh import VERTEX_COLOURS
+    from crackbake.simulate.stress import vertex_weights
+
+    box = trimesh.creation.box()
+    n = len(box.vertices)
+    wt = np.arange(n) / n
+    header = [
+        "ply", "format ascii 1.0", f"element vertex {n}",
+        *[f"property float {c}" for c in ("x", "y", "z", "wt")],
+        *[f"property uchar {c}" for c in ("red", "green", "blue")],
+        f"element face {len(box.faces)}", "property list uchar int vertex_indices", "end_header",
+    ]
+    rows = [f"{x} {y} {z} {w} 255 0 0" for (x, y, z), w in zip(box.vertices, wt, strict=True)]
+    rows += [f"3 {a} {b} {c}" for a, b, c in box.faces]
+    path = tmp_path / "painted.ply"
+    path.write_text("\n".join(header + rows) + "\n")
+    mesh = load_mesh(path)
+    path.unlink()
+    assert {"wt", "red", VERTEX_COLOURS} <= set(mesh.attributes)
+    assert all(len(a) == len(mesh.vertices) for a in mesh.attributes.values())
+    assert np.allclose(vertex_weights(mesh, "wt"), wt)
+    assert np.allclose(vertex_weights(mesh, None), 0.2126)  # luminance of pure red
+    with pytest.raises(CrackbakeError, match=r"no vertex attribute 'paint'; available: .*wt"):
+        vertex_weights(mesh, "paint")

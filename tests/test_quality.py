@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import plate_mesh
 
-from crackbake.io.mesh import Mesh, vertex_normals
+from crackbake.geometry import welded_vertex_normals
+from crackbake.io.mesh import Mesh
 from crackbake.simulate.simmesh import build_simmesh
 from crackbake.simulate.solver import SolverParams
 from crackbake.simulate.solver.iben import solve_iben
@@ -19,18 +21,13 @@ from crackbake.simulate.stress import CurvatureSource, DirectionalSource, Shrink
 
 
 def make_mesh(vertices: np.ndarray, faces: np.ndarray, name: str) -> Mesh:
-    return Mesh(vertices=vertices, faces=faces, uv=None, normals=vertex_normals(vertices, faces),
-                source=f"{name}.obj", name=name)
+    return Mesh(vertices=vertices, faces=faces, uv=None,
+                normals=welded_vertex_normals(vertices, faces), source=f"{name}.obj", name=name)
 
 
 def plate(n: int) -> Mesh:
     """A 1 x 1 plate made of n x n squares (2 n^2 triangles)."""
-    x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
-    v = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    f = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]).reshape(-1, 3)
-    return make_mesh(v, f, f"plate{n}")
+    return plate_mesh(n, uv=False, name=f"plate{n}")
 
 
 def cylinder(n_around: int = 48, n_along: int = 24, radius: float = 0.3, length: float = 1.5):

@@ -6,11 +6,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import plate_mesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from crackbake.errors import CrackbakeError
-from crackbake.io.mesh import Mesh, load_mesh, vertex_normals
+from crackbake.geometry import welded_vertex_normals
+from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.simulate.simmesh import SimMesh, asset_barycentric, build_simmesh, target_edge_length
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
@@ -22,7 +24,8 @@ SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 def _mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    return Mesh(vertices=vertices, faces=faces, uv=None, normals=vertex_normals(vertices, faces))
+    normals = welded_vertex_normals(vertices, faces)
+    return Mesh(vertices=vertices, faces=faces, uv=None, normals=normals)
 
 
 def _grid_faces(nu: int, nv: int, wrap_u: bool, wrap_v: bool) -> np.ndarray:
@@ -38,14 +41,7 @@ def _grid_faces(nu: int, nv: int, wrap_u: bool, wrap_v: bool) -> np.ndarray:
 
 def plate(cells: int, size: float = 2.0, wobble: float = 0.0, seed: int = 0) -> Mesh:
     """Flat square plate in z=0, 2 * cells^2 triangles; ``wobble`` moves inner vertices."""
-    t = np.linspace(0.0, size, cells + 1)
-    x, y = np.meshgrid(t, t, indexing="ij")
-    xy = np.stack([x.ravel(), y.ravel()], 1)
-    inner = ((xy > 0) & (xy < size)).all(axis=1)
-    rng = np.random.default_rng(seed)
-    xy[inner] += wobble * (size / cells) * rng.uniform(-0.5, 0.5, (int(inner.sum()), 2))
-    vertices = np.column_stack([xy, np.zeros(len(xy))])
-    return _mesh(vertices, _grid_faces(cells, cells, False, False))
+    return plate_mesh(cells, size, wobble, seed, uv=False)
 
 
 def torus(nu: int, nv: int, bump: float = 0.0, major: float = 1.0, minor: float = 0.4) -> Mesh:

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from scipy.spatial import Delaunay
+from conftest import sim_plate
 
 from crackbake.simulate.solver import SolverParams
 from crackbake.simulate.solver.thesis import (
@@ -16,37 +16,19 @@ from crackbake.simulate.solver.thesis import (
 )
 
 
-def plate(n: int, size: float = 1.0, jitter: float = 0.3, seed: int = 0) -> SimpleNamespace:
-    """Jittered (n+1)^2-point square plate in z=0, Delaunay-triangulated, duck-typed SimMesh."""
-    rng = np.random.default_rng(seed)
-    h = size / n
-    g = np.linspace(0.0, size, n + 1)
-    xx, yy = np.meshgrid(g, g, indexing="ij")
-    p = np.stack([xx.ravel(), yy.ravel()], 1)
-    inner = (p > 0).all(1) & (p < size).all(1)
-    p[inner] += rng.uniform(-jitter * h, jitter * h, (inner.sum(), 2))
-    tri = Delaunay(p)
-    faces = tri.simplices.astype(np.int64)
-    # Counter-clockwise (normal +z) for every face.
-    a, b, c = p[faces[:, 0]], p[faces[:, 1]], p[faces[:, 2]]
-    cw = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0] < 0
-    faces[cw] = faces[cw][:, [0, 2, 1]]
-    v = np.column_stack([p, np.zeros(len(p))])
-    boundary = ~inner
+def plate(n: int, seed: int = 0) -> SimpleNamespace:
+    """The conftest sim plate (jitter 0.3) with boundary flags, the mean edge length, and asset
+    faces on a coarse 4x4 grid over it, so asset boundaries cross it."""
+    sim = sim_plate(n, jitter=0.3, seed=seed)
+    v, faces = sim.vertices, sim.faces
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    edge_length = float(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean())
-    # Asset faces: quads of a coarse 4x4 grid over the plate, so asset boundaries cross it.
-    cen = v[faces].mean(1)
-    cell = np.minimum((cen[:, :2] / size * 4).astype(np.int64), 3)
-    return SimpleNamespace(
-        vertices=v,
-        faces=faces,
-        asset_face=cell[:, 0] * 4 + cell[:, 1],
-        boundary=boundary,
-        edge_length=edge_length,
-        node_face=np.zeros(len(v), dtype=np.int64),
-        node_bary=np.zeros((len(v), 3)),
-    )
+    cell = np.minimum((v[faces].mean(1)[:, :2] * 4).astype(np.int64), 3)
+    sim.boundary = ~((v[:, :2] > 1e-9) & (v[:, :2] < 1 - 1e-9)).all(1)
+    sim.edge_length = float(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean())
+    sim.asset_face = cell[:, 0] * 4 + cell[:, 1]
+    sim.node_face = np.zeros(len(v), dtype=np.int64)
+    sim.node_bary = np.zeros((len(v), 3))
+    return sim
 
 
 def directional_field(sim, direction=(1.0, 0.0, 0.0), s: float = 1.0) -> SimpleNamespace:

@@ -9,14 +9,25 @@ never cut cracks or stress.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.geometry import face_cross, weld_by_position, welded_vertex_normals
+
+# Still importable from here for callers outside io/ (tests/test_uv.py imports vertex_normals);
+# the implementations live in crackbake.geometry.
+vertex_normals = welded_vertex_normals
+__all__ = ["Mesh", "load_mesh", "vertex_normals", "weld_by_position", "SUPPORTED_SUFFIXES",
+           "VERTEX_COLOURS"]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+# Key of the vertex colours in :attr:`Mesh.attributes` (also how error messages list them).
+VERTEX_COLOURS = "(vertex colours)"
+# PLY vertex properties that are geometry, not painted attributes.
+_PLY_GEOMETRY = {"x", "y", "z", "nx", "ny", "nz"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,6 +49,13 @@ class Mesh:
         Path the mesh was read from.
     name : str
         Object name (file stem, or the picked/concatenated object names).
+    attributes : dict of str to (V, ...) array
+        Per-vertex attributes read with the mesh, in the file's dtype, rows aligned with
+        ``vertices``: PLY vertex properties other than position and normal, glTF custom
+        attributes (names as stored, e.g. ``_NAME``), and the vertex colours (RGBA) under
+        :data:`VERTEX_COLOURS`.  Only attributes every concatenated object has are kept.
+    objects : int
+        How many objects of the file were concatenated into this mesh.
     """
 
     vertices: np.ndarray
@@ -46,6 +64,8 @@ class Mesh:
     normals: np.ndarray
     source: str = ""
     name: str = "mesh"
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    objects: int = 1
 
     @property
     def bbox_min(self) -> np.ndarray:
@@ -70,49 +90,6 @@ class Mesh:
             "bbox_max": [float(x) for x in self.bbox_max],
             "has_uv": self.uv is not None,
         }
-
-
-def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Unit face normals, (F, 3); zero for degenerate faces."""
-    tri = vertices[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals, (V, 3), accumulated over positions.
-
-    Vertices that share a position (UV-seam splits) get the same normal, so shading is smooth
-    across UV seams.
-    """
-    wv, wf, inverse = weld_by_position(vertices, faces)
-    tri = wv[wf]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 * area
-    acc = np.zeros_like(wv)
-    for k in range(3):
-        np.add.at(acc, wf[:, k], n)
-    length = np.linalg.norm(acc, axis=1, keepdims=True)
-    acc = np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
-    return acc[inverse]
-
-
-def weld_by_position(
-    vertices: np.ndarray, faces: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Merge vertices with identical positions (the copies made by UV seams).
-
-    Returns
-    -------
-    welded_vertices : (W, 3) float64
-    welded_faces : (F, 3) int64
-        Same faces, same order, indexing ``welded_vertices``.
-    inverse : (V,) int64
-        ``welded_vertices[inverse] == vertices``.
-    """
-    welded, inverse = np.unique(vertices, axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1).astype(np.int64)
-    return welded, inverse[faces], inverse
 
 
 def _scene_geometries(scene, object_name: str | None, path: Path):
@@ -146,6 +123,57 @@ def _scene_geometries(scene, object_name: str | None, path: Path):
     return [g for _, _, g in items]
 
 
+def _read_file(path: Path):
+    """The trimesh object of a mesh file, after the path and format checks."""
+    import trimesh
+
+    if not path.exists():
+        raise CrackbakeError(f"{path}: file not found; check the path")
+    if path.is_dir():
+        raise CrackbakeError(f"{path}: is a directory; pass a mesh file")
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise CrackbakeError(
+            f"{path}: unsupported format '{suffix or '(none)'}'; "
+            f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
+        )
+    try:
+        loaded = trimesh.load(str(path), file_type=suffix[1:], process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt input
+        raise CrackbakeError(
+            f"{path}: could not read the {suffix[1:].upper()} file ({exc}); "
+            "check that it is a valid mesh"
+        ) from exc
+    return loaded
+
+
+def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
+    """Vertices (V, 3) and faces (F, 3) of the objects concatenated and checked, with the
+    per-object UV and file-normal parts."""
+    vertices, faces, uv_parts, normal_parts = [], [], [], []
+    offset = 0
+    for g, u in zip(geoms, uvs, strict=True):
+        v = np.asarray(g.vertices, dtype=np.float64)
+        f = np.asarray(g.faces, dtype=np.int64)
+        vertices.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+        if keep_uv:
+            uv_parts.append(u)
+        normal_parts.append(_file_normals(g))
+    vertices = np.concatenate(vertices)
+    faces = np.concatenate(faces)
+
+    if not np.isfinite(vertices).all():
+        bad = int((~np.isfinite(vertices).all(axis=1)).sum())
+        raise CrackbakeError(
+            f"{path}: {bad} vertices have NaN or infinite coordinates; repair the mesh first"
+        )
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
+    return vertices, faces, uv_parts, normal_parts
+
+
 def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     """Load a triangle mesh from OBJ, PLY, STL, OFF, glTF or GLB.
 
@@ -167,24 +195,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     import trimesh
 
     path = Path(path)
-    if not path.exists():
-        raise CrackbakeError(f"{path}: file not found; check the path")
-    if path.is_dir():
-        raise CrackbakeError(f"{path}: is a directory; pass a mesh file")
-    suffix = path.suffix.lower()
-    if suffix not in SUPPORTED_SUFFIXES:
-        raise CrackbakeError(
-            f"{path}: unsupported format '{suffix or '(none)'}'; "
-            f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
-        )
-    try:
-        loaded = trimesh.load(str(path), file_type=suffix[1:], process=False)
-    except Exception as exc:  # trimesh raises many types for corrupt input
-        raise CrackbakeError(
-            f"{path}: could not read the {suffix[1:].upper()} file ({exc}); "
-            "check that it is a valid mesh"
-        ) from exc
-
+    loaded = _read_file(path)
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):
@@ -213,27 +224,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
             stacklevel=2,
         )
 
-    vertices, faces, uv_parts, normal_parts = [], [], [], []
-    offset = 0
-    for g, u in zip(geoms, uvs, strict=True):
-        v = np.asarray(g.vertices, dtype=np.float64)
-        f = np.asarray(g.faces, dtype=np.int64)
-        vertices.append(v)
-        faces.append(f + offset)
-        offset += len(v)
-        if keep_uv:
-            uv_parts.append(u)
-        normal_parts.append(_file_normals(g))
-    vertices = np.concatenate(vertices)
-    faces = np.concatenate(faces)
-
-    if not np.isfinite(vertices).all():
-        bad = int((~np.isfinite(vertices).all(axis=1)).sum())
-        raise CrackbakeError(
-            f"{path}: {bad} vertices have NaN or infinite coordinates; repair the mesh first"
-        )
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
+    vertices, faces, uv_parts, normal_parts = _stack(geoms, uvs, keep_uv, path)
 
     uv = np.concatenate(uv_parts) if keep_uv else None
     if uv is not None and not np.isfinite(uv).all():
@@ -247,10 +238,9 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     if all(n is not None for n in normal_parts):
         normals = np.concatenate(normal_parts)
     else:
-        normals = vertex_normals(vertices, faces)
+        normals = welded_vertex_normals(vertices, faces)
 
-    tri = vertices[faces]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area2 = np.linalg.norm(face_cross(vertices, faces), axis=1)
     if not (area2 > 0).any():
         raise CrackbakeError(f"{path}: every face has zero area; crackbake needs a surface")
     n_degenerate = int((area2 <= 0).sum())
@@ -261,10 +251,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
             stacklevel=2,
         )
 
-    if object_name is not None:
-        name = object_name
-    else:
-        name = path.stem
+    name = object_name if object_name is not None else path.stem
     return Mesh(
         vertices=vertices,
         faces=faces,
@@ -272,6 +259,8 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
         normals=normals,
         source=str(path),
         name=name,
+        attributes=_concatenate_attributes([_vertex_attributes(g) for g in geoms]),
+        objects=len(geoms),
     )
 
 
@@ -293,3 +282,36 @@ def _file_normals(geom) -> np.ndarray | None:
     if not np.isfinite(n).all() or (length < 1e-12).any():
         return None
     return n / length
+
+
+def _vertex_attributes(geom) -> dict[str, np.ndarray]:
+    """Per-vertex attributes of one trimesh geometry, one row per vertex, the file's dtype.
+
+    trimesh's own ``vertex_attributes`` (glTF custom attributes) win over the raw PLY
+    properties of the same name; vertex colours are stored under :data:`VERTEX_COLOURS`.
+    """
+    n = len(geom.vertices)
+    out: dict[str, np.ndarray] = {}
+    raw = (geom.metadata or {}).get("_ply_raw", {}).get("vertex", {}).get("data", {})
+    if isinstance(raw, dict):
+        for key in set(raw) - _PLY_GEOMETRY:
+            out[key] = np.asarray(raw[key])
+    for key, values in (getattr(geom, "vertex_attributes", {}) or {}).items():
+        out[key] = np.asarray(values)
+    if getattr(geom.visual, "kind", None) == "vertex":
+        out[VERTEX_COLOURS] = np.asarray(geom.visual.vertex_colors)
+    return {k: v for k, v in out.items() if v.ndim >= 1 and len(v) == n}
+
+
+def _concatenate_attributes(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The attributes every object has, stacked in object order (those that do not stack are
+    left out)."""
+    if len(parts) == 1:
+        return parts[0]
+    out = {}
+    for key in set.intersection(*(set(p) for p in parts)):
+        try:
+            out[key] = np.concatenate([p[key] for p in parts])
+        except ValueError:  # different trailing shapes: not one attribute
+            continue
+    return out

@@ -1,0 +1,356 @@
+"""Initial stress fields on the simulation mesh (method.md §A2, §B6).
+
+Every source adds (or multiplies) a symmetric 3x3 **world-space** tensor per sim face lying in the
+face plane (``S @ n == 0``), tension positive: the convention of
+:mod:`crackbake.simulate.solver.fem`.
+Additive sources (impact, shrinkage, directional, curvature) are summed; painted weights then
+multiply the sum, and noise perturbs what is left, so a zero weight always means zero stress.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from crackbake.errors import CrackbakeWarning
+from crackbake.geometry import unit_rows, vertex_normals
+from crackbake.io.mesh import Mesh
+from crackbake.simulate.solver.fem import face_frames, face_geometry
+from crackbake.simulate.stress.geodesic import impact_distance
+from crackbake.simulate.stress.sources import (
+    CurvatureSource,
+    DirectionalSource,
+    ImpactSource,
+    NoiseSource,
+    ShrinkSource,
+    WeightSource,
+    _finite_vector,
+)
+from crackbake.simulate.stress.weights import weight_field
+
+CURVATURE_CLIP = 5.0
+# Default noise feature size, fraction of the bounding-box diagonal: in world units, so the
+# pattern does not change with the simulation resolution.
+NOISE_SCALE_DIAGONAL = 0.02
+# Sinusoids summed per noise field (more is smoother-looking but slower).
+NOISE_WAVES = 8
+
+
+@dataclass(eq=False)
+class StressField:
+    """The initial stress on the simulation mesh.
+
+    Attributes
+    ----------
+    stress : (M, 3, 3) float64
+        World-space in-plane tensors per sim face, tension positive.
+    growth : (M, 3, 3) float64
+        Added to ``stress`` per solver step (shrinkage rate); zeros when nothing grows.
+    weight : (M,) float64
+        Painted-weight multiplier applied (ones without a weight source).
+    impacts : list of dict
+        ``{"point": [x, y, z] snapped, "radius": r, "strength": s}`` per impact, as used.
+    """
+
+    stress: np.ndarray
+    growth: np.ndarray
+    weight: np.ndarray
+    impacts: list[dict] = field(default_factory=list)
+
+
+
+def _project(stress: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """``P S P`` symmetrised, with ``P = I - n n^T``; (M, 3, 3)."""
+    sn = np.matmul(stress, normal[:, :, None])[:, :, 0]
+    nsn = np.einsum("ea,ea->e", normal, sn)
+    out = (
+        stress
+        - _outer(sn, normal)
+        - _outer(normal, sn)
+        + nsn[:, None, None] * _outer(normal, normal)
+    )
+    return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+
+def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-row outer products of (K, 3) arrays, (K, 3, 3)."""
+    return a[:, :, None] * b[:, None, :]
+
+
+def _plane_identity(normal: np.ndarray) -> np.ndarray:
+    return np.eye(3)[None] - _outer(normal, normal)
+
+
+
+# --------------------------------------------------------------------------------------------
+# Per-source fields
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Geometry:
+    vertices: np.ndarray  # (N, 3)
+    faces: np.ndarray  # (M, 3)
+    area: np.ndarray  # (M,)
+    normal: np.ndarray  # (M, 3)
+    grad: np.ndarray  # (M, 3, 3)
+    centroid: np.ndarray  # (M, 3)
+
+
+def _impact_field(sim, geo: _Geometry, src: ImpactSource, radius: float) -> tuple[np.ndarray, dict]:
+    reach = 0.5 * np.pi * radius
+    dist, snapped, face = impact_distance(sim, src.point, max_distance=reach)
+    moved = float(np.linalg.norm(snapped - np.asarray(src.point, dtype=np.float64)))
+    extent = float(np.linalg.norm(geo.vertices.max(axis=0) - geo.vertices.min(axis=0)))
+    if moved > 0.01 * extent:
+        warnings.warn(
+            f"impact point {tuple(float(x) for x in src.point)} lies {moved:.4g} off the surface; "
+            f"snapped to {tuple(round(float(x), 6) for x in snapped)}",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+    nodal = dist[geo.faces]  # (M, 3)
+    d_face = nodal.mean(axis=1)  # inf when any corner is out of reach
+    # Inside the source face the surface is flat, so the straight distance is the geodesic one.
+    d_face[face] = np.linalg.norm(geo.centroid[face] - snapped)
+    active = np.flatnonzero(d_face <= reach)
+    stress = np.zeros((len(geo.faces), 3, 3))
+    w = src.strength * 2.0 * np.cos(d_face[active] / radius)
+    n = geo.normal[active]
+    # Radial direction: the surface gradient of the distance.  First-order fast marching biases
+    # that gradient towards mesh edges (up to ~20 degrees on irregular meshes), so where it
+    # agrees with the straight direction from the impact (projected into the face: exact on flat
+    # parts, close on gently curved ones) the straight one is used; past a fold or round a
+    # bend they part ways and the gradient alone is right.  Blend over 25..40 degrees apart.
+    g = np.einsum("ei,eia->ea", nodal[active], geo.grad[active])
+    g = _face_vertex_smooth(geo.faces[active], geo.area[active], g)  # steadies per-face noise
+    g, g_len = unit_rows(g - np.einsum("ea,ea->e", g, n)[:, None] * n)
+    chord = geo.centroid[active] - snapped
+    chord = unit_rows(chord - np.einsum("ea,ea->e", chord, n)[:, None] * n)[0]
+    agree = np.einsum("ea,ea->e", g, chord)
+    cos25, cos40 = np.cos(np.radians(25.0)), np.cos(np.radians(40.0))
+    t = np.clip((cos25 - agree) / (cos25 - cos40), 0.0, 1.0)
+    t = np.where(g_len > 0.5, t, 0.0)  # gradient lost (source face, cone tip): straight only
+    r = (1 - t)[:, None] * chord + t[:, None] * g
+    # The impact sits on the centroid itself: any in-plane direction is as good.
+    lost = np.linalg.norm(r, axis=1) < 1e-9
+    if lost.any():
+        faces_lost = geo.faces[active[lost]]
+        r[lost] = geo.vertices[faces_lost[:, 1]] - geo.vertices[faces_lost[:, 0]]
+    r -= np.einsum("ea,ea->e", r, n)[:, None] * n
+    r = unit_rows(r)[0]
+    c = np.cross(n, r)
+    stress[active] = w[:, None, None] * (_outer(r, r) + src.hoop * _outer(c, c))
+    info = {
+        "point": [float(x) for x in snapped],
+        "radius": float(radius),
+        "strength": float(src.strength),
+    }
+    return stress, info
+
+
+def _directional_field(geo: _Geometry, src: DirectionalSource) -> np.ndarray:
+    d = unit_rows(_finite_vector(src.direction, "tension direction")[None])[0][0]
+    pd = d[None] - (geo.normal @ d)[:, None] * geo.normal
+    return src.strength * _outer(pd, pd)
+
+
+
+def _face_vertex_smooth(faces: np.ndarray, area: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Area-weighted face -> node -> face average of per-face values (K, ...) over (K, 3) faces."""
+    k = len(faces)
+    flat = values.reshape(k, -1)
+    nodes, local = np.unique(faces, return_inverse=True)
+    local = local.reshape(-1)
+    inc = sp.csr_matrix(
+        (np.repeat(area, 3), (local, np.repeat(np.arange(k), 3))), shape=(len(nodes), k)
+    )
+    node_area = np.asarray(inc.sum(axis=1)).reshape(-1)
+    node = (inc @ flat) / np.where(node_area > 0, node_area, 1.0)[:, None]
+    return node[local.reshape(k, 3)].mean(axis=1).reshape(values.shape)
+
+
+def _node_normals(sim, mesh: Mesh, geo: _Geometry) -> np.ndarray:
+    """Unit normals at the sim nodes, (N, 3).
+
+    The asset's own (shading) normals interpolated at each node where the sim mesh says where
+    its nodes lie: a low-poly asset is flat inside each face, but its shading normals describe
+    the smooth surface it stands for.  Geometric area-weighted normals otherwise.
+    """
+    geometric = vertex_normals(geo.vertices, geo.faces)
+    node_face = getattr(sim, "node_face", None)
+    node_bary = getattr(sim, "node_bary", None)
+    normals = getattr(mesh, "normals", None)
+    if node_face is None or node_bary is None or normals is None:
+        return geometric
+    node_face = np.asarray(node_face, dtype=np.int64)
+    if node_face.shape != (len(geo.vertices),) or len(normals) != len(mesh.vertices):
+        return geometric
+    vn = np.einsum("nk,nka->na", np.asarray(node_bary), normals[mesh.faces[node_face]])
+    vn, length = unit_rows(vn)
+    return np.where((length > 1e-6)[:, None], vn, geometric)
+
+
+def _curvature_field(sim, mesh: Mesh, geo: _Geometry, src: CurvatureSource) -> np.ndarray:
+    m = len(geo.faces)
+    vn = _node_normals(sim, mesh, geo)
+    # Shape operator of each face: the gradient of the linearly interpolated node normals,
+    # restricted to the face plane and symmetrised (its sign does not matter here).
+    shape = np.matmul(np.swapaxes(vn[geo.faces], 1, 2), geo.grad)
+    shape = _project(shape, geo.normal)
+    # One smoothing pass: per-face normal differences on an irregular mesh are noisy.
+    shape = _project(_face_vertex_smooth(geo.faces, geo.area, shape), geo.normal)
+    frames = face_frames(geo.normal, geo.vertices, geo.faces)  # (M, 3, 2)
+    k = np.matmul(np.swapaxes(frames, 1, 2), np.matmul(shape, frames))
+    a, b, c = k[:, 0, 0], k[:, 0, 1], k[:, 1, 1]
+    mean = 0.5 * (a + c)
+    half_gap = np.hypot(0.5 * (a - c), b)
+    magnitude = np.sqrt(2.0 * (mean**2 + half_gap**2))  # sqrt(k1^2 + k2^2)
+    # Reference curvature: the area-weighted median over the curved faces.  A mean would be
+    # dragged up by sharp creases (whose smoothed curvature is ~angle / edge length) and down by
+    # flat parts, leaving the smooth curved surface far from O(1).
+    extent = float(np.linalg.norm(geo.vertices.max(axis=0) - geo.vertices.min(axis=0)))
+    curved = np.flatnonzero(magnitude * extent > 1e-6)
+    ref = 0.0
+    if len(curved):
+        order = curved[np.argsort(magnitude[curved])]
+        cum = np.cumsum(geo.area[order])
+        ref = float(magnitude[order[min(np.searchsorted(cum, 0.5 * cum[-1]), len(order) - 1)]])
+    if not ref * extent > 1e-6:
+        warnings.warn(
+            "the mesh is flat, so the curvature source adds no stress; drop it or use "
+            "another source",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+        return np.zeros((m, 3, 3))
+    stress = np.zeros((m, 3, 3))
+    if src.bias:
+        # Eigenvalues mean +- half_gap; the larger |k| is mean + half_gap when mean >= 0, with
+        # eigenvector at angle theta, else the other one (perpendicular).
+        theta = 0.5 * np.arctan2(2.0 * b, a - c)
+        cos, sin = np.cos(theta), np.sin(theta)
+        local = np.where((mean >= 0)[:, None], np.stack([cos, sin], 1), np.stack([-sin, cos], 1))
+        t = np.matmul(frames, local[:, :, None])[:, :, 0]
+        anisotropy = 2.0 * np.minimum(np.abs(mean), half_gap)  # |k_max| - |k_min|
+        amp = src.bias * np.minimum(anisotropy / ref, CURVATURE_CLIP)
+        stress += amp[:, None, None] * _outer(t, t)
+    if src.density:
+        amp = src.density * np.minimum(magnitude / ref, CURVATURE_CLIP)
+        stress += amp[:, None, None] * _plane_identity(geo.normal)
+    return stress
+
+
+
+def _smooth_noise(points: np.ndarray, scale: float, rng: np.random.Generator, count: int):
+    """``count`` smooth unit-variance random fields at (M, 3) points, (count, M).
+
+    Each is a sum of :data:`NOISE_WAVES` plane waves of random direction, phase and wavelength
+    near ``scale`` (solid noise, so it is seamless across UV seams and thin walls alike).
+    """
+    k = rng.normal(size=(3, count * NOISE_WAVES))
+    k /= np.linalg.norm(k, axis=0, keepdims=True)
+    k *= (2 * np.pi / scale) * rng.uniform(0.7, 1.4, size=count * NOISE_WAVES)
+    phase = rng.uniform(0, 2 * np.pi, size=count * NOISE_WAVES)
+    # Phases in float64 (large coordinates), cosines in float32: it is only noise.
+    arg = ((points - points.mean(axis=0)) @ k + phase).astype(np.float32)
+    np.cos(arg, out=arg)
+    out = arg.reshape(len(points), count, NOISE_WAVES).sum(axis=2, dtype=np.float64).T
+    return out * np.sqrt(2.0 / NOISE_WAVES)
+
+
+def _apply_noise(
+    stress: np.ndarray, geo: _Geometry, src: NoiseSource, scale: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noisy stress and the multiplier used (so growth can follow it)."""
+    fields = _smooth_noise(geo.centroid, scale, rng, 4)
+    factor = np.maximum(1.0 + src.amount * fields[0], 0.0)
+    size = np.sqrt(np.einsum("eab,eab->e", stress, stress))
+    if not size.any():
+        size = np.ones_like(size)  # nothing else to perturb: noise alone is a weak field
+    t = fields[1:].T
+    t -= np.einsum("ea,ea->e", t, geo.normal)[:, None] * geo.normal
+    # E|P t|^2 = 2 for unit-variance components, hence the half.
+    extra = (0.5 * src.amount * size)[:, None, None] * _outer(t, t)
+    return factor[:, None, None] * stress + extra, factor
+
+
+# --------------------------------------------------------------------------------------------
+# Public entry points
+# --------------------------------------------------------------------------------------------
+
+
+def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressField:
+    """Sum the stress sources into the initial field on the simulation mesh.
+
+    Parameters
+    ----------
+    sim : SimMesh
+        Uses ``vertices`` (N, 3), ``faces`` (M, 3), ``asset_face`` (M,) and ``edge_length``.
+    mesh : Mesh
+        The asset mesh ``sim`` was built from (bounding box for default radii, per-vertex
+        weights and UVs for weight maps).
+    sources : sequence of ImpactSource, ShrinkSource, DirectionalSource, CurvatureSource,
+        WeightSource, NoiseSource
+        Any number of each; additive ones are summed, weights multiply the sum, noise perturbs
+        the result.  An empty sequence gives a zero field.
+    seed : int
+        Seeds the noise; the field is otherwise deterministic.
+
+    Returns
+    -------
+    StressField
+    """
+    vertices = np.asarray(sim.vertices, dtype=np.float64)
+    faces = np.asarray(sim.faces, dtype=np.int64)
+    area, normal, grad = face_geometry(vertices, faces)
+    geo = _Geometry(vertices, faces, area, normal, grad, vertices[faces].mean(axis=1))
+    m = len(faces)
+
+    stress = np.zeros((m, 3, 3))
+    growth = np.zeros((m, 3, 3))
+    weight = np.ones(m)
+    impacts: list[dict] = []
+    noises: list[NoiseSource] = []
+    bary_cache: list = []
+    for src in sources:
+        if isinstance(src, ImpactSource):
+            radius = 0.15 * mesh.diagonal if src.radius is None else float(src.radius)
+            s, info = _impact_field(sim, geo, src, radius)
+            stress += s
+            impacts.append(info)
+        elif isinstance(src, ShrinkSource):
+            plane = _plane_identity(normal)
+            stress += src.strength * plane
+            growth += src.rate * src.strength * plane
+        elif isinstance(src, DirectionalSource):
+            stress += _directional_field(geo, src)
+        elif isinstance(src, CurvatureSource):
+            stress += _curvature_field(sim, mesh, geo, src)
+        elif isinstance(src, WeightSource):
+            weight *= weight_field(sim, mesh, geo.centroid, src, bary_cache)
+        elif isinstance(src, NoiseSource):
+            noises.append(src)
+        else:
+            raise TypeError(f"not a stress source: {type(src).__name__}")
+
+    stress *= weight[:, None, None]
+    growth *= weight[:, None, None]
+    for i, src in enumerate(noises):
+        rng = np.random.default_rng(np.random.SeedSequence([int(seed), i]))
+        scale = src.scale if src.scale is not None else NOISE_SCALE_DIAGONAL * mesh.diagonal
+        stress, factor = _apply_noise(stress, geo, src, scale, rng)
+        growth *= factor[:, None, None]
+
+    # Exactly in-plane and symmetric whatever rounding did; degenerate faces carry nothing.
+    flat = area <= 0
+    stress = _project(stress, normal)
+    if growth.any():
+        growth = _project(growth, normal)
+    stress[flat] = 0.0
+    growth[flat] = 0.0
+    return StressField(stress=stress, growth=growth, weight=weight, impacts=impacts)
