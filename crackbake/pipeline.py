@@ -21,7 +21,11 @@ from crackbake.bake.preview import render_preview
 from crackbake.bake.raster import CHANNELS, CrackMaps, bake_cracks
 from crackbake.bake.uv import UVMesh, prepare_uvs
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.exchange.export import OutputStage, sha256_file, write_exr, write_glb, write_png
+from crackbake.exchange.exr import write_exr
+from crackbake.exchange.glb import write_glb
+from crackbake.exchange.materials import GLB_TEXTURE_MAX, base_color
+from crackbake.exchange.output import OutputStage, sha256_file
+from crackbake.exchange.png import write_png
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.network import (
     CrackNetwork,
@@ -34,10 +38,6 @@ from crackbake.network import (
 )
 from crackbake.params import RunParams, preset_names
 from crackbake.simulate.solver import SolverParams
-
-#: Base colour of the GLB preview material: intact surface and crack interior (sRGB, 0..255).
-SURFACE_RGB = np.array([200, 196, 188], np.float32)
-CRACK_RGB = np.array([24, 20, 18], np.float32)
 
 ProgressFn = Callable[[str], None]
 
@@ -95,28 +95,6 @@ class RunResult:
             "timings_s": self.manifest["timings_s"],
             "warnings": self.warnings,
         }
-
-
-#: Largest edge of the GLB's embedded base colour: 8K textures make GLBs slow to write and too
-#: big for many viewers (WebGL/mobile limits); the EXR/PNG maps keep the full resolution.
-GLB_TEXTURE_MAX = 4096
-
-
-def base_color(mask: np.ndarray, max_size: int | None = None) -> np.ndarray:
-    """sRGB uint8 (H, W, 3) preview colour: light surface, dark cracks.
-
-    Parameters
-    ----------
-    mask : (H, W) crack coverage 0..1
-    max_size : int, optional
-        Box-filter the mask down by a power of two until its edge is at most this.
-    """
-    m = mask.astype(np.float32)
-    while max_size is not None and m.shape[0] > max_size and m.shape[0] % 2 == 0:
-        m = m.reshape(m.shape[0] // 2, 2, m.shape[1] // 2, 2).mean(axis=(1, 3))
-    m = m[..., None]
-    rgb = SURFACE_RGB + (CRACK_RGB - SURFACE_RGB) * m
-    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
 
 
 def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, float]:

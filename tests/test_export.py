@@ -1,4 +1,4 @@
-"""Round trips of the writers in crackbake.exchange.export, checked with independent readers.
+"""Round trips of the writers in crackbake.exchange, checked with independent readers.
 
 EXR files are written with the OpenEXR bindings and re-read with OpenImageIO; PNGs are read with
 Pillow; GLBs are parsed here by hand (header, JSON chunk, BIN chunk) and loaded with trimesh.
@@ -19,7 +19,7 @@ import pytest
 from PIL import Image
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.exchange.export import (
+from crackbake.exchange import (
     OutputStage,
     read_exr,
     sha256_file,
