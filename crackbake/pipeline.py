@@ -27,15 +27,9 @@ from crackbake.exchange.materials import GLB_TEXTURE_MAX, base_color
 from crackbake.exchange.output import OutputStage, sha256_file
 from crackbake.exchange.png import write_png
 from crackbake.io.mesh import Mesh, load_mesh
-from crackbake.network import (
-    CrackNetwork,
-    from_solver,
-    jsonable,
-    read_sidecar,
-    segments,
-    write_obj,
-    write_sidecar,
-)
+from crackbake.io.obj_lines import write_obj
+from crackbake.io.sidecar import jsonable, read_sidecar, write_sidecar
+from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import RunParams, preset_names
 from crackbake.simulate.solver import SolverParams
 

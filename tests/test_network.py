@@ -14,17 +14,9 @@ import pytest
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh, load_mesh
-from crackbake.network import (
-    Crack,
-    CrackNetwork,
-    from_dict,
-    mesh_info,
-    read_sidecar,
-    segments,
-    to_dict,
-    write_obj,
-    write_sidecar,
-)
+from crackbake.io.obj_lines import write_obj
+from crackbake.io.sidecar import from_dict, read_sidecar, to_dict, write_sidecar
+from crackbake.network import Crack, CrackNetwork, mesh_info, segments
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -19,7 +19,8 @@ from PIL import Image
 from crackbake import __version__
 from crackbake.cli import main
 from crackbake.io.mesh import load_mesh
-from crackbake.network import Crack, CrackNetwork, mesh_info, write_sidecar
+from crackbake.io.sidecar import write_sidecar
+from crackbake.network import Crack, CrackNetwork, mesh_info
 from crackbake.params import RunParams
 from crackbake.pipeline import run
 
