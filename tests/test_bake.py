@@ -253,7 +253,7 @@ def test_dilation_with_no_island_fills_background():
 def test_bad_arguments(ctx):
     v, f, uv = plate(lambda x, y: (x, y))
     segs = make_segments([[0.1, 0.5, 0]], [[0.9, 0.5, 0]], width=0.01)
-    with pytest.raises(CrackbakeError, match="resolution"):
+    with pytest.raises(ValueError, match="res must be a positive"):
         bake_cracks(v, f, uv, segs, 0, ctx=ctx)
     with pytest.raises(CrackbakeError, match="profile"):
         bake_cracks(v, f, uv, segs, 64, profile_shape=0, ctx=ctx)

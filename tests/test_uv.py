@@ -14,6 +14,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from crackbake.bake import uv as U
+from crackbake.bake.uv.unwrap import worker_error
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh, vertex_normals
 
@@ -348,17 +349,17 @@ def test_unwrap_timeout_is_a_clear_error():
 def test_worker_crash_message():
     # A real segfault needs a crashing input (xatlas#146), too slow and fragile for the suite;
     # the message for a signal exit is what the user sees.
-    err = U._worker_error(-11, "", "mesh.obj", 1234)
+    err = worker_error(-11, "", "mesh.obj", 1234)
     assert str(err).startswith("xatlas crashed (signal 11, SIGSEGV) unwrapping mesh.obj")
     assert "1234 faces" in str(err) and "--uv keep" in str(err)
-    err = U._worker_error(1, "Traceback...\nRuntimeError: boom\n", "mesh.obj", 3)
+    err = worker_error(1, "Traceback...\nRuntimeError: boom\n", "mesh.obj", 3)
     assert "RuntimeError: boom" in str(err) and "\n" not in str(err)
 
 
 def test_unwrap_rejects_bad_arguments():
     mesh = torus_mesh(12, 6)
-    with pytest.raises(CrackbakeError, match="resolution"):
-        U.unwrap(mesh, 8)
+    with pytest.raises(ValueError, match="res must be a positive"):
+        U.unwrap(mesh, 0)
     with pytest.raises(CrackbakeError, match="padding"):
         U.unwrap(mesh, 256, padding=100)
 
