@@ -216,20 +216,7 @@ def bake_cracks(
         raise ValueError(f"res must be a positive texel count, got {res}")
     if profile_shape <= 0:
         raise CrackbakeError(f"profile shape {profile_shape} must be > 0 (1 = V profile)")
-    diagonal = float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
-    if max_distance is None:
-        max_distance = DEFAULT_MAX_DISTANCE_FRACTION * diagonal
-    if not max_distance > 0:
-        raise CrackbakeError(f"max distance {max_distance} must be > 0 (mesh units)")
-    if len(segments.a) and max_distance < 0.5 * float(segments.width.max()):
-        widest = float(segments.width.max())
-        warnings.warn(
-            f"max distance {max_distance:g} is below the widest crack's half width; "
-            f"raising it to {widest:g} so wide cracks are not cut",
-            CrackbakeWarning,
-            stacklevel=2,
-        )
-        max_distance = widest
+    max_distance = _max_distance(vertices, segments, max_distance)
 
     face_start, cand = face_candidates(vertices, faces, uv, segments, res, max_distance)
     timings["candidates"] = time.perf_counter() - t0
@@ -239,31 +226,7 @@ def bake_cracks(
         float(max_distance), float(profile_shape), timings,
     )  # fmt: skip
 
-    mask, width, time_ch = images["mask"], images["width"], images["time"]
-    depth, distance, crack_id = images["depth"], images["distance"], images["id"]
-    inside = images.pop("inside") > 0
-
-    t3 = time.perf_counter()
-    dilate(
-        [mask, width, time_ch, depth, distance, crack_id],
-        inside,
-        limit=dilate_px,
-        background=[0.0, 0.0, 0.0, 0.0, max_distance, -1.0],
-    )
-    timings["dilate"] = time.perf_counter() - t3
-    return CrackMaps(
-        res=res,
-        mask=mask,
-        width=width,
-        time=time_ch,
-        depth=depth,
-        distance=distance,
-        crack_id=crack_id,
-        inside=inside,
-        max_distance=float(max_distance),
-        profile_shape=float(profile_shape),
-        timings=timings,
-    )
+    return _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
 
 
 def _render(
@@ -340,3 +303,58 @@ def _render(
         timings["render"] = t_draw
         timings["readback"] = t_read
     return images
+
+
+def _max_distance(vertices: np.ndarray, segments: Segments, max_distance: float | None) -> float:
+    """The distance clamp: the default fraction of the diagonal, never below a half width."""
+    diagonal = float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
+    if max_distance is None:
+        max_distance = DEFAULT_MAX_DISTANCE_FRACTION * diagonal
+    if not max_distance > 0:
+        raise CrackbakeError(f"max distance {max_distance} must be > 0 (mesh units)")
+    if len(segments.a) and max_distance < 0.5 * float(segments.width.max()):
+        widest = float(segments.width.max())
+        warnings.warn(
+            f"max distance {max_distance:g} is below the widest crack's half width; "
+            f"raising it to {widest:g} so wide cracks are not cut",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+        max_distance = widest
+    return max_distance
+
+
+def _dilated_maps(
+    images: dict[str, np.ndarray],
+    res: int,
+    dilate_px: int | None,
+    max_distance: float,
+    profile_shape: float,
+    timings: dict[str, float],
+) -> CrackMaps:
+    """Fill the gutters of the rendered channels from their nearest island; the maps."""
+    mask, width, time_ch = images["mask"], images["width"], images["time"]
+    depth, distance, crack_id = images["depth"], images["distance"], images["id"]
+    inside = images.pop("inside") > 0
+
+    t3 = time.perf_counter()
+    dilate(
+        [mask, width, time_ch, depth, distance, crack_id],
+        inside,
+        limit=dilate_px,
+        background=[0.0, 0.0, 0.0, 0.0, max_distance, -1.0],
+    )
+    timings["dilate"] = time.perf_counter() - t3
+    return CrackMaps(
+        res=res,
+        mask=mask,
+        width=width,
+        time=time_ch,
+        depth=depth,
+        distance=distance,
+        crack_id=crack_id,
+        inside=inside,
+        max_distance=float(max_distance),
+        profile_shape=float(profile_shape),
+        timings=timings,
+    )
