@@ -92,33 +92,34 @@ def torus_unwrap(torus) -> U.UVMesh:
 # ------------------------------------------------------------------------------ overlap
 
 
-def test_overlap_stacked_triangles_is_one():
+def test_overlap_stacked_triangles_is_one(gl_ctx):
     uv = np.array([[0.1, 0.1], [0.9, 0.1], [0.5, 0.9]])
     # The second copy has the opposite winding (a mirrored island): it must count as well.
     faces = np.array([[0, 1, 2], [0, 2, 1]])
-    assert U.uv_overlap_fraction(uv, faces, res=256) == pytest.approx(1.0)
+    assert U.uv_overlap_fraction(uv, faces, res=256, ctx=gl_ctx) == pytest.approx(1.0)
 
 
-def test_overlap_two_triangle_square_is_zero():
+def test_overlap_two_triangle_square_is_zero(gl_ctx):
     uv = np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]])
     faces = np.array([[0, 1, 2], [0, 2, 3]])
-    assert U.uv_overlap_fraction(uv, faces, res=256) == 0.0
+    assert U.uv_overlap_fraction(uv, faces, res=256, ctx=gl_ctx) == 0.0
 
 
-def test_overlap_shared_edges_never_double_count():
+def test_overlap_shared_edges_never_double_count(gl_ctx):
     # 8000 irregular triangles sharing edges in every direction: any double counting on shared
     # edges would show up as overlap.
     pts, faces = grid(40, 100, 0.8, 0.9, jitter=0.3)
-    assert U.uv_overlap_fraction(pts + 0.05, faces, res=1024) == 0.0
+    assert U.uv_overlap_fraction(pts + 0.05, faces, res=1024, ctx=gl_ctx) == 0.0
 
 
-def test_overlap_half_overlapping_squares():
+def test_overlap_half_overlapping_squares(gl_ctx):
     # A = [0.25, 0.75]^2 and B = A shifted right by 0.25 (both texel-aligned at 1024):
     # |A and B| = 0.25 * 0.5 = 0.125, |A or B| = 0.25 + 0.25 - 0.125 = 0.375, so 1/3.
     sq = np.array([[0.25, 0.25], [0.75, 0.25], [0.75, 0.75], [0.25, 0.75]])
     uv = np.concatenate([sq, sq + [0.25, 0.0]])
     faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
-    assert U.uv_overlap_fraction(uv, faces, res=1024) == pytest.approx(1.0 / 3.0, abs=1e-9)
+    frac = U.uv_overlap_fraction(uv, faces, res=1024, ctx=gl_ctx)
+    assert frac == pytest.approx(1.0 / 3.0, abs=1e-9)
 
 
 def test_overlap_empty_is_zero():
@@ -133,11 +134,11 @@ def _square_mesh(uv):
     return make_mesh(v, [[0, 1, 2], [0, 2, 3]], uv)
 
 
-def test_check_uvs_cases():
+def test_check_uvs_cases(gl_ctx):
     none = U.check_uvs(_square_mesh(None))
     assert not none.usable and "no UVs" in none.reason and none.overlap_fraction is None
 
-    good = U.check_uvs(_square_mesh([[0, 0], [1, 0], [1, 1], [0, 1]]))
+    good = U.check_uvs(_square_mesh([[0, 0], [1, 0], [1, 1], [0, 1]]), ctx=gl_ctx)
     assert good.usable and good.reason == "" and not good.udim
     assert good.overlap_fraction == 0.0
 
@@ -189,14 +190,14 @@ def test_keep_mode_keeps_uvs():
     assert U.prepare_uvs(mesh, mode="auto").method == "kept"
 
 
-def test_keep_mode_warns_on_overlapping_uvs():
+def test_keep_mode_warns_on_overlapping_uvs(gl_ctx):
     # Two quads mirrored onto the same UV island (a common game-asset trick).
     mesh = _udim_mesh()
     uv = mesh.uv.copy()
     uv[4:] = uv[:4][:, ::-1]
     mirrored = make_mesh(mesh.vertices, mesh.faces, uv)
     with pytest.warns(CrackbakeWarning, match="cracks will show twice"):
-        out = U.prepare_uvs(mirrored, mode="keep")
+        out = U.prepare_uvs(mirrored, mode="keep", ctx=gl_ctx)
     assert out.overlap_fraction > 0.9
 
 
@@ -258,10 +259,10 @@ def test_unwrap_keeps_faces_and_positions(torus, torus_unwrap):
     np.testing.assert_array_equal(out.vertices[out.faces], torus.vertices[torus.faces])
 
 
-def test_unwrap_has_no_overlap(torus_unwrap):
+def test_unwrap_has_no_overlap(torus_unwrap, gl_ctx):
     assert torus_unwrap.overlap_fraction == pytest.approx(0.0, abs=1e-4)
     # measured independently at a finer raster
-    frac = U.uv_overlap_fraction(torus_unwrap.uv, torus_unwrap.faces, res=2048)
+    frac = U.uv_overlap_fraction(torus_unwrap.uv, torus_unwrap.faces, res=2048, ctx=gl_ctx)
     assert frac == pytest.approx(0.0, abs=1e-4)
 
 

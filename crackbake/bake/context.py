@@ -95,6 +95,11 @@ class GLScope:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
+        if not self._own and self.ctx is not None and self._objects:
+            # Rebind framebuffer 0 first: moderngl rebinds the "current" framebuffer after
+            # creating one, and a released (deleted) name there raises GL_INVALID_OPERATION in
+            # the next draw that shares this context.
+            self.ctx.detect_framebuffer(0).use()
         # Reverse order of creation: framebuffers before their attachments, VAOs before buffers.
         while self._objects:
             self._objects.pop().release()
