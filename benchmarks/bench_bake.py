@@ -120,10 +120,10 @@ def bare_exr_writes(planes: dict[str, np.ndarray], folder: Path) -> dict[str, fl
 def child(mesh_name: str, res: int) -> dict:
     from crackbake.bake.raster import bake_cracks
     from crackbake.bake.uv import prepare_uvs
-    from crackbake.exchange.export import write_exr, write_glb, write_png
+    from crackbake.exchange import GLB_TEXTURE_MAX, base_color, write_exr, write_glb, write_png
+    from crackbake.exchange.bundle import exr_channels
     from crackbake.io.mesh import load_mesh
     from crackbake.network import segments
-    from crackbake.pipeline import GLB_TEXTURE_MAX, _exr_channels, base_color
 
     row: dict = {"mesh": mesh_name, "res": res}
     path = spot_path() if mesh_name == "spot" else torus_100k(
@@ -149,7 +149,7 @@ def child(mesh_name: str, res: int) -> dict:
     row["render+read+dilate"] = row["render"] + row["readback"] + row["dilate"]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        planes = _exr_channels(maps, float32=False)
+        planes = exr_channels(maps, float32=False)
         # Two alternating rounds, best of each: single writes vary by +-30 % on 2 busy cores.
         ours, bares = [], []
         for _ in range(2):

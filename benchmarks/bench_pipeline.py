@@ -42,7 +42,7 @@ def child(preset: str, faces: int) -> dict:
     ).validate().resolved()
     timings: dict[str, float] = {}
     t = time.perf_counter()
-    network, stats, _ = solve(mesh, params, relative, lambda _m: None, timings)
+    network, stats, _ = solve(mesh, params, relative, timings)
     timings["total"] = time.perf_counter() - t
     st = network.stats()
     return {

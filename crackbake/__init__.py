@@ -2,7 +2,9 @@
 
 The pipeline is a chain of small stages with plain data between them::
 
-    mesh.load_mesh -> uv.prepare_uvs -> network (sidecar / solver) -> bake.bake_cracks -> export
+    io.mesh.load_mesh -> simulate (sim mesh, stress, solver) or io.sidecar.read_sidecar
+      -> network.CrackNetwork -> bake.uv.prepare_uvs -> bake.raster.bake_cracks
+      -> exchange (EXR, PNG, GLB, sidecar, manifest)
 
 ``crackbake.pipeline.run`` chains them exactly as the ``crackbake`` command does.
 """

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import logging
 import sys
 import time
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
@@ -17,6 +19,8 @@ from crackbake.params import (
     METHODS,
     RES_MAX,
     RES_MIN,
+    SIM_FACES_DEFAULT,
+    UV_MODES,
     RunParams,
     load_preset,
     parse_direction,
@@ -48,6 +52,41 @@ Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.mask, cra
 crack.depth, crack.time, crack.id, crack.distance), <stem>_mask.png, <stem>_depth.png,
 <stem>.glb, preview.png, cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
 """
+
+
+class _EchoHandler(logging.Handler):
+    """Shows log records on stderr as the CLI's progress lines (``[  1.2s] `` prefix with -v)."""
+
+    def __init__(self, verbose: bool, t0: float) -> None:
+        super().__init__(logging.INFO)
+        self.verbose = verbose
+        self.t0 = t0
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            elapsed = f"[{time.perf_counter() - self.t0:6.1f}s] " if self.verbose else ""
+            click.echo(f"{elapsed}{record.getMessage()}", err=True)
+        except Exception:  # logging must never break the run
+            self.handleError(record)
+
+
+@contextmanager
+def _progress_display(quiet: bool, verbose: bool, t0: float):
+    """Route the ``crackbake`` loggers' records to stderr while the block runs (-q: errors only)."""
+    root = logging.getLogger("crackbake")
+    handler = _EchoHandler(verbose, t0)
+    if quiet:
+        handler.setLevel(logging.ERROR)
+    saved = root.level, root.propagate
+    root.addHandler(handler)
+    root.setLevel(logging.INFO)
+    root.propagate = False  # the CLI owns the display: no second copy via the root logger
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
+        root.setLevel(saved[0])
+        root.propagate = saved[1]
 
 
 def _preset_help() -> str:
@@ -104,7 +143,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     "(cracks grown to their end along mesh edges).",
 )
 @click.option("--detail", type=float, help="Simulation mesh edge length, mesh units.")
-@click.option("--sim-faces", type=int, help="Simulation mesh size in faces [100000].")
+@click.option("--sim-faces", type=int, help=f"Simulation mesh size in faces [{SIM_FACES_DEFAULT}].")
 @click.option("--shrink", type=float, help="Uniform shrinkage tension (crackle, glaze, mud).")
 @click.option("--shrink-rate", type=float, help="Shrinkage added per solver step (relative).")
 @click.option(
@@ -167,7 +206,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option(
     "--uv",
-    type=click.Choice(["auto", "keep", "unwrap"]),
+    type=click.Choice(UV_MODES),
     default="auto",
     show_default=True,
     help="auto: keep usable UVs, else unwrap with xatlas.",
@@ -216,153 +255,85 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("-v", "--verbose", is_flag=True, help="Print stage timings and details.")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
 @click.version_option(__version__, "-V", "--version", prog_name="crackbake")
-def main(
-    mesh: Path,
-    impacts: tuple[str, ...],
-    cracks: Path | None,
-    preset: str | None,
-    method: str | None,
-    detail: float | None,
-    sim_faces: int | None,
-    shrink: float | None,
-    shrink_rate: float | None,
-    directions: tuple[str, ...],
-    curvature: str | None,
-    weight_map: Path | None,
-    weight_attribute: str | None,
-    invert_weights: bool,
-    noise: float | None,
-    hoop: float | None,
-    toughness: float | None,
-    tip_factor: float | None,
-    relax_steps: int | None,
-    relax_rate: float | None,
-    relax_share: float | None,
-    max_cracks: int | None,
-    max_steps: int | None,
-    max_crack_length: float | None,
-    crack_width: float | None,
-    depth_ratio: float | None,
-    res: int,
-    out: Path | None,
-    uv: str,
-    padding: int | None,
-    dilate: int | None,
-    max_distance: float | None,
-    profile: float,
-    seed: int,
-    formats: tuple[str, ...],
-    float32: bool,
-    object_name: str | None,
-    unwrap_timeout: float,
-    no_cache: bool,
-    quiet: bool,
-    verbose: bool,
-    as_json: bool,
-) -> None:
+def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> None:
     """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
     from crackbake.errors import CrackbakeWarning
     from crackbake.pipeline import run
 
     t0 = time.perf_counter()
-
-    def err(msg: str) -> None:
-        click.echo(msg, err=True)
-
-    def progress(msg: str) -> None:
-        if not quiet:
-            elapsed = f"[{time.perf_counter() - t0:6.1f}s] " if verbose else ""
-            err(f"{elapsed}{msg}")
-
     recorded: list[str] = []
 
     def show(message, category, *_args, **_kwargs) -> None:
         recorded.append(str(message))
         if not quiet:
-            err(f"warning: {message}")
+            _err(f"warning: {message}")
 
     try:
-        bias, density = _parse_curvature(curvature)
-        params = RunParams(
-            mesh=mesh,
-            out=out,
-            impacts=tuple(parse_impact(t) for t in impacts),
-            cracks=cracks,
-            res=res,
-            uv=uv,
-            padding=padding,
-            dilate=dilate,
-            max_distance=max_distance,
-            profile=profile,
-            seed=seed,
-            formats=formats,
-            float32=float32,
-            object_name=object_name,
-            unwrap_timeout=unwrap_timeout,
-            cache=not no_cache,
-            preset=preset,
-            method=method,
-            detail=detail,
-            sim_faces=sim_faces,
-            shrink=shrink,
-            shrink_rate=shrink_rate,
-            directions=tuple(parse_direction(d) for d in directions),
-            curvature_bias=bias,
-            curvature_density=density,
-            weight_map=weight_map,
-            weight_attribute=weight_attribute,
-            weight_invert=invert_weights,
-            noise=noise,
-            hoop=hoop,
-            toughness=toughness,
-            tip_factor=tip_factor,
-            relax_steps=relax_steps,
-            relax_rate=relax_rate,
-            relax_share=relax_share,
-            max_cracks=max_cracks,
-            max_steps=max_steps,
-            max_crack_length=max_crack_length,
-            crack_width=crack_width,
-            depth_ratio=depth_ratio,
-        )
-        with warnings.catch_warnings():
+        params = _run_params(mesh, options)
+        with warnings.catch_warnings(), _progress_display(quiet, verbose, t0):
             warnings.simplefilter("always", CrackbakeWarning)
             warnings.showwarning = show
-            result = run(params, progress=progress)
+            result = run(params)
     except CrackbakeError as exc:
-        err(f"error: {exc}")
+        _err(f"error: {exc}")
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
-        err("interrupted; no outputs were written")
+        _err("interrupted; no outputs were written")
         sys.exit(130)
     except Exception as exc:  # a bug: say so, keep the traceback behind --verbose
         if verbose:
             raise
-        err(f"internal error: {type(exc).__name__}: {exc} (rerun with --verbose for details)")
+        _err(f"internal error: {type(exc).__name__}: {exc} (rerun with --verbose for details)")
         sys.exit(1)
 
     result.warnings = recorded
     if as_json:
         click.echo(json.dumps(result.summary(), indent=2))
     if not quiet:
-        m = result.manifest
-        lo, hi = m["mesh"]["bbox_min"], m["mesh"]["bbox_max"]
-        bbox = " x ".join(f"{b - a:.4g}" for a, b in zip(lo, hi, strict=True))
-        uv_found = "found" if m["mesh"]["has_uv"] else "none in the file"
-        err(
-            f"mesh: {m['mesh']['vertices']} vertices, {m['mesh']['faces']} faces, "
-            f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}; "
-            f"cracks: {m['cracks']['cracks']} ({m['cracks']['points']} points)"
-        )
-        if verbose:
-            for stage, secs in m["timings_s"].items():
-                err(f"  {stage:<8} {secs:8.3f} s")
-        err(f"wrote {len(result.files) + 1} files to {result.out_dir}/")
-        for f in result.files:
-            err(f"  {f['name']:<28} {f['bytes'] / 1e6:8.2f} MB")
-        manifest = Path(result.out_dir) / "manifest.json"
-        if manifest.is_file():
-            err(f"  {'manifest.json':<28} {manifest.stat().st_size / 1e6:8.2f} MB")
+        _report(result, verbose)
+
+
+def _err(msg: str) -> None:
+    click.echo(msg, err=True)
+
+
+def _run_params(mesh: Path, o: dict) -> RunParams:
+    """:class:`RunParams` from the parsed options (``o`` holds main's keyword arguments)."""
+    bias, density = _parse_curvature(o.pop("curvature"))
+    impacts = tuple(parse_impact(t) for t in o.pop("impacts"))
+    directions = tuple(parse_direction(d) for d in o.pop("directions"))
+    return RunParams(
+        mesh=mesh,
+        impacts=impacts,
+        directions=directions,
+        curvature_bias=bias,
+        curvature_density=density,
+        cache=not o.pop("no_cache"),
+        weight_invert=o.pop("invert_weights"),
+        **o,
+    )
+
+
+def _report(result, verbose: bool) -> None:
+    """The closing summary on stderr: mesh, UVs, cracks, (timings,) files written."""
+    m = result.manifest
+    lo, hi = m["mesh"]["bbox_min"], m["mesh"]["bbox_max"]
+    bbox = " x ".join(f"{b - a:.4g}" for a, b in zip(lo, hi, strict=True))
+    uv_found = "found" if m["mesh"]["has_uv"] else "none in the file"
+    _err(
+        f"mesh: {m['mesh']['vertices']} vertices, {m['mesh']['faces']} faces, "
+        f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}; "
+        f"cracks: {m['cracks']['cracks']} ({m['cracks']['points']} points)"
+    )
+    if verbose:
+        for stage, secs in m["timings_s"].items():
+            _err(f"  {stage:<8} {secs:8.3f} s")
+    _err(f"wrote {len(result.files) + 1} files to {result.out_dir}/")
+    for f in result.files:
+        _err(f"  {f['name']:<28} {f['bytes'] / 1e6:8.2f} MB")
+    manifest = Path(result.out_dir) / "manifest.json"
+    if manifest.is_file():
+        _err(f"  {'manifest.json':<28} {manifest.stat().st_size / 1e6:8.2f} MB")
 
 
 if __name__ == "__main__":

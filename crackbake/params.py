@@ -148,7 +148,7 @@ class RunParams:
     cracks : Path or None
         A ``cracks.json`` sidecar to bake instead of solving.
     res : int
-        Texture edge in texels, 64..16384.
+        Texture edge in texels, :data:`RES_MIN`..:data:`RES_MAX`.
     uv : str
         ``auto`` (keep usable UVs, else unwrap), ``keep`` or ``unwrap``.
     padding : int or None
@@ -203,7 +203,7 @@ class RunParams:
     object_name: str | None = None
     unwrap_timeout: float = 300.0
     cache: bool = True
-    tile: int = 4096
+    tile: int = TILE_DEFAULT
     # --- solver and stress (None: from the preset, else SOLVER_DEFAULTS) ---
     preset: str | None = None
     method: str | None = None
@@ -262,8 +262,10 @@ class RunParams:
             )
         if not self.unwrap_timeout > 0:
             raise CrackbakeError(f"--unwrap-timeout {self.unwrap_timeout} must be > 0 seconds")
-        if not 256 <= self.tile <= 16384:
-            raise CrackbakeError(f"tile size {self.tile} is out of range; use 256..16384")
+        if not TILE_MIN <= self.tile <= TILE_MAX:
+            raise CrackbakeError(
+                f"tile size {self.tile} is out of range; use {TILE_MIN}..{TILE_MAX}"
+            )
         if self.seed < 0 or self.seed >= 2**63:
             raise CrackbakeError(f"--seed {self.seed} must be a non-negative 64-bit integer")
         if self.preset is not None:

@@ -1,45 +1,32 @@
 """One crackbake run: the stages chained exactly as the ``crackbake`` command does.
 
 mesh -> crack network (sidecar, or the solver) -> UVs -> GPU bake -> files.  Each stage is its
-own module; this one only orders them, times them and decides what gets written.
+own module; this one only orders them, times them and hands one GL context to every GPU stage.
+Progress is reported through :mod:`logging` (logger ``"crackbake.pipeline"``).
 """
 
 from __future__ import annotations
 
-import json
+import logging
 import time
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
-from crackbake import __version__
 from crackbake.bake.context import create_context, renderer_info
-from crackbake.bake.preview import render_preview
-from crackbake.bake.raster import CHANNELS, CrackMaps, bake_cracks
+from crackbake.bake.raster import CrackMaps, bake_cracks
 from crackbake.bake.uv import UVMesh, prepare_uvs
-from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.exchange.export import OutputStage, sha256_file, write_exr, write_glb, write_png
+from crackbake.errors import CrackbakeWarning
+from crackbake.exchange.bundle import write_outputs
+from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
+from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
-from crackbake.network import (
-    CrackNetwork,
-    from_solver,
-    jsonable,
-    read_sidecar,
-    segments,
-    write_obj,
-    write_sidecar,
-)
-from crackbake.params import RunParams, preset_names
-from crackbake.simulate.solver import SolverParams
+from crackbake.io.sidecar import jsonable, read_sidecar
+from crackbake.network import CrackNetwork, from_solver, segments
+from crackbake.params import RunParams
+from crackbake.simulate.setup import sidecar_params, solver_params, stress_sources
 
-#: Base colour of the GLB preview material: intact surface and crack interior (sRGB, 0..255).
-SURFACE_RGB = np.array([200, 196, 188], np.float32)
-CRACK_RGB = np.array([24, 20, 18], np.float32)
-
-ProgressFn = Callable[[str], None]
+logger = logging.getLogger(__name__)
 
 
 @dataclass(eq=False)
@@ -97,84 +84,13 @@ class RunResult:
         }
 
 
-#: Largest edge of the GLB's embedded base colour: 8K textures make GLBs slow to write and too
-#: big for many viewers (WebGL/mobile limits); the EXR/PNG maps keep the full resolution.
-GLB_TEXTURE_MAX = 4096
-
-
-def base_color(mask: np.ndarray, max_size: int | None = None) -> np.ndarray:
-    """sRGB uint8 (H, W, 3) preview colour: light surface, dark cracks.
-
-    Parameters
-    ----------
-    mask : (H, W) crack coverage 0..1
-    max_size : int, optional
-        Box-filter the mask down by a power of two until its edge is at most this.
-    """
-    m = mask.astype(np.float32)
-    while max_size is not None and m.shape[0] > max_size and m.shape[0] % 2 == 0:
-        m = m.reshape(m.shape[0] // 2, 2, m.shape[1] // 2, 2).mean(axis=(1, 3))
-    m = m[..., None]
-    rgb = SURFACE_RGB + (CRACK_RGB - SURFACE_RGB) * m
-    return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
-
-
-def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, float]:
-    """The camera direction (from the mesh towards the camera) that shows the most cracks.
-
-    Candidates are the 17 directions of the upper half of a cube's corners, edges and faces
-    (y is up), tilted 20 degrees upwards; each scores the crack length facing it, with the
-    mesh area facing it breaking ties (and choosing the view when there are no cracks).
-    """
-    cand = np.array(
-        [
-            (x, y, z)
-            for x in (-1, 0, 1)
-            for y in (0, 1)
-            for z in (-1, 0, 1)
-            if (x, y, z) != (0, 0, 0)
-        ],
-        float,
-    )
-    cand /= np.linalg.norm(cand, axis=1, keepdims=True)
-    cand[:, 1] += np.tan(np.radians(20))
-    cand /= np.linalg.norm(cand, axis=1, keepdims=True)
-    tri = mesh.vertices[mesh.faces]
-    area_normals = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    score = np.maximum(area_normals @ cand.T, 0).sum(axis=0)
-    score = 1e-3 * score / max(score.max(), 1e-300)
-    if network.cracks:
-        unit = area_normals / np.maximum(
-            np.linalg.norm(area_normals, axis=1, keepdims=True), 1e-300
-        )
-        for crack in network.cracks:
-            seg = np.linalg.norm(np.diff(crack.points, axis=0), axis=1)
-            n = unit[crack.faces[:-1]]
-            score += (seg[:, None] * np.maximum(n @ cand.T, 0)).sum(axis=0)
-    return tuple(float(x) for x in cand[int(np.argmax(score))])
-
-
-def _exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
-    chans = maps.channels()
-    if float32:
-        return {k: v.astype(np.float32, copy=False) for k, v in chans.items()}
-    # Types follow CHANNELS: half for bounded data, float where range or precision needs it.
-    out = {}
-    for name, arr in chans.items():
-        want = np.float16 if CHANNELS[name] == "half" else np.float32
-        out[name] = arr if arr.dtype == want else arr.astype(want)
-    return out
-
-
-def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
+def run(params: RunParams) -> RunResult:
     """Run crackbake end to end and write the output folder.
 
     Parameters
     ----------
     params : RunParams
         Validated here.
-    progress : callable, optional
-        Called with a short message at the start of each stage.
 
     Returns
     -------
@@ -185,12 +101,11 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
     CrackbakeError
         Any bad input; nothing is left under a final output name.
     """
-    say = progress or (lambda _msg: None)
     params.validate()
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
 
-    say(f"loading {params.mesh}")
+    logger.info("loading %s", params.mesh)
     t = time.perf_counter()
     mesh = load_mesh(params.mesh, params.object_name)
     timings["load"] = time.perf_counter() - t
@@ -204,96 +119,35 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
                 CrackbakeWarning,
                 stacklevel=2,
             )
-        say(f"reading crack network {params.cracks}")
+        logger.info("reading crack network %s", params.cracks)
         t = time.perf_counter()
         network = read_sidecar(params.cracks, mesh)
         timings["cracks"] = time.perf_counter() - t
     else:
         params, relative = params.resolved()
-        network, solver_stats, solved = solve(mesh, params, relative, say, timings)
+        network, solver_stats, solved = solve(mesh, params, relative, timings)
 
-    say("preparing UVs")
-    t = time.perf_counter()
-    uvmesh: UVMesh = prepare_uvs(
-        mesh,
-        mode=params.uv,
-        res=params.res,
-        padding=params.padding,
-        timeout=params.unwrap_timeout,
-        cache=params.cache,
-    )
-    timings["unwrap"] = time.perf_counter() - t
-
-    say(f"baking {params.res}x{params.res}")
-    t = time.perf_counter()
+    # One GL context for the UV overlap measure, the bake and the preview.
     ctx = create_context()
     try:
-        gl_info = renderer_info(ctx)
-        maps = bake_cracks(
-            uvmesh.vertices,
-            uvmesh.faces,
-            uvmesh.uv,
-            segments(network),
-            params.res,
-            max_distance=params.max_distance,
-            profile_shape=params.profile,
-            dilate_px=params.dilate,
-            tile=params.tile,
-            ctx=ctx,
-        )
+        uvmesh, maps = _bake(ctx, mesh, network, params, timings)
+        logger.info("writing %s", params.out_dir)
+        t = time.perf_counter()
+        effective = effective_params(params, solver_stats, maps, uvmesh)
+        with OutputStage(params.out_dir) as stage:
+            write_outputs(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx)
+            files = stage.records()
+            timings["write"] = time.perf_counter() - t
+            timings["total"] = time.perf_counter() - t_start
+            manifest = build_manifest(
+                params, effective, mesh, uvmesh, network, maps, renderer_info(ctx), files, timings
+            )
+            write_manifest(stage.path("manifest.json"), manifest)
+            stage.commit(last=("manifest.json",))
     finally:
         ctx.release()
-    timings["bake"] = time.perf_counter() - t
-
-    say(f"writing {params.out_dir}")
-    t = time.perf_counter()
-    out_dir = Path(params.out_dir)
-    stem = Path(params.mesh).stem
-    depth_max = float(maps.depth.max())
-    effective = params.to_dict()
-    if solver_stats:
-        effective["solver"] = solver_stats
-    effective.update(
-        {
-            "max_distance": maps.max_distance,
-            "padding": uvmesh.padding_px,
-            "uv_method": uvmesh.method,
-        }
-    )
-    with OutputStage(out_dir) as stage:
-        write_outputs(stage, stem, params, mesh, uvmesh, network, maps)
-        files = stage.records()
-        timings["write"] = time.perf_counter() - t
-        timings["total"] = time.perf_counter() - t_start
-        manifest = {
-            "crackbake": __version__,
-            "inputs": _inputs(params),
-            "params": effective,
-            "mesh": mesh.describe(),
-            "uv": {
-                "method": uvmesh.method,
-                "vertices": int(len(uvmesh.vertices)),
-                "overlap_fraction": float(uvmesh.overlap_fraction),
-                "padding_px": int(uvmesh.padding_px),
-            },
-            "cracks": network.stats(),
-            "maps": {
-                "resolution": params.res,
-                "depth_png_scale": depth_max,
-                "max_distance": maps.max_distance,
-                "covered_fraction": float(maps.inside.mean()),
-                "exr_channels": {
-                    k: ("float" if params.float32 else v) for k, v in CHANNELS.items()
-                },
-            },
-            "renderer": gl_info,
-            "files": files,
-            "timings_s": {k: round(v, 4) for k, v in timings.items()},
-        }
-        Path(stage.path("manifest.json")).write_text(json.dumps(manifest, indent=2) + "\n")
-        stage.commit(last=("manifest.json",))
     return RunResult(
-        out_dir=out_dir,
+        out_dir=Path(params.out_dir),
         files=files,
         manifest=manifest,
         mesh=mesh,
@@ -303,89 +157,45 @@ def run(params: RunParams, progress: ProgressFn | None = None) -> RunResult:
     )
 
 
-def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
-    """The stress sources a (resolved) parameter set asks for.
-
-    Raises
-    ------
-    CrackbakeError
-        When nothing would load the surface, or a preset needs an impact that is missing.
-    """
-    from crackbake.simulate.stress import (
-        CurvatureSource,
-        DirectionalSource,
-        ImpactSource,
-        NoiseSource,
-        ShrinkSource,
-        WeightSource,
-        load_weight_map,
-        vertex_weights,
+def _bake(
+    ctx, mesh: Mesh, network: CrackNetwork, params: RunParams, timings: dict[str, float]
+) -> tuple[UVMesh, CrackMaps]:
+    """The UV stage and the GPU bake, timed as ``unwrap`` and ``bake``."""
+    logger.info("preparing UVs")
+    t = time.perf_counter()
+    uvmesh = prepare_uvs(
+        mesh,
+        mode=params.uv,
+        res=params.res,
+        padding=params.padding,
+        timeout=params.unwrap_timeout,
+        cache=params.cache,
+        ctx=ctx,
     )
+    timings["unwrap"] = time.perf_counter() - t
 
-    if relative.get("needs_impact") and not params.impacts:
-        raise CrackbakeError(
-            f"preset '{params.preset}' needs an impact point; add --impact X,Y,Z "
-            "(a point on or near the surface, mesh units)"
-        )
-    diagonal = mesh.diagonal
-    sources: list = []
-    for imp in params.impacts:
-        radius = imp.radius
-        if radius is None:
-            radius = relative.get("impact_radius_rel", 0.15) * diagonal
-        sources.append(ImpactSource(imp.point, radius, imp.strength, hoop=params.hoop))
-    if params.shrink:
-        sources.append(ShrinkSource(params.shrink, params.shrink_rate or 0.0))
-    for x, y, z, strength in params.directions:
-        sources.append(DirectionalSource((x, y, z), strength))
-    if params.curvature_bias or params.curvature_density:
-        sources.append(
-            CurvatureSource(params.curvature_bias or 0.0, params.curvature_density or 0.0)
-        )
-    if not sources:
-        raise CrackbakeError(
-            "nothing to crack: give --impact X,Y,Z, --shrink S, --direction X,Y,Z, --curvature B "
-            f"or a --preset ({', '.join(preset_names())}), or bake a network with --cracks"
-        )
-    if params.weight_map is not None or params.weight_attribute is not None:
-        per_vertex = (
-            vertex_weights(params.mesh, params.weight_attribute, params.object_name)
-            if params.weight_attribute is not None
-            else None
-        )
-        image = load_weight_map(params.weight_map) if params.weight_map is not None else None
-        sources.append(WeightSource(per_vertex, image, params.weight_invert))
-    if params.noise:
-        sources.append(NoiseSource(params.noise))
-    return sources
-
-
-def solver_params(params: RunParams, mesh: Mesh, relative: dict) -> SolverParams:
-    """:class:`SolverParams` from a resolved parameter set (relative widths made absolute)."""
-    width = params.crack_width
-    if width is None:
-        width = relative.get("crack_width_rel", 0.001) * mesh.diagonal
-    return SolverParams(
-        method=params.method or "iben",
-        toughness=params.toughness,
-        tip_factor=params.tip_factor,
-        relax_steps=params.relax_steps,
-        relax_rate=params.relax_rate,
-        relax_share=params.relax_share,
-        max_cracks=params.max_cracks,
-        max_steps=params.max_steps,
-        max_crack_length=params.max_crack_length,
-        crack_width=width,
-        depth_ratio=params.depth_ratio,
-        seed=params.seed,
+    logger.info("baking %dx%d", params.res, params.res)
+    t = time.perf_counter()
+    maps = bake_cracks(
+        uvmesh.vertices,
+        uvmesh.faces,
+        uvmesh.uv,
+        segments(network),
+        params.res,
+        max_distance=params.max_distance,
+        profile_shape=params.profile,
+        dilate_px=params.dilate,
+        tile=params.tile,
+        ctx=ctx,
     )
+    timings["bake"] = time.perf_counter() - t
+    return uvmesh, maps
 
 
 def solve(
     mesh: Mesh,
     params: RunParams,
     relative: dict,
-    say: ProgressFn,
     timings: dict[str, float],
 ) -> tuple[CrackNetwork, dict, Solved]:
     """Simulation mesh, stress field and crack solver: the network for a resolved run.
@@ -404,36 +214,26 @@ def solve(
     from crackbake.simulate.stress import stress_field
 
     sources = stress_sources(params, mesh, relative)
-    say("building the simulation mesh")
+    logger.info("building the simulation mesh")
     t = time.perf_counter()
     sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces, seed=params.seed)
     timings["simmesh"] = time.perf_counter() - t
-    say(f"stress field on {len(sim.faces)} simulation faces")
+    logger.info("stress field on %d simulation faces", len(sim.faces))
     t = time.perf_counter()
     field = stress_field(sim, mesh, sources, seed=params.seed)
     timings["stress"] = time.perf_counter() - t
     sp = solver_params(params, mesh, relative)
-    say(f"growing cracks ({sp.method})")
+    logger.info("growing cracks (%s)", sp.method)
     t = time.perf_counter()
-    if sp.method == "thesis":
-        from crackbake.simulate.solver.thesis import solve_thesis
-
-        result = solve_thesis(sim, field, sp, progress=say)
-    else:
-        from crackbake.simulate.solver.iben import solve_iben
-
-        result = solve_iben(sim, field, sp, progress=say)
-        if result.stats.get("stopped") == "max steps":
-            warnings.warn(
-                f"the solver stopped at --max-steps {sp.max_steps} with cracks still growing; "
-                "raise --max-steps for the complete pattern",
-                CrackbakeWarning,
-                stacklevel=2,
-            )
+    result = _grow(sim, field, sp)
     timings["solve"] = time.perf_counter() - t
-    say(f"{result.stats.get('cracks', len(result.cracks))} cracks started, "
-        f"{len(result.cracks)} polylines, {result.steps} steps"
-        + (f" ({result.stats['stopped']})" if "stopped" in result.stats else ""))
+    logger.info(
+        "%s cracks started, %d polylines, %s steps%s",
+        result.stats.get("cracks", len(result.cracks)),
+        len(result.cracks),
+        result.steps,
+        f" ({result.stats['stopped']})" if "stopped" in result.stats else "",
+    )
     effective = params.to_dict()
     effective.update(
         {
@@ -445,7 +245,7 @@ def solve(
     network = from_solver(
         result.cracks,
         mesh,
-        params=_sidecar_params(effective),
+        params=sidecar_params(effective),
         impacts=field.impacts,
         solver_steps=result.steps,
     )
@@ -454,98 +254,20 @@ def solve(
     return network, jsonable(stats), Solved(sim=sim, field=field, result=result)
 
 
-def _sidecar_params(effective: dict) -> dict:
-    """Parameters stored in the sidecar: everything that shapes the network, no output paths."""
-    drop = {
-        "out",
-        "formats",
-        "float32",
-        "unwrap_timeout",
-        "cache",
-        "tile",
-        "res",
-        "padding",
-        "dilate",
-        "max_distance",
-        "profile",
-        "cracks",
-    }
-    return jsonable({k: v for k, v in effective.items() if k not in drop})
+def _grow(sim, field, sp):
+    """Run the solver ``sp.method`` names; warn when iben stopped at its step limit."""
+    if sp.method == "thesis":
+        from crackbake.simulate.solver.thesis import solve_thesis
 
+        return solve_thesis(sim, field, sp)
+    from crackbake.simulate.solver.iben import solve_iben
 
-def write_outputs(
-    stage: OutputStage,
-    stem: str,
-    params: RunParams,
-    mesh: Mesh,
-    uvmesh: UVMesh,
-    network: CrackNetwork,
-    maps: CrackMaps,
-) -> None:
-    """Write the requested maps, the GLB, the preview and the network into ``stage``.
-
-    Parameters
-    ----------
-    stage : OutputStage
-        Staging folder; nothing reaches its final name until the caller commits.
-    stem : str
-        Prefix of the map file names (the mesh file's stem).
-    params : RunParams
-        ``formats`` and ``float32`` decide what is written.
-    mesh, uvmesh, network, maps
-        The stages' results.
-    """
-    depth_max = float(maps.depth.max())
-    if "exr" in params.formats:
-        write_exr(
-            stage.path(f"{stem}_cracks.exr"),
-            _exr_channels(maps, params.float32),
-            attributes={
-                "crackbake:version": __version__,
-                "crackbake:units": "mesh",
-                "crackbake:uvConvention": "texel (0,0) is UV (0,1): v up, top row first",
-                "crackbake:depthProfile": f"V exponent {maps.profile_shape:g}",
-                "crackbake:maxDistance": float(maps.max_distance),
-            },
+    result = solve_iben(sim, field, sp)
+    if result.stats.get("stopped") == "max steps":
+        warnings.warn(
+            f"the solver stopped at --max-steps {sp.max_steps} with cracks still growing; "
+            "raise --max-steps for the complete pattern",
+            CrackbakeWarning,
+            stacklevel=3,
         )
-    if "png" in params.formats:
-        write_png(stage.path(f"{stem}_mask.png"), maps.mask, bits=8)
-        scale = depth_max if depth_max > 0 else 1.0
-        write_png(stage.path(f"{stem}_depth.png"), maps.depth / scale, bits=16)
-    if "glb" in params.formats:
-        write_glb(
-            stage.path(f"{stem}.glb"),
-            uvmesh.vertices,
-            uvmesh.faces,
-            uvmesh.uv,
-            uvmesh.normals,
-            base_color(maps.mask, GLB_TEXTURE_MAX),
-            name=stem,
-        )
-    if "preview" in params.formats:
-        write_png(
-            stage.path("preview.png"),
-            render_preview(
-                uvmesh.vertices,
-                uvmesh.faces,
-                uvmesh.uv,
-                uvmesh.normals,
-                base_color(maps.mask),
-                view_dir=preview_direction(mesh, network),
-            ),
-            bits=8,
-        )
-    write_sidecar(network, stage.path("cracks.json"))
-    write_obj(network, stage.path("cracks.obj"))
-
-
-def _inputs(params: RunParams) -> dict:
-    inputs = {"mesh": {"path": str(params.mesh), "sha256": sha256_file(params.mesh)}}
-    if params.weight_map is not None:
-        inputs["weight_map"] = {
-            "path": str(params.weight_map),
-            "sha256": sha256_file(params.weight_map),
-        }
-    if params.cracks is not None:
-        inputs["cracks"] = {"path": str(params.cracks), "sha256": sha256_file(params.cracks)}
-    return inputs
+    return result

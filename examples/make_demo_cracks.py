@@ -17,7 +17,8 @@ from scipy.spatial import cKDTree
 from trimesh.triangles import closest_point
 
 from crackbake.io.mesh import load_mesh
-from crackbake.network import Crack, CrackNetwork, mesh_info, write_sidecar
+from crackbake.io.sidecar import write_sidecar
+from crackbake.network import Crack, CrackNetwork, mesh_info
 
 MAX_WIDTH = 0.004  # mesh units; spot is about 2 units tall
 

@@ -4,19 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import plate_mesh
 
-from crackbake.bake.context import create_context
 from crackbake.bake.dilation import dilate, nearest_island
 from crackbake.bake.raster import bake_cracks, face_candidates
 from crackbake.errors import CrackbakeError
 from crackbake.network import Segments
-
-
-@pytest.fixture(scope="module")
-def ctx():
-    c = create_context()
-    yield c
-    c.release()
 
 
 def make_segments(a, b, width, depth=None, time=(0.0, 1.0), ids=None) -> Segments:
@@ -31,10 +24,9 @@ def make_segments(a, b, width, depth=None, time=(0.0, 1.0), ids=None) -> Segment
 
 
 def plate(uv_of_xy):
-    """Unit square in z = 0 as two triangles; UVs from a function of (x, y)."""
-    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
-    f = np.array([[0, 1, 2], [0, 2, 3]])
-    return v, f, np.array([uv_of_xy(x, y) for x, y, _ in v], float)
+    """Unit square in z = 0 as two triangles (conftest's plate); UVs from a function of (x, y)."""
+    m = plate_mesh(1)
+    return m.vertices, m.faces, np.array([uv_of_xy(x, y) for x, y, _ in m.vertices], float)
 
 
 def col_of(u, res):
@@ -45,7 +37,7 @@ def row_of(v, res):
     return int(np.floor((1.0 - v) * res))
 
 
-def test_width_in_world_units_on_stretched_uvs(ctx):
+def test_width_in_world_units_on_stretched_uvs(gl_ctx):
     res = 512
     # v is squashed 4x: one world unit spans res/4 texels along v but res texels along u.
     v, f, uv = plate(lambda x, y: (x, y / 4))
@@ -53,7 +45,7 @@ def test_width_in_world_units_on_stretched_uvs(ctx):
     segs = make_segments(
         [[0.1, 0.5, 0], [0.25, 0.6, 0]], [[0.9, 0.5, 0], [0.25, 0.95, 0]], width=w
     )
-    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=ctx)
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=gl_ctx)
     mask = m.mask.astype(np.float64)
     # Horizontal crack: its width runs along v -> w * res / 4 texels down a column.
     col = col_of(0.6, res)
@@ -66,7 +58,7 @@ def test_width_in_world_units_on_stretched_uvs(ctx):
     assert float(m.width[row, col_of(0.25, res)]) == pytest.approx(w, rel=2e-3)
 
 
-def test_antialiased_coverage_is_exact_area_for_straight_edges(ctx):
+def test_antialiased_coverage_is_exact_area_for_straight_edges(gl_ctx):
     """For a straight crack along a texel axis, the one-texel ramp equals the exact covered area."""
     res = 256
     v, f, uv = plate(lambda x, y: (x, y))
@@ -74,7 +66,7 @@ def test_antialiased_coverage_is_exact_area_for_straight_edges(ctx):
     for shift in (0.0, 0.3, 0.65):
         y = 0.5 + shift / res
         segs = make_segments([[0.1, y, 0]], [[0.9, y, 0]], width=w_tex / res)
-        m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=ctx)
+        m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=gl_ctx)
         column = m.mask[:, res // 2].astype(np.float64)
         # A fractional value shows the edge is anti-aliased, not a hard step.
         assert ((column > 0.05) & (column < 0.95)).any()
@@ -85,23 +77,23 @@ def test_antialiased_coverage_is_exact_area_for_straight_edges(ctx):
         np.testing.assert_allclose(column, exact, atol=2e-3)
 
 
-def test_thin_crack_keeps_its_area(ctx):
+def test_thin_crack_keeps_its_area(gl_ctx):
     res = 256
     v, f, uv = plate(lambda x, y: (x, y))
     w = 0.3 / res
     segs = make_segments([[0.1, 0.5013, 0]], [[0.9, 0.5013, 0]], width=w)
-    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=ctx)
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=gl_ctx)
     column = m.mask[:, res // 2].astype(np.float64)
     assert column.sum() == pytest.approx(0.3, abs=0.02)
     assert column.max() < 0.35
 
 
-def test_channels_values(ctx):
+def test_channels_values(gl_ctx):
     res = 256
     v, f, uv = plate(lambda x, y: (x, y))
     w, dmax = 0.04, 0.01
     segs = make_segments([[0.1, 0.5, 0]], [[0.9, 0.5, 0]], width=w, depth=dmax, ids=[7])
-    m = bake_cracks(v, f, uv, segs, res, max_distance=0.1, ctx=ctx)
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.1, ctx=gl_ctx)
     r, c = row_of(0.5, res), col_of(0.5, res)  # texel centre half a texel from the crack
     assert float(m.crack_id[r, c]) == 7
     assert float(m.time[r, c]) == pytest.approx((0.5 + 0.5 / res - 0.1) / 0.8, abs=2e-3)
@@ -118,7 +110,7 @@ def test_channels_values(ctx):
     assert float(m.distance[r2, c2]) == pytest.approx(np.hypot(x2 - 0.9, y2 - 0.5), rel=1e-4)
 
 
-def test_continuous_across_uv_seam(ctx):
+def test_continuous_across_uv_seam(gl_ctx):
     """A crack crossing a UV seam continues on both islands with the same width and depth."""
     res = 512
     s = 0.4  # UV units per world unit on both islands
@@ -135,7 +127,7 @@ def test_continuous_across_uv_seam(ctx):
     uv[4:, 1] = 0.55 + s * (vertices[4:, 0] - 0.5)
     w, dmax = 0.03, 0.01
     segs = make_segments([[0.2, 0.5, 0]], [[0.8, 0.5, 0]], width=w, depth=dmax)
-    m = bake_cracks(vertices, faces, uv, segs, res, max_distance=0.05, dilate_px=0, ctx=ctx)
+    m = bake_cracks(vertices, faces, uv, segs, res, max_distance=0.05, dilate_px=0, ctx=gl_ctx)
     mask = m.mask.astype(np.float64)
     expected = w * s * res
     # Left island: the crack runs along u; the seam is at u = 0.25. Sum down the column next to it.
@@ -152,11 +144,11 @@ def test_continuous_across_uv_seam(ctx):
     assert dl > 0.8 * dmax
 
 
-def test_unbounded_and_limited_dilation(ctx):
+def test_unbounded_and_limited_dilation(gl_ctx):
     res = 256
     v, f, uv = plate(lambda x, y: (0.25 + 0.5 * x, 0.25 + 0.5 * y))
     segs = make_segments([[0.0, 0.5, 0]], [[1.0, 0.5, 0]], width=0.05, ids=[3])
-    full = bake_cracks(v, f, uv, segs, res, max_distance=0.1, ctx=ctx)
+    full = bake_cracks(v, f, uv, segs, res, max_distance=0.1, ctx=gl_ctx)
     assert full.inside.mean() == pytest.approx(0.25, abs=0.01)
     r = row_of(0.5, res) - 1
     # Unbounded: the crack's row continues to the image border, and the far corner is filled.
@@ -165,7 +157,7 @@ def test_unbounded_and_limited_dilation(ctx):
     assert float(full.crack_id[0, 0]) == -1  # the island's corner is far from the crack
     assert float(full.distance[0, 0]) == pytest.approx(float(full.distance[res // 4, res // 4]))
     # Limited to 4 texels: 3 texels out is filled, 10 texels out is background.
-    lim = bake_cracks(v, f, uv, segs, res, max_distance=0.1, dilate_px=4, ctx=ctx)
+    lim = bake_cracks(v, f, uv, segs, res, max_distance=0.1, dilate_px=4, ctx=gl_ctx)
     edge = col_of(0.25, res)
     assert float(lim.mask[r, edge - 3]) > 0.5
     assert float(lim.mask[r, edge - 10]) == 0
@@ -173,15 +165,15 @@ def test_unbounded_and_limited_dilation(ctx):
     assert float(lim.distance[r, edge - 10]) == pytest.approx(0.1)
 
 
-def test_tiled_bake_matches_single_pass(ctx):
+def test_tiled_bake_matches_single_pass(gl_ctx):
     res = 512
     v, f, uv = plate(lambda x, y: (x, y))
     rng = np.random.default_rng(1)
     a = rng.random((40, 3)) * [1, 1, 0]
     b = a + (rng.random((40, 3)) - 0.5) * [0.3, 0.3, 0]
     segs = make_segments(a, b, width=rng.random((40, 2)) * 0.01)
-    one = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=512, ctx=ctx)
-    tiled = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=256, ctx=ctx)  # 4 bands
+    one = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=512, ctx=gl_ctx)
+    tiled = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=256, ctx=gl_ctx)  # 4 bands
     for name, arr in one.channels().items():
         np.testing.assert_allclose(
             tiled.channels()[name].astype(np.float64), arr.astype(np.float64),
@@ -250,19 +242,19 @@ def test_dilation_with_no_island_fills_background():
     assert (img == 3.0).all()
 
 
-def test_bad_arguments(ctx):
+def test_bad_arguments(gl_ctx):
     v, f, uv = plate(lambda x, y: (x, y))
     segs = make_segments([[0.1, 0.5, 0]], [[0.9, 0.5, 0]], width=0.01)
-    with pytest.raises(CrackbakeError, match="resolution"):
-        bake_cracks(v, f, uv, segs, 0, ctx=ctx)
+    with pytest.raises(ValueError, match="res must be a positive"):
+        bake_cracks(v, f, uv, segs, 0, ctx=gl_ctx)
     with pytest.raises(CrackbakeError, match="profile"):
-        bake_cracks(v, f, uv, segs, 64, profile_shape=0, ctx=ctx)
+        bake_cracks(v, f, uv, segs, 64, profile_shape=0, ctx=gl_ctx)
 
 
-def test_no_cracks_bakes_clean_maps(ctx):
+def test_no_cracks_bakes_clean_maps(gl_ctx):
     v, f, uv = plate(lambda x, y: (x, y))
     segs = make_segments(np.zeros((0, 3)), np.zeros((0, 3)), width=0.0)
-    m = bake_cracks(v, f, uv, segs, 64, max_distance=0.2, ctx=ctx)
+    m = bake_cracks(v, f, uv, segs, 64, max_distance=0.2, ctx=gl_ctx)
     assert float(m.mask.max()) == 0
     assert (m.crack_id == -1).all()
     assert np.allclose(m.distance, 0.2)

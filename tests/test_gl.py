@@ -12,7 +12,13 @@ import sys
 
 import pytest
 
-from crackbake.bake.context import create_context, renderer_info, shader_dir, shader_source
+from crackbake.bake.context import (
+    GLScope,
+    create_context,
+    renderer_info,
+    shader_dir,
+    shader_source,
+)
 
 PROBE = (
     "from crackbake.bake.context import create_context\n"
@@ -59,3 +65,26 @@ def test_missing_libraries_name_the_package_and_the_install_line(env, names):
 def test_shaders_are_found():
     assert (shader_dir() / "crack_bake.frag").is_file()
     assert "#version 430" in shader_source("crack_bake.vert")
+
+
+def test_scope_releases_its_objects_on_error_and_keeps_the_shared_context(gl_ctx):
+    kept = []
+    with pytest.raises(RuntimeError), GLScope(gl_ctx) as gl:
+        kept.append(gl.keep(gl.ctx.buffer(reserve=64)))
+        kept.append(gl.keep(gl.ctx.texture((4, 4), 1, dtype="f4")))
+        raise RuntimeError("draw failed")
+    # moderngl marks released objects with an invalid glo.
+    assert all(obj.glo == 0 or obj.mglo is None or type(obj.mglo).__name__ == "InvalidObject"
+               for obj in kept)
+    assert gl_ctx.error == "GL_NO_ERROR"
+    with GLScope(gl_ctx) as gl:
+        assert gl.ctx is gl_ctx
+        gl.keep(gl.ctx.buffer(reserve=16))
+
+
+def test_scope_without_a_context_makes_and_releases_its_own():
+    with GLScope() as gl:
+        ctx = gl.ctx
+        assert ctx.version_code >= 430
+        gl.keep(ctx.buffer(reserve=16))
+    assert gl.ctx is None

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import logging
+import re
 import struct
 import subprocess
 import sys
@@ -19,7 +21,8 @@ from PIL import Image
 from crackbake import __version__
 from crackbake.cli import main
 from crackbake.io.mesh import load_mesh
-from crackbake.network import Crack, CrackNetwork, mesh_info, write_sidecar
+from crackbake.io.sidecar import write_sidecar
+from crackbake.network import Crack, CrackNetwork, mesh_info
 from crackbake.params import RunParams
 from crackbake.pipeline import run
 
@@ -214,6 +217,29 @@ def test_cli_version_and_help():
     r = cli("--help")
     assert r.exit_code == 0
     assert "Examples:" in r.output and "--cracks" in r.output and "--res" in r.output
+
+
+def test_cli_shows_stage_progress_from_the_log(plate, tmp_path):
+    obj, side, _ = plate
+    args = [str(obj), "--cracks", str(side), "--res", "64", "--formats", "exr"]
+    r = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "a")])
+    assert r.exit_code == 0, r.output
+    lines = r.stderr.splitlines()
+    assert lines[:5] == [
+        f"loading {obj}",
+        f"reading crack network {side}",
+        "preparing UVs",
+        "baking 64x64",
+        f"writing {tmp_path / 'a'}",
+    ]
+    assert r.stdout == ""
+    r = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "b"), "-v"])
+    assert r.exit_code == 0, r.output
+    assert re.match(r"\[ *\d+\.\ds\] loading ", r.stderr.splitlines()[0])
+    r = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "c"), "-q"])
+    assert r.exit_code == 0 and r.stderr == ""
+    # The display is the CLI's: after it, the library logs nothing on its own.
+    assert not logging.getLogger("crackbake").handlers
 
 
 def test_cli_bakes_with_json_summary(plate, tmp_path):

@@ -1,24 +1,58 @@
-"""The preview renders the textured mesh the right way round."""
+"""The preview (crackbake.bake.preview): rendered the right way round, from a view of the cracks."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+from conftest import plate_mesh
 
-from crackbake.bake.preview import render_preview
+from crackbake.bake.preview import preview_direction, render_preview
+from crackbake.network import Crack, CrackNetwork, mesh_info
 
 
-def test_dark_texture_corner_shows_in_the_matching_corner_of_the_picture():
+def test_dark_texture_corner_shows_in_the_matching_corner_of_the_picture(gl_ctx):
     # A square plate facing +z, UVs = xy; the camera looks from +z with y up.
-    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
-    f = np.array([[0, 1, 2], [0, 2, 3]])
-    uv = v[:, :2].copy()
-    n = np.tile([0.0, 0.0, 1.0], (4, 1))
+    m = plate_mesh(1)
     color = np.full((64, 64, 3), 220, np.uint8)
     color[:16, :16] = 0  # image row 0 = v = 1: the top-left of the texture is UV (0, 1)
-    pic = render_preview(v, f, uv, n, color, size=256, view_dir=(0, 0, 1), up=(0, 1, 0))
+    pic = render_preview(
+        m.vertices, m.faces, m.uv, m.normals, color, size=256, view_dir=(0, 0, 1), up=(0, 1, 0),
+        ctx=gl_ctx,
+    )  # fmt: skip
     gray = pic.mean(axis=2)
     quarter = 256 // 4
     # The plate fills most of the frame; its top-left (x = 0, y = 1) is the picture's top-left.
     top_left = gray[quarter : quarter + 20, quarter : quarter + 20].mean()
     bottom_right = gray[-quarter - 20 : -quarter, -quarter - 20 : -quarter].mean()
     assert top_left < 40 and bottom_right > 120
+
+
+def test_standalone_call_makes_its_own_context():
+    m = plate_mesh(1)
+    pic = render_preview(m.vertices, m.faces, m.uv, m.normals, np.zeros((8, 8, 3), np.uint8),
+                         size=32)  # fmt: skip
+    assert pic.shape == (32, 32, 3) and pic.dtype == np.uint8
+
+
+def _two_sided_box():
+    """Plate facing +z (faces 0, 1) and the same plate flipped to face -z (faces 2, 3)."""
+    m = plate_mesh(1)
+    flipped = m.faces[:, ::-1] + len(m.vertices)
+    return replace(
+        m,
+        vertices=np.vstack([m.vertices, m.vertices]),
+        faces=np.vstack([m.faces, flipped]),
+        uv=np.vstack([m.uv, m.uv]),
+        normals=np.vstack([m.normals, -m.normals]),
+    )
+
+
+def test_preview_direction_faces_the_cracks():
+    m = _two_sided_box()
+    crack = Crack(id=0, points=[[0.6, 0.1, 0.0], [0.9, 0.2, 0.0]], faces=[2, 2], time=[0, 1],
+                  width=[0.01, 0.01], depth=[0.0, 0.0])  # fmt: skip
+    d = preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)))
+    assert np.isclose(np.linalg.norm(d), 1.0) and d[2] < 0  # the cracked side faces -z
+    crack.faces = np.array([0, 0])
+    assert preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)))[2] > 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from functools import cache
 from pathlib import Path
+from types import TracebackType
 
 from crackbake.errors import CrackbakeError
 
@@ -52,6 +53,59 @@ def create_context():
             f"cannot open a headless OpenGL context ({msg}); on Debian/Ubuntu install: {APT_LINE}"
         ) from exc
     return ctx
+
+
+class GLScope:
+    """The GL objects of one draw, released together when the block ends (errors included).
+
+    ::
+
+        with GLScope(ctx) as gl:
+            prog = gl.keep(gl.ctx.program(vertex_shader=..., fragment_shader=...))
+            ...
+
+    One context serves a whole run (UV overlap, bake, preview): a scope given the run's context
+    releases only what it kept and leaves the context open; a scope given none creates a
+    temporary context and releases it too, so standalone calls need no set-up.
+
+    Attributes
+    ----------
+    ctx : moderngl.Context
+        The context to draw with (valid inside the ``with`` block).
+    """
+
+    def __init__(self, ctx=None) -> None:
+        self.ctx = ctx
+        self._own = ctx is None
+        self._objects: list = []
+
+    def __enter__(self) -> GLScope:
+        if self._own:
+            self.ctx = create_context()
+        return self
+
+    def keep(self, obj):
+        """Register a GL object (buffer, texture, program, ...) for release; returns it."""
+        self._objects.append(obj)
+        return obj
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if not self._own and self.ctx is not None and self._objects:
+            # Rebind framebuffer 0 first: moderngl rebinds the "current" framebuffer after
+            # creating one, and a released (deleted) name there raises GL_INVALID_OPERATION in
+            # the next draw that shares this context.
+            self.ctx.detect_framebuffer(0).use()
+        # Reverse order of creation: framebuffers before their attachments, VAOs before buffers.
+        while self._objects:
+            self._objects.pop().release()
+        if self._own and self.ctx is not None:
+            self.ctx.release()
+            self.ctx = None
 
 
 def renderer_info(ctx) -> dict:

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from crackbake.bake.context import create_context, shader_source
+from crackbake.bake.context import GLScope, shader_source
+from crackbake.io.mesh import Mesh
+from crackbake.network import CrackNetwork
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
@@ -75,8 +77,6 @@ def render_preview(
     (size, size, 3) uint8
         sRGB picture, row 0 = top.
     """
-    import moderngl
-
     vertices = np.asarray(vertices, np.float64)
     lo, hi = vertices.min(0), vertices.max(0)
     centre = 0.5 * (lo + hi) if target is None else np.asarray(target, np.float64)
@@ -95,50 +95,88 @@ def render_preview(
     fill = -np.cross(np.asarray(up, np.float64), d)
     fill = fill / max(np.linalg.norm(fill), 1e-12)
 
-    own = ctx is None
-    if own:
-        ctx = create_context()
-    try:
-        prog = ctx.program(
+    with GLScope(ctx) as gl:
+        pixels = _draw(gl, vertices, faces, uv, normals, color, size, mvp, key, fill)
+    return np.ascontiguousarray(np.flipud(pixels))
+
+
+def _draw(gl: GLScope, vertices, faces, uv, normals, color, size, mvp, key, fill) -> np.ndarray:
+    """Draw the textured mesh with 4x MSAA; the (size, size, 3) uint8 picture, row 0 = bottom."""
+    import moderngl
+
+    ctx = gl.ctx
+    prog = gl.keep(
+        ctx.program(
             vertex_shader=shader_source("preview.vert"),
             fragment_shader=shader_source("preview.frag"),
         )
-        data = np.concatenate(
-            [vertices, np.asarray(normals, np.float64), np.asarray(uv, np.float64)], axis=1
-        ).astype(np.float32)
-        vbo = ctx.buffer(data.tobytes())
-        ibo = ctx.buffer(np.asarray(faces, np.uint32).tobytes())
-        vao = ctx.vertex_array(
+    )
+    data = np.concatenate(
+        [vertices, np.asarray(normals, np.float64), np.asarray(uv, np.float64)], axis=1
+    ).astype(np.float32)
+    vbo = gl.keep(ctx.buffer(data.tobytes()))
+    ibo = gl.keep(ctx.buffer(np.asarray(faces, np.uint32).tobytes()))
+    vao = gl.keep(
+        ctx.vertex_array(
             prog, [(vbo, "3f 3f 2f", "in_pos", "in_normal", "in_uv")], index_buffer=ibo
         )
-        # Texture rows: GL's first row is v = 0, so upload the image bottom row first.
-        img = np.ascontiguousarray(np.flipud(np.asarray(color, np.uint8)[..., :3]))
-        tex = ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes())
-        tex.build_mipmaps()
-        tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        tex.anisotropy = 8.0
-        tex.use(0)
-        prog["u_color"].value = 0
-        prog["u_mvp"].write(mvp.T.tobytes())  # GLSL matrices are column-major
-        prog["u_key"].value = tuple(key.astype(np.float32))
-        prog["u_fill"].value = tuple(fill.astype(np.float32))
+    )
+    # Texture rows: GL's first row is v = 0, so upload the image bottom row first.
+    img = np.ascontiguousarray(np.flipud(np.asarray(color, np.uint8)[..., :3]))
+    tex = gl.keep(ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes()))
+    tex.build_mipmaps()
+    tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    tex.anisotropy = 8.0
+    tex.use(0)
+    prog["u_color"].value = 0
+    prog["u_mvp"].write(mvp.T.tobytes())  # GLSL matrices are column-major
+    prog["u_key"].value = tuple(key.astype(np.float32))
+    prog["u_fill"].value = tuple(fill.astype(np.float32))
 
-        samples = min(4, ctx.info.get("GL_MAX_SAMPLES", 4))
-        ms_color = ctx.renderbuffer((size, size), 4, samples=samples)
-        ms_depth = ctx.depth_renderbuffer((size, size), samples=samples)
-        ms_fbo = ctx.framebuffer([ms_color], ms_depth)
-        out_tex = ctx.texture((size, size), 4)
-        out_fbo = ctx.framebuffer([out_tex])
-        ms_fbo.use()
-        ctx.enable(moderngl.DEPTH_TEST)
-        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
-        ms_fbo.clear(0.16, 0.17, 0.19, 1.0, depth=1.0)
-        vao.render(moderngl.TRIANGLES)
-        ctx.copy_framebuffer(out_fbo, ms_fbo)
-        pixels = np.frombuffer(out_fbo.read(components=3), np.uint8).reshape(size, size, 3)
-        for obj in (out_fbo, out_tex, ms_fbo, ms_depth, ms_color, tex, vao, ibo, vbo, prog):
-            obj.release()
-    finally:
-        if own:
-            ctx.release()
-    return np.ascontiguousarray(np.flipud(pixels))
+    samples = min(4, ctx.info.get("GL_MAX_SAMPLES", 4))
+    ms_color = gl.keep(ctx.renderbuffer((size, size), 4, samples=samples))
+    ms_depth = gl.keep(ctx.depth_renderbuffer((size, size), samples=samples))
+    ms_fbo = gl.keep(ctx.framebuffer([ms_color], ms_depth))
+    out_tex = gl.keep(ctx.texture((size, size), 4))
+    out_fbo = gl.keep(ctx.framebuffer([out_tex]))
+    ms_fbo.use()
+    ctx.enable_only(moderngl.DEPTH_TEST)
+    ms_fbo.clear(0.16, 0.17, 0.19, 1.0, depth=1.0)
+    vao.render(moderngl.TRIANGLES)
+    ctx.copy_framebuffer(out_fbo, ms_fbo)
+    return np.frombuffer(out_fbo.read(components=3), np.uint8).reshape(size, size, 3)
+
+
+def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, float]:
+    """The camera direction (from the mesh towards the camera) that shows the most cracks.
+
+    Candidates are the 17 directions of the upper half of a cube's corners, edges and faces
+    (y is up), tilted 20 degrees upwards; each scores the crack length facing it, with the
+    mesh area facing it breaking ties (and choosing the view when there are no cracks).
+    """
+    cand = np.array(
+        [
+            (x, y, z)
+            for x in (-1, 0, 1)
+            for y in (0, 1)
+            for z in (-1, 0, 1)
+            if (x, y, z) != (0, 0, 0)
+        ],
+        float,
+    )
+    cand /= np.linalg.norm(cand, axis=1, keepdims=True)
+    cand[:, 1] += np.tan(np.radians(20))
+    cand /= np.linalg.norm(cand, axis=1, keepdims=True)
+    tri = mesh.vertices[mesh.faces]
+    area_normals = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    score = np.maximum(area_normals @ cand.T, 0).sum(axis=0)
+    score = 1e-3 * score / max(score.max(), 1e-300)
+    if network.cracks:
+        unit = area_normals / np.maximum(
+            np.linalg.norm(area_normals, axis=1, keepdims=True), 1e-300
+        )
+        for crack in network.cracks:
+            seg = np.linalg.norm(np.diff(crack.points, axis=0), axis=1)
+            n = unit[crack.faces[:-1]]
+            score += (seg[:, None] * np.maximum(n @ cand.T, 0)).sum(axis=0)
+    return tuple(float(x) for x in cand[int(np.argmax(score))])

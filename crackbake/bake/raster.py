@@ -18,10 +18,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from crackbake.bake.context import create_context, shader_source
+from crackbake.bake.context import GLScope, shader_source
 from crackbake.bake.dilation import dilate
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
+from crackbake.params import TILE_DEFAULT
 
 #: Channels of :class:`CrackMaps` in EXR order, with their storage type.
 CHANNELS: dict[str, str] = {
@@ -37,8 +38,6 @@ CHANNELS: dict[str, str] = {
 #: Default clamp of the distance channel, as a fraction of the bounding-box diagonal.
 DEFAULT_MAX_DISTANCE_FRACTION = 0.02
 
-#: Default tile edge in texels: a band holds at most tile**2 texels (19 bytes each on the GL side).
-DEFAULT_TILE = 4096
 
 
 @dataclass(eq=False)
@@ -172,7 +171,7 @@ def bake_cracks(
     max_distance: float | None = None,
     profile_shape: float = 1.0,
     dilate_px: int | None = None,
-    tile: int = DEFAULT_TILE,
+    tile: int = TILE_DEFAULT,
     ctx=None,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
@@ -198,67 +197,75 @@ def bake_cracks(
     dilate_px : int, optional
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
-        Largest framebuffer edge; bigger images are drawn tile by tile.
+        Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
+        texels (19 bytes each on the GL side).
     ctx : moderngl.Context, optional
-        Context to reuse; one is created (and released) when not given.
+        The run's context; a temporary one is created (and released) when not given.
 
     Returns
     -------
     CrackMaps
     """
-    import moderngl
-
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
     uv = np.asarray(uv, np.float64)
-    if not 1 <= res <= 16384:
-        raise CrackbakeError(f"bake resolution {res} is out of range; use 64..16384")
+    if res < 1:
+        # RunParams validates the user's --res; this guards direct library calls.
+        raise ValueError(f"res must be a positive texel count, got {res}")
     if profile_shape <= 0:
         raise CrackbakeError(f"profile shape {profile_shape} must be > 0 (1 = V profile)")
-    diagonal = float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
-    if max_distance is None:
-        max_distance = DEFAULT_MAX_DISTANCE_FRACTION * diagonal
-    if not max_distance > 0:
-        raise CrackbakeError(f"max distance {max_distance} must be > 0 (mesh units)")
-    if len(segments.a) and max_distance < 0.5 * float(segments.width.max()):
-        widest = float(segments.width.max())
-        warnings.warn(
-            f"max distance {max_distance:g} is below the widest crack's half width; "
-            f"raising it to {widest:g} so wide cracks are not cut",
-            CrackbakeWarning,
-            stacklevel=2,
-        )
-        max_distance = widest
+    max_distance = _max_distance(vertices, segments, max_distance)
 
     face_start, cand = face_candidates(vertices, faces, uv, segments, res, max_distance)
     timings["candidates"] = time.perf_counter() - t0
 
-    own_ctx = ctx is None
-    if own_ctx:
-        ctx = create_context()
-    try:
+    images = _render(
+        ctx, vertices, faces, uv, segments, res, tile, face_start, cand,
+        float(max_distance), float(profile_shape), timings,
+    )  # fmt: skip
+
+    return _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
+
+
+def _render(
+    ctx,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    segments: Segments,
+    res: int,
+    tile: int,
+    face_start: np.ndarray,
+    cand: np.ndarray,
+    max_distance: float,
+    profile_shape: float,
+    timings: dict[str, float],
+) -> dict[str, np.ndarray]:
+    """Draw the faces in UV space band by band; the planar channel images (row 0 = v = 0)."""
+    import moderngl
+
+    with GLScope(ctx) as gl:
+        ctx = gl.ctx
         t1 = time.perf_counter()
         # Non-indexed corners so gl_PrimitiveID is the face index.
         corner = np.empty((len(faces) * 3, 5), np.float32)
         corner[:, 0:2] = uv[faces].reshape(-1, 2)
         corner[:, 2:5] = vertices[faces].reshape(-1, 3)
-        prog = ctx.program(
-            vertex_shader=shader_source("crack_bake.vert"),
-            fragment_shader=shader_source("crack_bake.frag"),
+        prog = gl.keep(
+            ctx.program(
+                vertex_shader=shader_source("crack_bake.vert"),
+                fragment_shader=shader_source("crack_bake.frag"),
+            )
         )
-        vbo = ctx.buffer(corner.tobytes())
-        vao = ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")])
-        ssbo_seg = ctx.buffer(_segment_buffer(segments).tobytes())
-        ssbo_start = ctx.buffer(face_start.tobytes())
-        ssbo_cand = ctx.buffer(cand.tobytes())
-        ssbo_seg.bind_to_storage_buffer(0)
-        ssbo_start.bind_to_storage_buffer(1)
-        ssbo_cand.bind_to_storage_buffer(2)
+        vbo = gl.keep(ctx.buffer(corner.tobytes()))
+        vao = gl.keep(ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")]))
+        for binding, data in enumerate((_segment_buffer(segments), face_start, cand)):
+            gl.keep(ctx.buffer(data.tobytes())).bind_to_storage_buffer(binding)
         prog["u_res"].value = float(res)
-        prog["u_max_distance"].value = float(max_distance)
-        prog["u_shape"].value = float(profile_shape)
+        prog["u_max_distance"].value = max_distance
+        prog["u_shape"].value = profile_shape
 
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded.
@@ -269,10 +276,10 @@ def bake_cracks(
             n: np.empty((res, res), {"f1": np.uint8, "f2": np.float16, "f4": np.float32}[d])
             for n, d in zip(names, dtypes, strict=True)
         }
-        textures = [ctx.texture((res, band), 1, dtype=d) for d in dtypes]
-        fbo = ctx.framebuffer(color_attachments=textures)
+        textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
+        fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
         fbo.use()
-        ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
         timings["setup"] = time.perf_counter() - t1
         t_draw = t_read = 0.0
         for y0 in range(0, res, band):
@@ -295,12 +302,37 @@ def bake_cracks(
             t_read += time.perf_counter() - tb
         timings["render"] = t_draw
         timings["readback"] = t_read
-        for obj in (fbo, *textures, vao, vbo, ssbo_seg, ssbo_start, ssbo_cand, prog):
-            obj.release()
-    finally:
-        if own_ctx:
-            ctx.release()
+    return images
 
+
+def _max_distance(vertices: np.ndarray, segments: Segments, max_distance: float | None) -> float:
+    """The distance clamp: the default fraction of the diagonal, never below a half width."""
+    diagonal = float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
+    if max_distance is None:
+        max_distance = DEFAULT_MAX_DISTANCE_FRACTION * diagonal
+    if not max_distance > 0:
+        raise CrackbakeError(f"max distance {max_distance} must be > 0 (mesh units)")
+    if len(segments.a) and max_distance < 0.5 * float(segments.width.max()):
+        widest = float(segments.width.max())
+        warnings.warn(
+            f"max distance {max_distance:g} is below the widest crack's half width; "
+            f"raising it to {widest:g} so wide cracks are not cut",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+        max_distance = widest
+    return max_distance
+
+
+def _dilated_maps(
+    images: dict[str, np.ndarray],
+    res: int,
+    dilate_px: int | None,
+    max_distance: float,
+    profile_shape: float,
+    timings: dict[str, float],
+) -> CrackMaps:
+    """Fill the gutters of the rendered channels from their nearest island; the maps."""
     mask, width, time_ch = images["mask"], images["width"], images["time"]
     depth, distance, crack_id = images["depth"], images["distance"], images["id"]
     inside = images.pop("inside") > 0

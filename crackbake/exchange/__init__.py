@@ -1,1 +1,35 @@
-"""Files for other tools: EXR, PNG and GLB writers and the atomic output folder."""
+"""Files for other tools: one module per format (EXR, PNG, GLB), the atomic output folder, the
+run's set of files and its manifest."""
+
+from crackbake.exchange.bundle import exr_channels, write_outputs
+from crackbake.exchange.exr import (
+    LOSSLESS_COMPRESSIONS,
+    LOSSY_COMPRESSIONS,
+    read_exr,
+    write_exr,
+)
+from crackbake.exchange.glb import write_glb
+from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
+from crackbake.exchange.materials import CRACK_RGB, GLB_TEXTURE_MAX, SURFACE_RGB, base_color
+from crackbake.exchange.output import OutputStage, sha256_file
+from crackbake.exchange.png import write_png
+
+__all__ = [
+    "CRACK_RGB",
+    "GLB_TEXTURE_MAX",
+    "LOSSLESS_COMPRESSIONS",
+    "LOSSY_COMPRESSIONS",
+    "SURFACE_RGB",
+    "OutputStage",
+    "base_color",
+    "build_manifest",
+    "effective_params",
+    "exr_channels",
+    "read_exr",
+    "sha256_file",
+    "write_exr",
+    "write_glb",
+    "write_manifest",
+    "write_outputs",
+    "write_png",
+]

@@ -1,0 +1,127 @@
+"""Whether an asset's own UVs can be baked into: range, UDIM tiles, degenerate faces, overlap."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from crackbake.bake.uv.overlap import uv_overlap_fraction
+from crackbake.io.mesh import Mesh
+
+# Kept UVs may stray this far outside [0, 1] (exporters round) and are clipped.
+UV_TOLERANCE = 1e-6
+# Twice the UV area below which a face counts as degenerate: far below one texel at 16384^2
+# (3.7e-9), so only truly collapsed faces qualify.
+DEGENERATE_AREA2 = 1e-12
+# Kept UVs may have up to this fraction of faces straying outside [0, 1] by at most
+# STRAY_MARGIN (Keenan Crane's spot has 10 of 5,856): they are kept, with a warning, rather than
+# throwing away an artist's layout for a few texels.
+STRAY_FACE_FRACTION = 0.01
+STRAY_MARGIN = 0.25
+# Resolution at which check_uvs measures overlap; 1024^2 resolves islands down to ~0.1 % of the
+# page and costs well under a second even for 500k faces.
+OVERLAP_RES = 1024
+
+
+@dataclass(frozen=True)
+class UVCheck:
+    """Whether a mesh's own UVs can be baked into.
+
+    Attributes
+    ----------
+    usable : bool
+        UVs exist, are finite, lie in [0, 1] and not every face is degenerate in UV.
+    reason : str
+        ``""`` when usable, else a short why (no UVs / outside [0, 1] / UDIM tiles / degenerate).
+    udim : bool
+        The UVs are laid out in UDIM tiles (each face inside one integer tile, ``u`` in [0, 10)).
+    overlap_fraction : float or None
+        Overlapping / covered UV area for usable UVs, else ``None``.
+    outside_fraction : float
+        Fraction of faces reaching slightly outside [0, 1] in otherwise usable UVs (exporters
+        and hand-made UVs often stray a little); their outside part gets no texels.
+    """
+
+    usable: bool
+    reason: str
+    udim: bool
+    overlap_fraction: float | None
+    outside_fraction: float = 0.0
+
+
+def uv_area2(corners: np.ndarray) -> np.ndarray:
+    """Twice the unsigned UV area per face, (F,), from corners (F, 3, 2)."""
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def is_udim(corners: np.ndarray) -> bool:
+    """True when every face lies inside one integer UV tile of a UDIM layout, not all in 0-1."""
+    if corners.size == 0:
+        return False
+    tile = np.floor(corners.mean(axis=1))  # (F, 2); a centroid is strictly inside its tile
+    inside = (corners >= tile[:, None, :] - UV_TOLERANCE) & (
+        corners <= tile[:, None, :] + 1.0 + UV_TOLERANCE
+    )
+    if not inside.all():
+        return False
+    tu, tv = tile[:, 0], tile[:, 1]
+    # UDIM numbers tiles 1001 + u + 10 v: u in 0..9, v >= 0.
+    if (tu < 0).any() or (tu > 9).any() or (tv < 0).any():
+        return False
+    return bool(((tu > 0) | (tv > 0)).any())
+
+
+def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
+    """Decide whether the mesh's own UVs can be baked into, and how much they overlap.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The asset mesh; only the UVs of vertices that faces use are looked at.
+    ctx : moderngl.Context, optional
+        GL context for the overlap measure; a temporary one when not given.
+
+    Returns
+    -------
+    UVCheck
+        ``overlap_fraction`` is measured (at 1024^2, see :func:`uv_overlap_fraction`) only when
+        the UVs are usable.
+    """
+    if mesh.uv is None:
+        return UVCheck(False, "the mesh has no UVs", False, None)
+    uv = np.asarray(mesh.uv, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if uv.shape != (len(mesh.vertices), 2):
+        return UVCheck(False, f"UV array has shape {uv.shape}, not one UV per vertex", False, None)
+    if len(faces) == 0:
+        return UVCheck(False, "the mesh has no faces", False, None)
+    corners = uv[faces]
+    if not np.isfinite(corners).all():
+        return UVCheck(False, "UVs contain NaN or infinite values", False, None)
+    lo, hi = corners.reshape(-1, 2).min(axis=0), corners.reshape(-1, 2).max(axis=0)
+    outside_fraction = 0.0
+    if (lo < -UV_TOLERANCE).any() or (hi > 1.0 + UV_TOLERANCE).any():
+        if is_udim(corners):
+            tiles = np.unique(np.floor(corners.mean(axis=1)), axis=0)
+            return UVCheck(False, f"UVs span {len(tiles)} UDIM tiles", True, None)
+        stray = ((corners < -UV_TOLERANCE) | (corners > 1.0 + UV_TOLERANCE)).any(axis=(1, 2))
+        outside_fraction = float(stray.mean())
+        if (
+            outside_fraction > STRAY_FACE_FRACTION
+            or (lo < -STRAY_MARGIN).any()
+            or (hi > 1.0 + STRAY_MARGIN).any()
+        ):
+            return UVCheck(
+                False,
+                f"UVs lie outside [0, 1] (u {lo[0]:.3g}..{hi[0]:.3g}, "
+                f"v {lo[1]:.3g}..{hi[1]:.3g})",
+                False,
+                None,
+            )
+    if not (uv_area2(corners) > DEGENERATE_AREA2).any():
+        return UVCheck(False, "every face has zero UV area", False, None)
+    overlap = uv_overlap_fraction(np.clip(uv, 0.0, 1.0), faces, OVERLAP_RES, ctx=ctx)
+    return UVCheck(True, "", False, overlap, outside_fraction)

@@ -1,0 +1,131 @@
+"""The UVs the textures are baked for: the asset's own when usable, else an xatlas unwrap.
+
+Most game assets come with good UVs, and xatlas is slow (about 45 s for 100k faces) and can
+crash, so :func:`prepare_uvs` keeps the asset's UVs whenever :func:`check_uvs` finds them usable.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from crackbake.bake.uv.check import DEGENERATE_AREA2, UVCheck, check_uvs, uv_area2
+from crackbake.bake.uv.unwrap import unwrap
+from crackbake.bake.uv.uvmesh import UVMesh, mesh_label
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.mesh import Mesh
+from crackbake.params import UV_MODES
+
+# Above this overlap fraction kept UVs get a warning: mirrored/stacked islands repeat cracks.
+OVERLAP_WARN_FRACTION = 0.01
+
+
+def kept_uvmesh(mesh: Mesh, check: UVCheck) -> UVMesh:
+    """The asset's own UVs as a :class:`UVMesh`, warning about overlap, strays and zero area."""
+    label = mesh_label(mesh)
+    overlap = float(check.overlap_fraction or 0.0)
+    if overlap > OVERLAP_WARN_FRACTION:
+        warnings.warn(
+            f"{label}: {overlap:.1%} of the UV area overlaps (stacked or mirrored islands), so "
+            "cracks will show twice there; use --uv unwrap for unique UVs",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+    if check.outside_fraction > 0:
+        n = int(round(check.outside_fraction * len(mesh.faces)))
+        warnings.warn(
+            f"{label}: {n} faces reach slightly outside the 0-1 UV square; their outside parts "
+            "get no texels (use --uv unwrap to avoid it)",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+    # Not clipped: clipping would distort the straying faces; the bake simply gets no texels
+    # outside the page and the GLB keeps the artist's UVs.
+    uv = np.asarray(mesh.uv, dtype=np.float64)
+    n_degenerate = int(np.count_nonzero(uv_area2(uv[mesh.faces]) <= DEGENERATE_AREA2))
+    if n_degenerate > OVERLAP_WARN_FRACTION * len(mesh.faces):
+        warnings.warn(
+            f"{label}: {n_degenerate} faces have zero UV area and get no texels; "
+            "use --uv unwrap if cracks go missing there",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+    return UVMesh(
+        vertices=np.asarray(mesh.vertices, dtype=np.float64),
+        faces=np.asarray(mesh.faces, dtype=np.int64),
+        uv=uv,
+        normals=np.asarray(mesh.normals, dtype=np.float64),
+        vertex_map=np.arange(len(mesh.vertices), dtype=np.int64),
+        method="kept",
+        overlap_fraction=overlap,
+        padding_px=0,
+    )
+
+
+def prepare_uvs(
+    mesh: Mesh,
+    mode: str = "auto",
+    res: int = 2048,
+    padding: int | None = None,
+    timeout: float = 300.0,
+    cache: bool = True,
+    ctx=None,
+) -> UVMesh:
+    """The UVs to bake into: keep the asset's, or unwrap with xatlas.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The asset mesh.
+    mode : {"auto", "keep", "unwrap"}
+        ``"keep"`` uses the mesh's UVs (error when unusable), ``"unwrap"`` always runs xatlas,
+        ``"auto"`` keeps usable UVs and unwraps otherwise (warning why when the mesh had UVs).
+    res : int
+        Texture resolution an unwrap packs for, texels per side.
+    padding : int, optional
+        Unwrap gutter in texels; default :func:`default_padding`.
+    timeout : float
+        Seconds xatlas may run.
+    cache : bool
+        Use the unwrap cache.
+    ctx : moderngl.Context, optional
+        The run's GL context (overlap measure); a temporary one when not given.
+
+    Returns
+    -------
+    UVMesh
+
+    Raises
+    ------
+    CrackbakeError
+        Unknown mode, unusable UVs in ``"keep"`` mode, or a failed unwrap.
+
+    Warns
+    -----
+    CrackbakeWarning
+        Kept UVs overlapping by more than 1 %, or ``"auto"`` falling back to an unwrap.
+    """
+    if mode not in UV_MODES:
+        raise CrackbakeError(f"unknown UV mode '{mode}'; use one of {', '.join(UV_MODES)}")
+    if mode == "unwrap":
+        return unwrap(mesh, res, padding=padding, timeout=timeout, cache=cache, ctx=ctx)
+
+    label = mesh_label(mesh)
+    check = check_uvs(mesh, ctx=ctx)
+    if check.usable:
+        return kept_uvmesh(mesh, check)
+    if mode == "keep":
+        if check.udim:
+            raise CrackbakeError(
+                f"{label}: UDIM tiles are not supported yet; move the UVs into the 0-1 tile "
+                "or use --uv unwrap"
+            )
+        raise CrackbakeError(f"{label}: cannot keep the UVs: {check.reason}; use --uv unwrap")
+    if mesh.uv is not None:
+        warnings.warn(
+            f"{label}: {check.reason}; unwrapping with xatlas instead",
+            CrackbakeWarning,
+            stacklevel=2,
+        )
+    return unwrap(mesh, res, padding=padding, timeout=timeout, cache=cache, ctx=ctx)

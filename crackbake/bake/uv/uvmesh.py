@@ -1,0 +1,86 @@
+"""The output mesh the textures are baked for (:class:`UVMesh`) and the unwrap's gutter size.
+
+Conventions: UVs are in [0, 1] with ``v`` pointing up (OBJ/Blender); texel ``(i, j)`` of a
+``res`` x ``res`` page covers ``u`` in ``[i, i+1] / res`` and ``v`` in ``[j, j+1] / res`` (GL's
+framebuffer rows, row 0 at the bottom).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from crackbake.io.mesh import Mesh
+
+
+@dataclass(frozen=True, eq=False)
+class UVMesh:
+    """The output mesh: the asset's faces (same count and order as ``Mesh.faces``), UVs used.
+
+    Attributes
+    ----------
+    vertices : (V', 3) float64
+        Positions, mesh units; ``vertices == mesh.vertices[vertex_map]`` exactly.
+    faces : (F, 3) int64
+        Same faces, same order and same corner order as the input ``Mesh.faces``.
+    uv : (V', 2) float64
+        In [0, 1], ``v`` up (OBJ/Blender convention), one square page.
+    normals : (V', 3) float64
+        Unit normals, ``mesh.normals[vertex_map]``.
+    vertex_map : (V',) int64
+        Index into the input ``Mesh.vertices`` for each output vertex.
+    method : str
+        ``"kept"`` (the asset's UVs) or ``"unwrapped"`` (xatlas).
+    overlap_fraction : float
+        Overlapping UV area / covered UV area, 0..1 (NaN when an unwrap could not measure it
+        because no OpenGL context was available).
+    padding_px : int
+        Chart gutter in texels at the resolution unwrapped for (0 when kept).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray
+    normals: np.ndarray
+    vertex_map: np.ndarray
+    method: str
+    overlap_fraction: float
+    padding_px: int
+
+
+def default_padding(res: int) -> int:
+    """Chart gutter for a page of ``res`` texels: about ``res / 256``, at least 2 texels.
+
+    Mip-mapping halves the gutter per level; res/256 keeps islands apart down to the 1/128-size
+    mip and 2 texels keeps bilinear filtering clean at small sizes.
+    """
+    return max(2, int(round(res / 256)))
+
+
+def mesh_label(mesh: Mesh) -> str:
+    """The mesh's file name (or object name) for messages."""
+    return Path(mesh.source).name if mesh.source else mesh.name
+
+
+def unwrapped_uvmesh(
+    mesh: Mesh,
+    vertex_map: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    overlap: float,
+    padding: int,
+) -> UVMesh:
+    """The :class:`UVMesh` of an unwrap: ``mesh``'s positions and normals gathered by
+    ``vertex_map``."""
+    return UVMesh(
+        vertices=np.asarray(mesh.vertices, dtype=np.float64)[vertex_map],
+        faces=faces,
+        uv=uv,
+        normals=np.asarray(mesh.normals, dtype=np.float64)[vertex_map],
+        vertex_map=vertex_map,
+        method="unwrapped",
+        overlap_fraction=overlap,
+        padding_px=int(padding),
+    )

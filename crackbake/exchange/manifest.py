@@ -1,0 +1,106 @@
+"""``manifest.json``: what a run read, the parameters it used, what it wrote and how long it took.
+
+Written last into the output folder, so a manifest present means the files it lists are complete
+(see :class:`crackbake.exchange.output.OutputStage`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from crackbake import __version__
+from crackbake.bake.raster import CHANNELS, CrackMaps
+from crackbake.bake.uv import UVMesh
+from crackbake.exchange.output import sha256_file
+from crackbake.io.mesh import Mesh
+from crackbake.network import CrackNetwork
+from crackbake.params import RunParams
+
+
+def effective_params(
+    params: RunParams, solver_stats: dict, maps: CrackMaps, uvmesh: UVMesh
+) -> dict:
+    """Every parameter as the run used it: the options, solver figures and derived bake values."""
+    effective = params.to_dict()
+    if solver_stats:
+        effective["solver"] = solver_stats
+    effective.update(
+        {
+            "max_distance": maps.max_distance,
+            "padding": uvmesh.padding_px,
+            "uv_method": uvmesh.method,
+        }
+    )
+    return effective
+
+
+def inputs(params: RunParams) -> dict:
+    """Path and SHA-256 of every input file (mesh, weight map, sidecar)."""
+    found = {"mesh": {"path": str(params.mesh), "sha256": sha256_file(params.mesh)}}
+    if params.weight_map is not None:
+        found["weight_map"] = {
+            "path": str(params.weight_map),
+            "sha256": sha256_file(params.weight_map),
+        }
+    if params.cracks is not None:
+        found["cracks"] = {"path": str(params.cracks), "sha256": sha256_file(params.cracks)}
+    return found
+
+
+def build_manifest(
+    params: RunParams,
+    effective: dict,
+    mesh: Mesh,
+    uvmesh: UVMesh,
+    network: CrackNetwork,
+    maps: CrackMaps,
+    renderer: dict,
+    files: list[dict],
+    timings: dict[str, float],
+) -> dict:
+    """The content of ``manifest.json``.
+
+    Parameters
+    ----------
+    params : RunParams
+        The (resolved) run parameters.
+    effective : dict
+        :func:`effective_params` of the run.
+    mesh, uvmesh, network, maps
+        The stages' results.
+    renderer : dict
+        :func:`crackbake.bake.context.renderer_info` of the context that baked.
+    files : list of dict
+        ``{"name", "bytes", "sha256"}`` of every file written except the manifest.
+    timings : dict of str to float
+        Seconds per stage, wall clock (rounded to 0.1 ms here).
+    """
+    return {
+        "crackbake": __version__,
+        "inputs": inputs(params),
+        "params": effective,
+        "mesh": mesh.describe(),
+        "uv": {
+            "method": uvmesh.method,
+            "vertices": int(len(uvmesh.vertices)),
+            "overlap_fraction": float(uvmesh.overlap_fraction),
+            "padding_px": int(uvmesh.padding_px),
+        },
+        "cracks": network.stats(),
+        "maps": {
+            "resolution": params.res,
+            "depth_png_scale": float(maps.depth.max()),
+            "max_distance": maps.max_distance,
+            "covered_fraction": float(maps.inside.mean()),
+            "exr_channels": {k: ("float" if params.float32 else v) for k, v in CHANNELS.items()},
+        },
+        "renderer": renderer,
+        "files": files,
+        "timings_s": {k: round(v, 4) for k, v in timings.items()},
+    }
+
+
+def write_manifest(path: str | Path, manifest: dict) -> None:
+    """Write ``manifest`` as indented JSON with a final newline."""
+    Path(path).write_text(json.dumps(manifest, indent=2) + "\n")
