@@ -464,5 +464,3 @@ def test_vertex_weights_from_ply_and_glb(tmp_path):
     glb = load_mesh(tmp_path / "m.glb")
     assert np.allclose(vertex_weights(glb, "paint"), wt, atol=1e-6)
     assert vertex_weights(glb, None) is None  # no vertex colours
-    # A path still works (the pipeline's older call): the file is loaded once more.
-    assert np.allclose(vertex_weights(tmp_path / "m.glb", "paint"), wt, atol=1e-6)

@@ -15,7 +15,8 @@ from scipy.spatial import cKDTree
 from crackbake.bake import uv as U
 from crackbake.bake.uv.unwrap import worker_error
 from crackbake.errors import CrackbakeError
-from crackbake.io.mesh import Mesh, vertex_normals
+from crackbake.geometry import welded_vertex_normals as vertex_normals
+from crackbake.io.mesh import Mesh
 
 
 def make_mesh(vertices, faces, uv=None, source="test.obj") -> Mesh:

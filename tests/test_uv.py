@@ -11,7 +11,8 @@ import trimesh
 
 from crackbake.bake import uv as U
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.io.mesh import Mesh, vertex_normals
+from crackbake.geometry import welded_vertex_normals as vertex_normals
+from crackbake.io.mesh import Mesh
 
 
 def make_mesh(vertices, faces, uv=None, source="test.obj") -> Mesh:

@@ -75,7 +75,7 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
         )
     if params.weight_map is not None or params.weight_attribute is not None:
         per_vertex = (
-            vertex_weights(params.mesh, params.weight_attribute, params.object_name)
+            vertex_weights(mesh, params.weight_attribute)
             if params.weight_attribute is not None
             else None
         )

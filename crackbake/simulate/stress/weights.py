@@ -14,7 +14,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.images import LUMA
-from crackbake.io.mesh import VERTEX_COLOURS, Mesh, load_mesh
+from crackbake.io.mesh import VERTEX_COLOURS, Mesh
 from crackbake.simulate.simmesh import asset_barycentric
 from crackbake.simulate.stress.sources import WeightSource
 
@@ -116,22 +116,17 @@ def _to_scalar(values: np.ndarray, n: int, what: str, path: Path) -> np.ndarray:
     return values[:, 0]
 
 
-def vertex_weights(
-    mesh: Mesh | str | Path, attribute: str | None = None, object_name: str | None = None
-) -> np.ndarray | None:
+def vertex_weights(mesh: Mesh, attribute: str | None = None) -> np.ndarray | None:
     """Per-asset-vertex weights painted in the mesh file, from the attributes read with it.
 
     Parameters
     ----------
     mesh : Mesh
         The asset as :func:`crackbake.io.mesh.load_mesh` returned it (its ``attributes`` hold the
-        painted values; nothing is read again).  A path still works: the file is then loaded
-        with ``object_name``.
+        painted values; nothing is read again).
     attribute : str, optional
         Named vertex attribute (a PLY vertex property, or a glTF ``_NAME`` attribute; the
         leading underscore may be left out).  ``None`` reads the vertex colours' luminance.
-    object_name : str, optional
-        Only with a path: the same ``--object`` pick given to ``load_mesh``.
 
     Returns
     -------
@@ -146,10 +141,6 @@ def vertex_weights(
         No attribute of that name (the message lists those available), or values that are not
         one finite number per vertex.
     """
-    if not isinstance(mesh, Mesh):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", CrackbakeWarning)  # the caller's load_mesh warned
-            mesh = load_mesh(mesh, object_name)
     path = Path(mesh.source)
     n = len(mesh.vertices)
     if attribute is None:

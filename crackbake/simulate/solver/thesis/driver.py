@@ -207,7 +207,7 @@ def _crack_paths(x, asset_face, params: SolverParams, h: float, crack_ptr, node,
     return cracks
 
 
-def solve_thesis(sim, field, params: SolverParams, *, progress=None) -> SolverResult:
+def solve_thesis(sim, field, params: SolverParams) -> SolverResult:
     """Grow cracks with the MSc-thesis method (:mod:`crackbake.simulate.solver.thesis`).
 
     Parameters
@@ -229,12 +229,7 @@ def solve_thesis(sim, field, params: SolverParams, *, progress=None) -> SolverRe
         One :class:`CrackPath` per crack through sim nodes; the sim mesh and stress unchanged;
         ``separation`` = final ``v+ / tau``.  ``stats`` holds counts, ``tau`` and timings.
         Progress goes to this module's logger.
-
-    Notes
-    -----
-    ``progress`` is ignored (kept only until the pipeline stops passing it).
     """
-    del progress
     _check(params)
     t0 = _time.perf_counter()
     x = np.ascontiguousarray(sim.vertices, dtype=np.float64)
