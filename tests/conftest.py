@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from crackbake.geometry import vertex_normals, weld_by_position
+from crackbake.geometry import vertex_normals, weld_by_position, welded_vertex_normals
 from crackbake.io.mesh import Mesh
 
 
@@ -70,6 +70,79 @@ def sim_plate(n: int, jitter: float = 0.35, seed: int = 1) -> SimpleNamespace:
     tri = tri[np.abs(cr) > 1e-12 * h * h]
     return SimpleNamespace(vertices=v, faces=tri, asset_face=np.arange(len(tri)) // 2,
                            edge_length=h, boundary=None)
+
+
+def make_mesh(vertices, faces, uv=None, source: str = "test.obj") -> Mesh:
+    """A :class:`Mesh` from arrays, with welded area-weighted vertex normals (as the loader)."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    return Mesh(
+        vertices=vertices,
+        faces=faces,
+        uv=None if uv is None else np.asarray(uv, dtype=np.float64),
+        normals=welded_vertex_normals(vertices, faces),
+        source=source,
+    )
+
+
+def torus_mesh(major: int = 48, minor: int = 24) -> Mesh:
+    """A closed torus (radii 1 and 0.3) without UVs."""
+    import trimesh
+
+    t = trimesh.creation.torus(1.0, 0.3, major_sections=major, minor_sections=minor)
+    return make_mesh(t.vertices, t.faces, source="torus.obj")
+
+
+def uv_grid(nx: int, ny: int, width: float, height: float, jitter: float = 0.0, seed: int = 0):
+    """A flat nx x ny quad grid over [0, width] x [0, height], two triangles per quad.
+
+    Returns the 2-D points ((nx+1)(ny+1), 2) and faces (2 nx ny, 3); ``jitter`` moves inner
+    points by up to ±jitter of a cell (seeded).
+    """
+    xs, ys = np.meshgrid(np.linspace(0, width, nx + 1), np.linspace(0, height, ny + 1))
+    pts = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    if jitter:
+        rng = np.random.default_rng(seed)
+        interior = (
+            (xs.ravel() > 0) & (xs.ravel() < width) & (ys.ravel() > 0) & (ys.ravel() < height)
+        )
+        step = min(width / nx, height / ny)
+        pts[interior] += rng.uniform(-jitter, jitter, (interior.sum(), 2)) * step
+    idx = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return pts, faces
+
+
+def tiny_network():
+    """Two cracks on the unit square (:func:`plate_mesh` with one cell), values chosen so
+    segments, lengths and the sidecar can be derived by hand."""
+    from crackbake.network import Crack, CrackNetwork, mesh_info
+
+    a = Crack(
+        id=7,
+        points=np.array([[0.2, 0.1, 0.0], [0.5, 0.1, 0.0], [0.9, 0.4, 0.0]]),  # 0.3 + 0.5 long
+        faces=np.array([0, 0, 0]),
+        time=np.array([0.0, 0.5, 1.0]),
+        width=np.array([0.004, 0.002, 0.0]),
+        depth=np.array([0.002, 0.001, 0.0]),
+    )
+    b = Crack(
+        id=2,
+        points=np.array([[0.1, 0.5, 0.0], [0.1, 0.9, 0.0]]),  # 0.4 long
+        faces=np.array([1, 1]),
+        time=np.array([0.2, 0.6]),
+        width=np.array([0.001, 0.003]),
+        depth=np.array([0.0, 0.0015]),
+    )
+    return CrackNetwork(
+        cracks=[a, b],
+        mesh=mesh_info(plate_mesh(1, name="square")),
+        params={"seed": 3, "method": "iben", "preset": "glass", "nested": {"k": [1, 2.5]}},
+        impacts=[{"point": [0.5, 0.5, 0.0], "radius": 0.1, "strength": 2.0}],
+        solver_steps=11,
+    )
 
 
 @pytest.fixture(scope="session")

@@ -11,12 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import plate_mesh
+from conftest import plate_mesh, tiny_network
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import from_dict, read_sidecar, to_dict, write_sidecar
-from crackbake.network import Crack, CrackNetwork, mesh_info
+from crackbake.network import Crack, CrackNetwork
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -24,33 +24,6 @@ REPO = Path(__file__).resolve().parents[1]
 def unit_square() -> Mesh:
     """Two triangles covering [0, 1]^2 at z = 0: face 0 below the diagonal, face 1 above."""
     return plate_mesh(1, name="square")
-
-
-def tiny_network() -> CrackNetwork:
-    """Two cracks on the unit square, values chosen so segments can be derived by hand."""
-    a = Crack(
-        id=7,
-        points=np.array([[0.2, 0.1, 0.0], [0.5, 0.1, 0.0], [0.9, 0.4, 0.0]]),  # 0.3 + 0.5 long
-        faces=np.array([0, 0, 0]),
-        time=np.array([0.0, 0.5, 1.0]),
-        width=np.array([0.004, 0.002, 0.0]),
-        depth=np.array([0.002, 0.001, 0.0]),
-    )
-    b = Crack(
-        id=2,
-        points=np.array([[0.1, 0.5, 0.0], [0.1, 0.9, 0.0]]),  # 0.4 long
-        faces=np.array([1, 1]),
-        time=np.array([0.2, 0.6]),
-        width=np.array([0.001, 0.003]),
-        depth=np.array([0.0, 0.0015]),
-    )
-    return CrackNetwork(
-        cracks=[a, b],
-        mesh=mesh_info(unit_square()),
-        params={"seed": 3, "method": "iben", "preset": "glass", "nested": {"k": [1, 2.5]}},
-        impacts=[{"point": [0.5, 0.5, 0.0], "radius": 0.1, "strength": 2.0}],
-        solver_steps=11,
-    )
 
 
 def random_network(seed: int = 0) -> CrackNetwork:

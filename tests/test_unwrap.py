@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 import trimesh
+from conftest import make_mesh, torus_mesh, uv_grid
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -15,25 +16,7 @@ from scipy.spatial import cKDTree
 from crackbake.bake import uv as U
 from crackbake.bake.uv.unwrap import worker_error
 from crackbake.errors import CrackbakeError
-from crackbake.geometry import welded_vertex_normals as vertex_normals
 from crackbake.io.mesh import Mesh
-
-
-def make_mesh(vertices, faces, uv=None, source="test.obj") -> Mesh:
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
-    return Mesh(
-        vertices=vertices,
-        faces=faces,
-        uv=None if uv is None else np.asarray(uv, dtype=np.float64),
-        normals=vertex_normals(vertices, faces),
-        source=source,
-    )
-
-
-def torus_mesh(major: int = 48, minor: int = 24) -> Mesh:
-    t = trimesh.creation.torus(1.0, 0.3, major_sections=major, minor_sections=minor)
-    return make_mesh(t.vertices, t.faces, source="torus.obj")
 
 
 def bumped_sphere_mesh() -> Mesh:
@@ -43,24 +26,6 @@ def bumped_sphere_mesh() -> Mesh:
     v = np.asarray(s.vertices)
     r = 1.0 + 0.15 * np.sin(3.0 * v[:, 0]) * np.cos(2.0 * v[:, 1]) + 0.05 * v[:, 2] ** 2
     return make_mesh(v * r[:, None], s.faces, source="bumpy.obj")
-
-
-def grid(nx: int, ny: int, width: float, height: float, jitter: float = 0.0, seed: int = 0):
-    """A flat nx x ny quad grid over [0, width] x [0, height], two triangles per quad."""
-    xs, ys = np.meshgrid(np.linspace(0, width, nx + 1), np.linspace(0, height, ny + 1))
-    pts = np.stack([xs.ravel(), ys.ravel()], axis=1)
-    if jitter:
-        rng = np.random.default_rng(seed)
-        interior = (
-            (xs.ravel() > 0) & (xs.ravel() < width) & (ys.ravel() > 0) & (ys.ravel() < height)
-        )
-        step = min(width / nx, height / ny)
-        pts[interior] += rng.uniform(-jitter, jitter, (interior.sum(), 2)) * step
-    idx = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
-    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
-    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
-    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    return pts, faces
 
 
 def chart_labels(faces: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
@@ -154,7 +119,7 @@ def test_unwrap_square_texels_on_one_page():
     # A flat 2 x 1 rectangle: xatlas alone would pack it into a 2:1 atlas and normalise u and v
     # by different sizes.  With square texels the UV map is a similarity, so 3-D length / UV
     # length is the same for edges running along u and along v.
-    pts, faces = grid(20, 10, 2.0, 1.0)
+    pts, faces = uv_grid(20, 10, 2.0, 1.0)
     mesh = make_mesh(np.c_[pts, np.zeros(len(pts))], faces, source="rect.obj")
     res = 256
     out = U.unwrap(mesh, res, cache=False)

@@ -7,47 +7,11 @@ import warnings
 
 import numpy as np
 import pytest
-import trimesh
+from conftest import make_mesh, torus_mesh, uv_grid
 
 from crackbake.bake import uv as U
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.geometry import welded_vertex_normals as vertex_normals
 from crackbake.io.mesh import Mesh
-
-
-def make_mesh(vertices, faces, uv=None, source="test.obj") -> Mesh:
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
-    return Mesh(
-        vertices=vertices,
-        faces=faces,
-        uv=None if uv is None else np.asarray(uv, dtype=np.float64),
-        normals=vertex_normals(vertices, faces),
-        source=source,
-    )
-
-
-def torus_mesh(major: int = 48, minor: int = 24) -> Mesh:
-    t = trimesh.creation.torus(1.0, 0.3, major_sections=major, minor_sections=minor)
-    return make_mesh(t.vertices, t.faces, source="torus.obj")
-
-
-def grid(nx: int, ny: int, width: float, height: float, jitter: float = 0.0, seed: int = 0):
-    """A flat nx x ny quad grid over [0, width] x [0, height], two triangles per quad."""
-    xs, ys = np.meshgrid(np.linspace(0, width, nx + 1), np.linspace(0, height, ny + 1))
-    pts = np.stack([xs.ravel(), ys.ravel()], axis=1)
-    if jitter:
-        rng = np.random.default_rng(seed)
-        interior = (
-            (xs.ravel() > 0) & (xs.ravel() < width) & (ys.ravel() > 0) & (ys.ravel() < height)
-        )
-        step = min(width / nx, height / ny)
-        pts[interior] += rng.uniform(-jitter, jitter, (interior.sum(), 2)) * step
-    idx = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
-    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
-    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
-    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    return pts, faces
 
 
 @pytest.fixture(autouse=True)
@@ -75,7 +39,7 @@ def test_overlap_two_triangle_square_is_zero(gl_ctx):
 def test_overlap_shared_edges_never_double_count(gl_ctx):
     # 8000 irregular triangles sharing edges in every direction: any double counting on shared
     # edges would show up as overlap.
-    pts, faces = grid(40, 100, 0.8, 0.9, jitter=0.3)
+    pts, faces = uv_grid(40, 100, 0.8, 0.9, jitter=0.3)
     assert U.uv_overlap_fraction(pts + 0.05, faces, res=1024, ctx=gl_ctx) == 0.0
 
 
@@ -144,7 +108,7 @@ def test_udim_detected_and_refused_in_keep_mode():
 
 
 def test_keep_mode_keeps_uvs():
-    pts, faces = grid(4, 4, 1.0, 1.0)
+    pts, faces = uv_grid(4, 4, 1.0, 1.0)
     mesh = make_mesh(np.c_[pts, np.zeros(len(pts))], faces, uv=pts)
     with warnings.catch_warnings():
         warnings.simplefilter("error", CrackbakeWarning)
@@ -203,7 +167,7 @@ def test_unknown_mode_is_an_error():
 
 def test_a_few_faces_straying_outside_are_kept_with_a_warning():
     """Like spot.obj (10 of 5,856 faces reach u = -0.05): keep the artist's layout, warn."""
-    pts, f = grid(12, 12, 1.0, 1.0)
+    pts, f = uv_grid(12, 12, 1.0, 1.0)
     v = np.c_[pts, np.zeros(len(pts))]
     uv = 0.05 + 0.9 * pts
     uv[0] = (-0.03, 0.02)  # one corner vertex strays: 2 of 288 faces reach outside
