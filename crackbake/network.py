@@ -8,10 +8,12 @@ The bake reads it flattened into :class:`Segments`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from crackbake.io.mesh import Mesh
+if TYPE_CHECKING:  # the network is the data contract; it needs no mesh code at run time
+    from crackbake.io.mesh import Mesh
 
 __all__ = ["Crack", "CrackNetwork", "Segments", "from_solver", "mesh_info", "segments"]
 

@@ -1,1 +1,3 @@
-"""Simulation: the sim mesh on the asset's surface, the stress field, the crack solvers."""
+"""Simulation: the sim mesh on the asset's surface (``simmesh``), the stress field (``stress``),
+the crack solvers (``solver``: Iben & O'Brien and the thesis variant) and ``setup``, which turns
+run parameters into stress sources and solver parameters."""
