@@ -5,7 +5,7 @@ VPY      := $(VENV)/bin/python
 STAMP    := $(VENV)/.installed
 APT_PKGS := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgbm1
 
-.PHONY: demo test setup syslibs lint bench clean
+.PHONY: demo test check setup syslibs lint bench clean
 
 setup: syslibs $(STAMP)
 
@@ -47,6 +47,11 @@ demo: setup
 test: setup
 	$(VPY) -m ruff check crackbake tests benchmarks examples
 	$(VPY) -m pytest -q
+
+# The quick loop while editing: ruff and every test not marked slow.
+check: setup
+	$(VPY) -m ruff check crackbake tests benchmarks examples
+	$(VPY) -m pytest -q -m "not slow"
 
 bench: setup
 	$(VPY) benchmarks/bench_bake.py
