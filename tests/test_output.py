@@ -64,6 +64,9 @@ def test_output_stage_commit_replaces_the_whole_set(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["manifest.json", "mask.png", "master.exr"]
     assert (out / "mask.png").read_bytes() == b"new mask"
     assert _beside(out) == []
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert out.stat().st_mode & 0o777 == 0o777 & ~umask  # an ordinary folder, not mkdtemp's 0700
 
 
 @pytest.mark.parametrize("exchange", [True, False])

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
+import secrets
 import shutil
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -94,9 +95,7 @@ class OutputStage:
         remove_leftovers(final)
         self.had_previous = check_replaceable(final, self.out_dir)  # again, under the lock
         try:
-            self._staging = Path(
-                tempfile.mkdtemp(prefix=sibling(final, "staging-").name, dir=final.parent)
-            )
+            self._staging = _new_folder(sibling(final, "staging-"))
             (self._staging / MARKER).write_bytes(b"")
         except OSError as exc:
             raise CrackbakeError(
@@ -204,6 +203,21 @@ class OutputStage:
         if self.had_previous:
             return f"interrupted; the previous outputs in {shown} are unchanged"
         return "interrupted; no outputs were written"
+
+
+def _new_folder(prefix: Path) -> Path:
+    """Create ``<prefix>XXXXXXXX`` (random) with the default permissions (umask applies).
+
+    Not :func:`tempfile.mkdtemp`: its 0700 folder would become the output folder.
+    """
+    for _ in range(100):
+        folder = prefix.parent / f"{prefix.name}{secrets.token_hex(4)}"
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            continue
+        return folder
+    raise FileExistsError(errno.EEXIST, "no free staging name", str(prefix))
 
 
 def _make_parents(parent: Path, shown: PathLike) -> list[Path]:
