@@ -1,7 +1,7 @@
 """``manifest.json``: what a run read, the parameters it used, what it wrote and how long it took.
 
-Written last into the output folder, so a manifest present means the files it lists are complete
-(see :class:`crackbake.exchange.output.OutputStage`).
+Written into the staging folder last; the set appears as a whole, so a manifest present means
+the files it lists are complete (see :class:`crackbake.exchange.output.OutputStage`).
 """
 
 from __future__ import annotations
