@@ -237,6 +237,8 @@ class RunParams:
 
     def validate(self) -> RunParams:
         """Check every value; return self so calls chain."""
+        if self.out is not None and not str(self.out).strip():
+            raise CrackbakeError("-o '' names no folder; give an output folder or leave -o out")
         if not RES_MIN <= self.res <= RES_MAX:
             raise CrackbakeError(
                 f"--res {self.res} is out of range; use a value from {RES_MIN} to {RES_MAX}"

@@ -8,6 +8,7 @@ Progress is reported through :mod:`logging` (logger ``"crackbake.pipeline"``).
 from __future__ import annotations
 
 import logging
+import signal
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ from crackbake.bake.raster import CrackMaps, bake_cracks
 from crackbake.bake.uv import UVMesh, prepare_uvs
 from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.bundle import write_outputs
+from crackbake.exchange.interrupt import RunInterrupted, interruptible
 from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
@@ -87,6 +89,11 @@ class RunResult:
 def run(params: RunParams) -> RunResult:
     """Run crackbake end to end and write the output folder.
 
+    The output folder is checked and locked before anything else (see :class:`OutputStage`),
+    every input is checked before the solver runs, and the new set replaces the folder's
+    contents in one rename at the end.  SIGINT and SIGTERM stop the run cleanly: the folder
+    keeps its previous set.
+
     Parameters
     ----------
     params : RunParams
@@ -99,9 +106,23 @@ def run(params: RunParams) -> RunResult:
     Raises
     ------
     CrackbakeError
-        Any bad input; nothing is left under a final output name.
+        Any bad input or unusable output folder; the output folder is unchanged.
+    RunInterrupted
+        SIGINT or SIGTERM arrived; its message says what the output folder holds, its
+        ``exit_code`` is 128 + the signal number.
     """
     params.validate()
+    stage = OutputStage(params.out_dir)
+    try:
+        with interruptible(), stage:
+            return _run(params, stage)
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        raise RunInterrupted(stage.interrupted_message(), signum) from None
+
+
+def _run(params: RunParams, stage: OutputStage) -> RunResult:
+    """The stages in order, cheap checks first, writing into the open ``stage``."""
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
 
@@ -117,7 +138,7 @@ def run(params: RunParams) -> RunResult:
             warnings.warn(
                 "--impact is ignored with --cracks (the network is baked as given)",
                 CrackbakeWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
         logger.info("reading crack network %s", params.cracks)
         t = time.perf_counter()
@@ -125,25 +146,28 @@ def run(params: RunParams) -> RunResult:
         timings["cracks"] = time.perf_counter() - t
     else:
         params, relative = params.resolved()
-        network, solver_stats, solved = solve(mesh, params, relative, timings)
+        sources = stress_sources(params, mesh, relative)  # weight maps, impacts: checked here
 
-    # One GL context for the UV overlap measure, the bake and the preview.
+    # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
+    # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     ctx = create_context()
     try:
-        uvmesh, maps = _bake(ctx, mesh, network, params, timings)
+        uvmesh = _uvs(ctx, mesh, params, timings)
+        if params.cracks is None:
+            network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
+        maps = _bake(ctx, uvmesh, network, params, timings)
         logger.info("writing %s", params.out_dir)
         t = time.perf_counter()
         effective = effective_params(params, solver_stats, maps, uvmesh)
-        with OutputStage(params.out_dir) as stage:
-            write_outputs(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx)
-            files = stage.records()
-            timings["write"] = time.perf_counter() - t
-            timings["total"] = time.perf_counter() - t_start
-            manifest = build_manifest(
-                params, effective, mesh, uvmesh, network, maps, renderer_info(ctx), files, timings
-            )
-            write_manifest(stage.path("manifest.json"), manifest)
-            stage.commit(last=("manifest.json",))
+        write_outputs(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx)
+        files = stage.records()
+        timings["write"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - t_start
+        manifest = build_manifest(
+            params, effective, mesh, uvmesh, network, maps, renderer_info(ctx), files, timings
+        )
+        write_manifest(stage.path("manifest.json"), manifest)
+        stage.commit()
     finally:
         ctx.release()
     return RunResult(
@@ -157,10 +181,8 @@ def run(params: RunParams) -> RunResult:
     )
 
 
-def _bake(
-    ctx, mesh: Mesh, network: CrackNetwork, params: RunParams, timings: dict[str, float]
-) -> tuple[UVMesh, CrackMaps]:
-    """The UV stage and the GPU bake, timed as ``unwrap`` and ``bake``."""
+def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMesh:
+    """The UV stage, timed as ``unwrap``."""
     logger.info("preparing UVs")
     t = time.perf_counter()
     uvmesh = prepare_uvs(
@@ -173,7 +195,13 @@ def _bake(
         ctx=ctx,
     )
     timings["unwrap"] = time.perf_counter() - t
+    return uvmesh
 
+
+def _bake(
+    ctx, uvmesh: UVMesh, network: CrackNetwork, params: RunParams, timings: dict[str, float]
+) -> CrackMaps:
+    """The GPU bake, timed as ``bake``."""
     logger.info("baking %dx%d", params.res, params.res)
     t = time.perf_counter()
     maps = bake_cracks(
@@ -189,7 +217,7 @@ def _bake(
         ctx=ctx,
     )
     timings["bake"] = time.perf_counter() - t
-    return uvmesh, maps
+    return maps
 
 
 def solve(
@@ -197,10 +225,12 @@ def solve(
     params: RunParams,
     relative: dict,
     timings: dict[str, float],
+    sources: list | None = None,
 ) -> tuple[CrackNetwork, dict, Solved]:
     """Simulation mesh, stress field and crack solver: the network for a resolved run.
 
-    Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).
+    Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).  ``sources``
+    are :func:`stress_sources` of the run when the caller already built them.
 
     Returns
     -------
@@ -213,7 +243,8 @@ def solve(
     from crackbake.simulate.simmesh import build_simmesh
     from crackbake.simulate.stress import stress_field
 
-    sources = stress_sources(params, mesh, relative)
+    if sources is None:
+        sources = stress_sources(params, mesh, relative)
     logger.info("building the simulation mesh")
     t = time.perf_counter()
     sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces, seed=params.seed)

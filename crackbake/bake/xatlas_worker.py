@@ -1,9 +1,14 @@
-"""Child-process entry point running xatlas: ``python -m crackbake.bake.xatlas_worker IN OUT``.
+"""Child-process entry point running xatlas: ``python -m crackbake.bake.xatlas_worker [IN OUT]``.
 
 xatlas can segfault (regular closed meshes, upstream jpcy/xatlas#146) or run for minutes, and
 either would take the calling process with it; :func:`crackbake.bake.uv.unwrap` therefore runs this
 module in a child process with a time limit.  It imports only numpy and xatlas so the child
 starts fast.
+
+The child dies with its parent: on Linux it asks the kernel for SIGKILL when the parent exits
+(``prctl(PR_SET_PDEATHSIG)``) before importing anything slow, and exits at once when the parent
+is already gone.  Without file arguments it reads the input ``.npz`` from stdin and writes the
+output ``.npz`` to stdout, so an unwrap leaves no temporary files anywhere, however it ends.
 
 Input arrays (``in.npz``): ``vertices`` (V, 3) float64, ``faces`` (F, 3) int64, ``res`` and
 ``padding`` (0-d ints).
@@ -18,10 +23,41 @@ page xatlas packed into, texels), ``atlas_count``, ``chart_count``, ``utilizatio
 
 from __future__ import annotations
 
+import os
 import sys
 
-import numpy as np
-import xatlas
+# Environment variable naming the parent's pid, set by crackbake.bake.uv.unwrap.run_worker.
+PARENT_ENV = "CRACKBAKE_XATLAS_PARENT"
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent() -> None:
+    """SIGKILL this process when its parent exits (Linux); exit now if it already has.
+
+    The parent's pid comes from :data:`PARENT_ENV`; comparing it with ``getppid()`` after the
+    ``prctl`` call closes the race where the parent died before the request was made.
+    """
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    parent = os.environ.get(PARENT_ENV)
+    if parent and parent.isdigit() and os.getppid() != int(parent):
+        os._exit(3)
+
+
+if __name__ == "__main__":
+    die_with_parent()
+
+import io  # noqa: E402  (after die_with_parent: the slow imports below run already guarded)
+
+import numpy as np  # noqa: E402
+import xatlas  # noqa: E402
 
 # Repacks tried (each shrinks the scale by SHRINK) before giving up on one page.
 MAX_ATTEMPTS = 12
@@ -121,17 +157,24 @@ def _utilization(uv: np.ndarray, faces: np.ndarray) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
-    if len(args) != 2:
-        print("usage: python -m crackbake.bake.xatlas_worker in.npz out.npz", file=sys.stderr)
+    if len(args) not in (0, 2):
+        print("usage: python -m crackbake.bake.xatlas_worker [in.npz out.npz]", file=sys.stderr)
         return 2
-    with np.load(args[0]) as data:
+    if args:
+        source, sink = open(args[0], "rb"), open(args[1], "wb")
+    else:
+        # stdout carries the result: anything else printing there (a library) goes to stderr.
+        sink = os.fdopen(os.dup(1), "wb")
+        os.dup2(2, 1)
+        source = io.BytesIO(sys.stdin.buffer.read())  # np.load needs a seekable file
+    with source, np.load(source, allow_pickle=False) as data:
         vertices = np.ascontiguousarray(data["vertices"], dtype=np.float64)
         faces = np.ascontiguousarray(data["faces"], dtype=np.int64)
         res = int(data["res"])
         padding = int(data["padding"])
     result = fit_one_page(vertices, faces, res, padding)
-    with open(args[1], "wb") as fh:
-        np.savez(fh, **result)
+    with sink:
+        np.savez(sink, **result)
     return 0
 
 

@@ -48,7 +48,7 @@ def write_outputs(
     Parameters
     ----------
     stage : OutputStage
-        Staging folder; nothing reaches its final name until the caller commits.
+        Staging folder; nothing reaches the output folder until the caller commits.
     stem : str
         Prefix of the map file names (the mesh file's stem).
     params : RunParams

@@ -1,7 +1,7 @@
 """``manifest.json``: what a run read, the parameters it used, what it wrote and how long it took.
 
-Written last into the output folder, so a manifest present means the files it lists are complete
-(see :class:`crackbake.exchange.output.OutputStage`).
+Written into the staging folder last; the set appears as a whole, so a manifest present means
+the files it lists are complete (see :class:`crackbake.exchange.output.OutputStage`).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from pathlib import Path
 from crackbake import __version__
 from crackbake.bake.raster import CHANNELS, CrackMaps
 from crackbake.bake.uv import UVMesh
+from crackbake.errors import CrackbakeError
 from crackbake.exchange.output import sha256_file
 from crackbake.io.mesh import Mesh
 from crackbake.network import CrackNetwork
@@ -102,5 +103,18 @@ def build_manifest(
 
 
 def write_manifest(path: str | Path, manifest: dict) -> None:
-    """Write ``manifest`` as indented JSON with a final newline."""
-    Path(path).write_text(json.dumps(manifest, indent=2) + "\n")
+    """Write ``manifest`` as indented JSON with a final newline.
+
+    Raises
+    ------
+    CrackbakeError
+        The file cannot be written (no space, no permission), as the other writers say it.
+    """
+    text = json.dumps(manifest, indent=2) + "\n"
+    try:
+        Path(path).write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise CrackbakeError(
+            f"cannot write manifest '{path}': {exc.strerror or exc}; "
+            "check that the folder exists, is writable and has space"
+        ) from exc

@@ -1,15 +1,26 @@
-"""Hashes of written files and the atomic output folder."""
+"""Hashes of written files and the output folder as one transaction (:class:`OutputStage`)."""
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
+import secrets
 import shutil
-import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
 from crackbake.errors import CrackbakeError
+from crackbake.exchange.interrupt import deferred
+from crackbake.exchange.outdir import (
+    MARKER,
+    FolderLock,
+    check_replaceable,
+    remove_leftovers,
+    sibling,
+    swap_in,
+    target_dir,
+)
 
 PathLike = str | os.PathLike
 
@@ -20,53 +31,95 @@ def sha256_file(path: PathLike) -> str:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
-_STAGE_PREFIX = ".crackbake-staging-"
-
-
 class OutputStage:
-    """Atomic writes into an output folder.
+    """The output folder as a transaction: the whole set appears at once, or nothing changes.
 
     ::
 
-        with OutputStage(out_dir) as stage:
+        with OutputStage(out_dir) as stage:     # checks and locks out_dir: before any work
+            ...                                 # the slow stages
             write_exr(stage.path("cracks.exr"), ...)
             records = stage.records()           # name, bytes, sha256 of what is staged
             write_manifest(stage.path("manifest.json"), records)
-            stage.commit(last=("manifest.json",))
+            stage.commit()
 
-    Files are written into a hidden staging folder inside ``out_dir`` (same filesystem, so the
-    final :func:`os.replace` is atomic per file).  :meth:`commit` moves every file in the staging
-    folder onto its final name, the names in ``last`` after all others, so a manifest present in
-    ``out_dir`` means the files it lists are complete.  Leaving the block without commit (an
-    exception included) removes the staging folder and touches no final name.
+    Entering checks that ``out_dir`` is missing, empty or a crackbake output folder (see
+    :func:`~crackbake.exchange.outdir.check_replaceable`), locks it against other runs, removes
+    what killed runs left beside it and creates a hidden staging folder next to it (same
+    parent, so same file system).  :meth:`commit` swaps the staging folder in with one rename
+    and then deletes the previous set: the folder holds exactly this run's files, and SIGINT or
+    SIGTERM (under :func:`~crackbake.exchange.interrupt.interruptible`) wait for the swap to
+    end.  Leaving the block without commit (an exception or interrupt included) removes the
+    staging folder, the lock file and any parent folder entering created; ``out_dir`` is
+    untouched.
 
-    A hard kill (SIGKILL, power loss) can leave a ``.crackbake-staging-*`` folder behind; it is
-    safe to delete.
+    Attributes
+    ----------
+    out_dir : Path
+        The folder as given.
+    final : Path
+        Its absolute path, symlinks resolved (set on entering).
+    had_previous : bool
+        ``final`` held a previous set when the stage was entered.
+    committed : bool
+        The new set is in place.
     """
 
     def __init__(self, out_dir: PathLike) -> None:
-        self.out_dir = Path(out_dir)
+        self.out_dir = Path(out_dir) if str(out_dir) else out_dir
+        self.final: Path | None = None
+        self.had_previous = False
+        self.committed = False
         self._staging: Path | None = None
-        self._committed = False
+        self._lock: FolderLock | None = None
+        self._made: list[Path] = []
         self._hashes: dict[str, tuple[tuple[int, int], str]] = {}
 
     def __enter__(self) -> OutputStage:
         try:
-            self.out_dir.mkdir(parents=True, exist_ok=True)
-            self._staging = Path(tempfile.mkdtemp(prefix=_STAGE_PREFIX, dir=self.out_dir))
-        except OSError as exc:
-            raise CrackbakeError(
-                f"cannot create output folder '{self.out_dir}': {exc.strerror}; "
-                "choose a writable location with --out"
-            ) from exc
+            self._open()
+        except BaseException:
+            self._close()
+            raise
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        self.discard()
+        self._close()
+
+    def _open(self) -> None:
+        final = target_dir(self.out_dir)
+        self.final = final
+        check_replaceable(final, self.out_dir)  # cheap refusals before touching anything
+        self._made = _make_parents(final.parent, self.out_dir)
+        self._lock = FolderLock(final, self.out_dir).acquire()
+        remove_leftovers(final)
+        self.had_previous = check_replaceable(final, self.out_dir)  # again, under the lock
+        try:
+            self._staging = _new_folder(sibling(final, "staging-"))
+            (self._staging / MARKER).write_bytes(b"")
+        except OSError as exc:
+            raise CrackbakeError(
+                f"cannot write beside output folder '{self.out_dir}': {exc.strerror}; "
+                "choose a writable location with -o"
+            ) from exc
+
+    def _close(self) -> None:
+        with deferred():
+            self.discard()
+            if self._lock is not None:
+                self._lock.release()
+                self._lock = None
+            if not self.committed:
+                for folder in reversed(self._made):  # parents this run created, if still empty
+                    try:
+                        folder.rmdir()
+                    except OSError:
+                        break
+            self._made = []
 
     @property
     def staging_dir(self) -> Path:
-        if self._staging is None or self._committed:
+        if self._staging is None or self.committed:
             raise CrackbakeError(
                 "OutputStage is not open; use it as `with OutputStage(out_dir) as stage:` "
                 "and stage files before commit()"
@@ -78,7 +131,7 @@ class OutputStage:
         if (
             not isinstance(name, str)
             or not name
-            or name in (".", "..")
+            or name in (".", "..", MARKER)
             or Path(name).name != name
             or "/" in name
             or "\\" in name
@@ -90,7 +143,10 @@ class OutputStage:
 
     def _staged(self) -> list[os.DirEntry]:
         with os.scandir(self.staging_dir) as it:
-            return sorted((e for e in it if e.is_file(follow_symlinks=False)), key=lambda e: e.name)
+            return sorted(
+                (e for e in it if e.is_file(follow_symlinks=False) and e.name != MARKER),
+                key=lambda e: e.name,
+            )
 
     def records(self) -> list[dict]:
         """``[{"name", "bytes", "sha256"}]`` of the files staged so far, sorted by name.
@@ -108,31 +164,88 @@ class OutputStage:
             out.append({"name": entry.name, "bytes": int(st.st_size), "sha256": cached[1]})
         return out
 
-    def commit(self, last: Iterable[str] = ("manifest.json",)) -> list[Path]:
-        """Move every staged file onto its final name (``last`` ones last); return final paths.
+    def commit(self, last: Iterable[str] = ()) -> list[Path]:
+        """Swap the staged set in as ``out_dir`` with one rename; return the final file paths.
 
-        Names in ``last`` that were never staged are skipped.
+        ``last`` is accepted for compatibility and ignored: every file appears at once.
         """
-        entries = self._staged()
-        last = [n for n in last if any(e.name == n for e in entries)]
-        order = [e.name for e in entries if e.name not in last] + last
-        moved = []
-        try:
-            for name in order:
-                final = self.out_dir / name
-                os.replace(self.staging_dir / name, final)
-                moved.append(final)
-        except OSError as exc:
-            raise CrackbakeError(
-                f"cannot move '{name}' into '{self.out_dir}': {exc.strerror}; "
-                "remove or rename what is in the way and run again"
-            ) from exc
-        self.discard()
-        self._committed = True
-        return moved
+        staging = self.staging_dir
+        names = [e.name for e in self._staged()]
+        with deferred():
+            try:
+                # The set is complete: once the marker is gone, the manifest marks it as ours.
+                (staging / MARKER).unlink()
+                check_replaceable(self.final, self.out_dir)  # nothing foreign arrived meanwhile
+                old = swap_in(staging, self.final)
+            except OSError as exc:
+                raise CrackbakeError(
+                    f"cannot move the new files into '{self.out_dir}': {exc.strerror}; "
+                    "check the folder holding it is writable and run again"
+                ) from exc
+            self.committed = True
+            self._staging = None
+            if old is not None:
+                shutil.rmtree(old, ignore_errors=True)
+        return [self.final / n for n in names]
 
     def discard(self) -> None:
-        """Remove the staging folder and everything in it (no final name is touched)."""
+        """Remove the staging folder and everything in it (``out_dir`` is not touched)."""
         if self._staging is not None:
-            shutil.rmtree(self._staging, ignore_errors=True)
-            self._staging = None
+            with deferred():
+                shutil.rmtree(self._staging, ignore_errors=True)
+                self._staging = None
+
+    def interrupted_message(self) -> str:
+        """What the output folder holds after an interrupt, as the end of a one-line message."""
+        shown = self.out_dir
+        if self.committed:
+            return f"interrupted; the new outputs in {shown} are complete"
+        if self.had_previous:
+            return f"interrupted; the previous outputs in {shown} are unchanged"
+        return "interrupted; no outputs were written"
+
+
+def _new_folder(prefix: Path) -> Path:
+    """Create ``<prefix>XXXXXXXX`` (random) with the default permissions (umask applies).
+
+    Not :func:`tempfile.mkdtemp`: its 0700 folder would become the output folder.
+    """
+    for _ in range(100):
+        folder = prefix.parent / f"{prefix.name}{secrets.token_hex(4)}"
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            continue
+        return folder
+    raise FileExistsError(errno.EEXIST, "no free staging name", str(prefix))
+
+
+def _make_parents(parent: Path, shown: PathLike) -> list[Path]:
+    """Create ``parent`` and its missing ancestors; return the ones created, outermost first."""
+    missing = []
+    p = parent
+    while not os.path.lexists(p):
+        missing.append(p)
+        p = p.parent
+    if os.path.lexists(p) and not p.is_dir():
+        raise CrackbakeError(
+            f"cannot create output folder '{shown}': '{p}' is not a folder; choose another -o"
+        )
+    made = []
+    for folder in reversed(missing):
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            for m in reversed(made):
+                try:
+                    m.rmdir()
+                except OSError:
+                    break
+            raise CrackbakeError(
+                f"cannot create output folder '{shown}': {exc.strerror}; "
+                "choose a writable location with -o"
+            ) from exc
+        made.append(folder)
+    return made

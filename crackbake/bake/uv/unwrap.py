@@ -7,11 +7,11 @@ mesh content (:mod:`crackbake.bake.uv.cache`).
 
 from __future__ import annotations
 
+import io
 import os
 import signal
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,10 @@ from crackbake.bake.uv.overlap import uv_overlap_fraction
 from crackbake.bake.uv.uvmesh import UVMesh, default_padding, mesh_label, unwrapped_uvmesh
 from crackbake.errors import CrackbakeError
 from crackbake.io.mesh import Mesh
+
+# Tells the worker our pid (crackbake.bake.xatlas_worker.PARENT_ENV; not imported from there so
+# this process never loads xatlas).
+PARENT_ENV = "CRACKBAKE_XATLAS_PARENT"
 
 
 def weld_for_unwrap(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -72,42 +76,62 @@ def run_worker(
     timeout: float,
     label: str,
 ) -> dict[str, np.ndarray]:
-    """Run :mod:`crackbake.bake.xatlas_worker` on (vertices, faces); its output arrays."""
+    """Run :mod:`crackbake.bake.xatlas_worker` on (vertices, faces); its output arrays.
+
+    The arrays travel through the child's stdin and stdout, so no temporary file exists at any
+    time.  The child runs in its own process group, which is killed on a timeout, an error or
+    an interrupt (SIGINT/SIGTERM arriving here); if this process is killed outright, the
+    kernel kills the child (``PR_SET_PDEATHSIG``, Linux).
+    """
     n_faces = len(faces)
-    with tempfile.TemporaryDirectory(prefix="crackbake-xatlas-") as tmp:
-        inp, out = Path(tmp) / "in.npz", Path(tmp) / "out.npz"
-        np.savez(inp, vertices=vertices, faces=faces, res=np.int64(res), padding=np.int64(padding))
-        env = os.environ.copy()
-        # The child must import this very crackbake, installed or not.
-        package_parent = str(Path(__file__).resolve().parents[3])
-        env["PYTHONPATH"] = os.pathsep.join(
-            p for p in (package_parent, env.get("PYTHONPATH", "")) if p
-        )
+    buf = io.BytesIO()
+    np.savez(buf, vertices=vertices, faces=faces, res=np.int64(res), padding=np.int64(padding))
+    env = os.environ.copy()
+    # The child must import this very crackbake, installed or not.
+    package_parent = str(Path(__file__).resolve().parents[3])
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (package_parent, env.get("PYTHONPATH", "")) if p)
+    env[PARENT_ENV] = str(os.getpid())
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "crackbake.bake.xatlas_worker"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        start_new_session=True,  # own process group: Ctrl-C reaches us, we stop the child
+    )
+    try:
+        stdout, stderr = proc.communicate(buf.getbuffer(), timeout=timeout)
+    except subprocess.TimeoutExpired:
+        raise CrackbakeError(
+            f"xatlas did not finish within {timeout:g} s unwrapping {label} "
+            f"({n_faces} faces); raise --unwrap-timeout, use --uv keep with your own UVs, "
+            "or decimate the mesh"
+        ) from None
+    finally:
+        stop_worker(proc)
+    if proc.returncode != 0:
+        raise worker_error(proc.returncode, stderr.decode("utf-8", "replace"), label, n_faces)
+    try:
+        with np.load(io.BytesIO(stdout), allow_pickle=False) as data:
+            return {k: np.asarray(data[k]) for k in data.files}
+    except (OSError, ValueError, KeyError, EOFError) as exc:
+        raise CrackbakeError(
+            f"xatlas's worker sent no readable result for {label} ({exc}); "
+            "try --uv keep with your own UVs or remesh"
+        ) from exc
+
+
+def stop_worker(proc: subprocess.Popen) -> None:
+    """Kill ``proc``'s process group if it is still running, and reap it."""
+    if proc.poll() is None:
         try:
-            proc = subprocess.run(
-                [sys.executable, "-m", "crackbake.bake.xatlas_worker", str(inp), str(out)],
-                capture_output=True,
-                text=True,
-                timeout=timeout,
-                env=env,
-            )
-        except subprocess.TimeoutExpired:
-            raise CrackbakeError(
-                f"xatlas did not finish within {timeout:g} s unwrapping {label} "
-                f"({n_faces} faces); raise --unwrap-timeout, use --uv keep with your own UVs, "
-                "or decimate the mesh"
-            ) from None
-        if proc.returncode != 0:
-            raise worker_error(proc.returncode, proc.stderr, label, n_faces)
-        try:
-            with np.load(out, allow_pickle=False) as data:
-                result = {k: np.asarray(data[k]) for k in data.files}
-        except Exception as exc:
-            raise CrackbakeError(
-                f"xatlas's worker wrote no readable result for {label} ({exc}); "
-                "check free space in the temp folder"
-            ) from exc
-    return result
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    for pipe in (proc.stdin, proc.stdout, proc.stderr):
+        if pipe is not None:
+            pipe.close()
+    proc.wait()
 
 
 def unwrap(

@@ -1,0 +1,94 @@
+"""SIGINT and SIGTERM during a run: both unwind the run like Ctrl-C, never mid-commit.
+
+Python turns SIGINT into :class:`KeyboardInterrupt`, but SIGTERM (what ``kill``, ``timeout``,
+schedulers and containers send) kills the process on the spot, leaving the staging folder behind.
+:func:`interruptible` makes both raise :class:`Interrupt` so every ``finally`` and ``with`` block
+cleans up, and :func:`deferred` holds them back while the output folder is being swapped.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from crackbake.errors import CrackbakeError
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class Interrupt(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived; ``signum`` says which."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = int(signum)
+
+
+class RunInterrupted(CrackbakeError):
+    """A run stopped by SIGINT/SIGTERM; the message says what the output folder holds.
+
+    ``exit_code`` is 128 + the signal number (130 for SIGINT, 143 for SIGTERM), as shells report
+    a process ended by that signal.
+    """
+
+    def __init__(self, message: str, signum: int = signal.SIGINT) -> None:
+        super().__init__(message)
+        self.signum = int(signum)
+        self.exit_code = 128 + self.signum
+
+
+class _State(threading.local):
+    depth = 0  # nesting of deferred()
+    pending: int | None = None
+
+
+_state = _State()
+
+
+def _handler(signum, _frame) -> None:
+    if _state.depth > 0:
+        _state.pending = signum  # raised when the deferred block ends
+        return
+    raise Interrupt(signum)
+
+
+@contextmanager
+def interruptible() -> Iterator[None]:
+    """SIGINT and SIGTERM raise :class:`Interrupt` in the main thread while the block runs.
+
+    Signals the process ignores (``nohup``, background jobs) stay ignored; the previous handlers
+    come back when the block ends.  Off the main thread (where Python cannot set handlers) this
+    does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {}
+    for sig in SIGNALS:
+        old = signal.getsignal(sig)
+        if old is not signal.SIG_IGN:
+            previous[sig] = old
+            signal.signal(sig, _handler)
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """Hold SIGINT/SIGTERM (under :func:`interruptible`) until the block ends, then raise.
+
+    For short sections that must not stop half-way: the swap of the output folder.
+    """
+    _state.depth += 1
+    try:
+        yield
+    finally:
+        _state.depth -= 1
+    if _state.depth == 0 and _state.pending is not None:
+        signum, _state.pending = _state.pending, None
+        raise Interrupt(signum)
