@@ -1,0 +1,173 @@
+"""World-scale rules of the iben loop: ball search, ligament bridges, near-crack, footprint."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail):
+    """Breadth-first step: queue the unvisited neighbours of ``n`` within ``sqrt(r2)`` of
+    ``(x0, x1, x2)``; returns the new queue tail."""
+    for j in range(NFc[n]):
+        f = NF[n, j]
+        for q in range(3):
+            y = F[f, q]
+            if vst[y] == vstamp:
+                continue
+            vst[y] = vstamp
+            e0 = X[y, 0] - x0
+            e1 = X[y, 1] - x1
+            e2 = X[y, 2] - x2
+            if e0 * e0 + e1 * e1 + e2 * e2 <= r2 and tail < queue.shape[0]:
+                queue[tail] = y
+                tail += 1
+    return tail
+
+
+@njit(cache=True)
+def _ball(c, rad, X, F, NF, NFc, vst, vstamp, queue):
+    """The nodes connected to ``c`` over the mesh within ``rad`` of it (breadth-first; cracks
+    separate): ``queue[:count]``, ``c`` first; returns ``count``."""
+    r2 = rad * rad
+    x0, x1, x2 = X[c, 0], X[c, 1], X[c, 2]
+    vst[c] = vstamp
+    queue[0] = c
+    head = 0
+    tail = 1
+    while head < tail:
+        tail = _enqueue_near(queue[head], x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue,
+                             tail)
+        head += 1
+    return tail
+
+
+@njit(cache=True)
+def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb, val, vec,
+            taun, vst, vstamp, queue, own_len):
+    """Ligament failure: when the free tip ``t`` is arrested (its separation is below the
+    toughness) and another crack or the mesh boundary lies ahead of it within ``rad`` (inside
+    the cone ``acos(coscone)`` around its smoothed direction), the thin ligament between them
+    breaks: the tip is made to fail (``val`` just above ``taun``) with its cut aimed at the
+    nearest such point.  Returns whether it did.  Without this a crack stopped a few edges
+    short of the crack it was running into, a gap that shows in the textures.  The boundary
+    counts only once the tip's crack (``own_len`` long) is at least ``rad`` long: short cracks
+    starting beside an open boundary otherwise curled back onto it at both ends (hooks).
+    """
+    to_boundary = own_len >= rad
+    p = pid[t]
+    d0, d1, d2 = pdir[p, 0], pdir[p, 1], pdir[p, 2]
+    ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if ld == 0.0 or rad <= 0.0:
+        return False
+    x0, x1, x2 = X[t, 0], X[t, 1], X[t, 2]
+    best = -1
+    bd = np.inf
+    for i in range(1, _ball(t, rad, X, F, NF, NFc, vst, vstamp, queue)):
+        n = queue[i]
+        if (pcid[pid[n]] >= 0 and pcid[pid[n]] != cid) or (onb[n] and to_boundary):
+            e0 = X[n, 0] - x0
+            e1 = X[n, 1] - x1
+            e2 = X[n, 2] - x2
+            le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+            if 0.0 < le < bd and (e0 * d0 + e1 * d1 + e2 * d2) >= coscone * le * ld:
+                best = n
+                bd = le
+    if best < 0:
+        return False
+    vn0 = vn1 = vn2 = 0.0
+    for j in range(NFc[t]):
+        f = NF[t, j]
+        vn0 += area[f] * nrm[f, 0]
+        vn1 += area[f] * nrm[f, 1]
+        vn2 += area[f] * nrm[f, 2]
+    e0 = X[best, 0] - x0
+    e1 = X[best, 1] - x1
+    e2 = X[best, 2] - x2
+    # Cut normal: in the tangent plane, perpendicular to the way to the target.
+    c0 = vn1 * e2 - vn2 * e1
+    c1 = vn2 * e0 - vn0 * e2
+    c2 = vn0 * e1 - vn1 * e0
+    lc = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    if lc == 0.0:
+        return False
+    vec[t, 0], vec[t, 1], vec[t, 2] = c0 / lc, c1 / lc, c2 / lc
+    val[t] = taun[t] * (1.0 + 1e-9)
+    return True
+
+
+@njit(cache=True)
+def _near_other(t, cid, d0, d1, d2, rad, cospar, rad_any, X, F, NF, NFc, pid, pcid, pdir, vst,
+                vstamp, queue):
+    """Whether another crack comes near node ``t`` (breadth-first over the mesh).
+
+    Returns 1 when a point of another crack lies within ``rad_any`` of ``t``, 2 when one lies
+    within ``rad`` and that crack's smoothed direction there (``pdir``) runs within
+    ``acos(cospar)`` of ``d``, else 0.
+    """
+    ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    r2 = max(rad, rad_any) ** 2
+    ra2 = rad_any * rad_any
+    x0, x1, x2 = X[t, 0], X[t, 1], X[t, 2]
+    vst[t] = vstamp
+    queue[0] = t
+    head = 0
+    tail = 1
+    found = 0
+    while head < tail:
+        n = queue[head]
+        head += 1
+        p = pid[n]
+        o = pcid[p]
+        if o >= 0 and o != cid:
+            e0 = X[n, 0] - x0
+            e1 = X[n, 1] - x1
+            e2 = X[n, 2] - x2
+            if e0 * e0 + e1 * e1 + e2 * e2 <= ra2:
+                return 1
+            u0, u1, u2 = pdir[p, 0], pdir[p, 1], pdir[p, 2]
+            lu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+            if lu > 0.0 and ld > 0.0 and abs(u0 * d0 + u1 * d1 + u2 * d2) >= cospar * lu * ld:
+                if rad_any == 0.0:
+                    return 2
+                found = 2
+        tail = _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail)
+    return found
+
+
+@njit(cache=True)
+def _smooth_dir(pc, pt, d0, d1, d2, length, pdir):
+    """Direction of a crack at its new point ``pt``: an exponential moving average over the
+    last ``length`` (mesh units) of its path, from the one at ``pc`` and the new segment ``d``.
+
+    A world-scale memory: a single segment's direction zig-zags across the sim triangles, and
+    the finer the mesh the more it does, so tests on it would depend on the resolution.
+    """
+    ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    if ld == 0.0:
+        return
+    u0, u1, u2 = pdir[pc, 0], pdir[pc, 1], pdir[pc, 2]
+    w = np.exp(-ld / length) if length > 0.0 else 0.0
+    if u0 * d0 + u1 * d1 + u2 * d2 < 0.0:
+        w = -w
+    e0 = w * u0 + (1.0 - abs(w)) * d0 / ld
+    e1 = w * u1 + (1.0 - abs(w)) * d1 / ld
+    e2 = w * u2 + (1.0 - abs(w)) * d2 / ld
+    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if le > 0.0:
+        pdir[pt, 0], pdir[pt, 1], pdir[pt, 2] = e0 / le, e1 / le, e2 / le
+
+
+@njit(cache=True)
+def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, queue):
+    """Whether the mean normalised separation ``v+ / h`` over the nodes within ``rad`` of node
+    ``c`` (breadth-first over the mesh) exceeds their mean normalised toughness."""
+    sv = 0.0
+    st = 0.0
+    for i in range(_ball(c, rad, X, F, NF, NFc, vst, vstamp, queue)):
+        n = queue[i]
+        if not dead[n] and taun[n] > 0.0 and hn[n] > 0.0:
+            sv += val[n] / hn[n]
+            st += taun[n] / hn[n]
+    return sv > st
