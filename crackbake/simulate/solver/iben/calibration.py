@@ -17,7 +17,7 @@ from crackbake.simulate.solver.iben.constants import (
 )
 
 
-def _flaw(seed: int, points: np.ndarray) -> np.ndarray:
+def flaw(seed: int, points: np.ndarray) -> np.ndarray:
     """Seeded toughness factors per node, a smooth world-space field in [1 - FLAW, 1 + FLAW].
 
     The flaws live in world space (a sum of plane waves of wavelength ``FLAW_WAVELENGTH`` x the
@@ -34,13 +34,13 @@ def _flaw(seed: int, points: np.ndarray) -> np.ndarray:
     return 1.0 + FLAW * np.tanh(noise)
 
 
-def _surface_wide(norm_sep: np.ndarray, bnd: np.ndarray) -> bool:
+def surface_wide(norm_sep: np.ndarray, bnd: np.ndarray) -> bool:
     """Whether at least ``FOOTPRINT_MIN_LOADED`` of the interior nodes are loaded."""
     use = (~bnd) & (norm_sep > 0)
     return bool(use.any()) and not use.sum() < FOOTPRINT_MIN_LOADED * max(int((~bnd).sum()), 1)
 
 
-def _footprint_factor(points: np.ndarray, norm_sep: np.ndarray, bnd: np.ndarray) -> np.ndarray:
+def footprint_factor(points: np.ndarray, norm_sep: np.ndarray, bnd: np.ndarray) -> np.ndarray:
     """Per-node toughness factor that hides sub-footprint fluctuations of the initial field.
 
     The initial normalised separation ``v+ / h`` of interior nodes is averaged over a world grid
@@ -57,7 +57,7 @@ def _footprint_factor(points: np.ndarray, norm_sep: np.ndarray, bnd: np.ndarray)
     n = len(points)
     fac = np.ones(n)
     use = (~bnd) & (norm_sep > 0)
-    if not _surface_wide(norm_sep, bnd):
+    if not surface_wide(norm_sep, bnd):
         return fac
     lo = points.min(0)
     diag = float(np.linalg.norm(points.max(0) - lo)) or 1.0
@@ -92,7 +92,7 @@ def _footprint_factor(points: np.ndarray, norm_sep: np.ndarray, bnd: np.ndarray)
     return fac
 
 
-def _percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
+def percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
     """REF_PERCENTILE of the positive normalised separations ``v+ / h`` of interior nodes.
 
     Falls back to all nodes when no interior node has a positive separation; 0 when none has.
@@ -103,7 +103,7 @@ def _percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
     return float(np.percentile(pool, REF_PERCENTILE)) if len(pool) else 0.0
 
 
-def _shadow_grid(X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def shadow_grid(X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Empty shadow grid over the bounding box and its parameters ``origin, cell, radius``."""
     lo, hi = X0.min(0), X0.max(0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0

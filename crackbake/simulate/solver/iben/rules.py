@@ -6,10 +6,18 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
-def _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail):
+@njit(cache=True, inline="always")
+def next_stamp(w):
+    """A fresh visit stamp for a breadth-first search (``w.vst``)."""
+    w.vstamp[0] += 1
+    return w.vstamp[0]
+
+
+@njit(cache=True, inline="always")
+def _enqueue_near(s, w, n, x0, x1, x2, r2, vstamp, tail):
     """Breadth-first step: queue the unvisited neighbours of ``n`` within ``sqrt(r2)`` of
     ``(x0, x1, x2)``; returns the new queue tail."""
+    X, F, NF, NFc, vst, queue = s.X, s.F, s.NF, s.NFc, w.vst, w.queue
     for j in range(NFc[n]):
         f = NF[n, j]
         for q in range(3):
@@ -20,16 +28,18 @@ def _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail):
             e0 = X[y, 0] - x0
             e1 = X[y, 1] - x1
             e2 = X[y, 2] - x2
-            if e0 * e0 + e1 * e1 + e2 * e2 <= r2 and tail < queue.shape[0]:
+            if e0 * e0 + e1 * e1 + e2 * e2 <= r2:
                 queue[tail] = y
                 tail += 1
     return tail
 
 
-@njit(cache=True)
-def _ball(c, rad, X, F, NF, NFc, vst, vstamp, queue):
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+def ball(s, w, c, rad):
     """The nodes connected to ``c`` over the mesh within ``rad`` of it (breadth-first; cracks
-    separate): ``queue[:count]``, ``c`` first; returns ``count``."""
+    separate): ``w.queue[:count]``, ``c`` first; returns ``count``."""
+    X, vst, queue = s.X, w.vst, w.queue
+    vstamp = next_stamp(w)
     r2 = rad * rad
     x0, x1, x2 = X[c, 0], X[c, 1], X[c, 2]
     vst[c] = vstamp
@@ -37,15 +47,13 @@ def _ball(c, rad, X, F, NF, NFc, vst, vstamp, queue):
     head = 0
     tail = 1
     while head < tail:
-        tail = _enqueue_near(queue[head], x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue,
-                             tail)
+        tail = _enqueue_near(s, w, queue[head], x0, x1, x2, r2, vstamp, tail)
         head += 1
     return tail
 
 
-@njit(cache=True)
-def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb, val, vec,
-            taun, vst, vstamp, queue, own_len):
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+def bridge(s, w, t, cid, rad, coscone, own_len):
     """Ligament failure: when the free tip ``t`` is arrested (its separation is below the
     toughness) and another crack or the mesh boundary lies ahead of it within ``rad`` (inside
     the cone ``acos(coscone)`` around its smoothed direction), the thin ligament between them
@@ -55,6 +63,9 @@ def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb
     counts only once the tip's crack (``own_len`` long) is at least ``rad`` long: short cracks
     starting beside an open boundary otherwise curled back onto it at both ends (hooks).
     """
+    X, NF, NFc, nrm, area, pid, pcid, pdir, onb = (s.X, s.NF, s.NFc, s.nrm, s.area, s.pid,
+                                                    s.pcid, s.pdir, s.onb)
+    queue = w.queue
     to_boundary = own_len >= rad
     p = pid[t]
     d0, d1, d2 = pdir[p, 0], pdir[p, 1], pdir[p, 2]
@@ -64,7 +75,7 @@ def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb
     x0, x1, x2 = X[t, 0], X[t, 1], X[t, 2]
     best = -1
     bd = np.inf
-    for i in range(1, _ball(t, rad, X, F, NF, NFc, vst, vstamp, queue)):
+    for i in range(1, ball(s, w, t, rad)):
         n = queue[i]
         if (pcid[pid[n]] >= 0 and pcid[pid[n]] != cid) or (onb[n] and to_boundary):
             e0 = X[n, 0] - x0
@@ -92,20 +103,21 @@ def _bridge(t, cid, rad, coscone, X, F, NF, NFc, nrm, area, pid, pcid, pdir, onb
     lc = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
     if lc == 0.0:
         return False
-    vec[t, 0], vec[t, 1], vec[t, 2] = c0 / lc, c1 / lc, c2 / lc
-    val[t] = taun[t] * (1.0 + 1e-9)
+    s.vec[t, 0], s.vec[t, 1], s.vec[t, 2] = c0 / lc, c1 / lc, c2 / lc
+    s.val[t] = s.taun[t] * (1.0 + 1e-9)
     return True
 
 
-@njit(cache=True)
-def _near_other(t, cid, d0, d1, d2, rad, cospar, rad_any, X, F, NF, NFc, pid, pcid, pdir, vst,
-                vstamp, queue):
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+def near_other(s, w, t, cid, d0, d1, d2, rad, cospar, rad_any):
     """Whether another crack comes near node ``t`` (breadth-first over the mesh).
 
     Returns 1 when a point of another crack lies within ``rad_any`` of ``t``, 2 when one lies
     within ``rad`` and that crack's smoothed direction there (``pdir``) runs within
     ``acos(cospar)`` of ``d``, else 0.
     """
+    X, pid, pcid, pdir, vst, queue = s.X, s.pid, s.pcid, s.pdir, w.vst, w.queue
+    vstamp = next_stamp(w)
     ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     r2 = max(rad, rad_any) ** 2
     ra2 = rad_any * rad_any
@@ -132,12 +144,12 @@ def _near_other(t, cid, d0, d1, d2, rad, cospar, rad_any, X, F, NF, NFc, pid, pc
                 if rad_any == 0.0:
                     return 2
                 found = 2
-        tail = _enqueue_near(n, x0, x1, x2, r2, X, F, NF, NFc, vst, vstamp, queue, tail)
+        tail = _enqueue_near(s, w, n, x0, x1, x2, r2, vstamp, tail)
     return found
 
 
 @njit(cache=True)
-def _smooth_dir(pc, pt, d0, d1, d2, length, pdir):
+def smooth_dir(pc, pt, d0, d1, d2, length, pdir):
     """Direction of a crack at its new point ``pt``: an exponential moving average over the
     last ``length`` (mesh units) of its path, from the one at ``pc`` and the new segment ``d``.
 
@@ -159,13 +171,14 @@ def _smooth_dir(pc, pt, d0, d1, d2, length, pdir):
         pdir[pt, 0], pdir[pt, 1], pdir[pt, 2] = e0 / le, e1 / le, e2 / le
 
 
-@njit(cache=True)
-def _footprint_fails(c, rad, X, F, NF, NFc, val, taun, hn, dead, vst, vstamp, queue):
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+def footprint_fails(s, w, c, rad):
     """Whether the mean normalised separation ``v+ / h`` over the nodes within ``rad`` of node
     ``c`` (breadth-first over the mesh) exceeds their mean normalised toughness."""
+    val, taun, hn, dead, queue = s.val, s.taun, s.hn, s.dead, w.queue
     sv = 0.0
     st = 0.0
-    for i in range(_ball(c, rad, X, F, NF, NFc, vst, vstamp, queue)):
+    for i in range(ball(s, w, c, rad)):
         n = queue[i]
         if not dead[n] and taun[n] > 0.0 and hn[n] > 0.0:
             sv += val[n] / hn[n]
