@@ -37,11 +37,12 @@ FLAW_WAVES = 12
 FOOTPRINT_REL = 0.01
 """World-scale footprint (relative to the bounding-box diagonal) over which the initial
 normalised separation is compared with its local mean: a node's toughness follows its own
-fluctuation below this scale (see :func:`_footprint_factor`)."""
+fluctuation below this scale (see :func:`.calibration.footprint_factor`)."""
 FOOTPRINT_CLIP = 2.0
-"""Largest factor (and smallest, inverted) that :func:`_footprint_factor` applies."""
+"""Largest factor (and smallest, inverted) that :func:`.calibration.footprint_factor` applies."""
 FOOTPRINT_MIN_LOADED = 0.95
-"""Least fraction of loaded interior nodes for which :func:`_footprint_factor` applies."""
+"""Least fraction of loaded interior nodes for which :func:`.calibration.footprint_factor`
+applies."""
 NUC_FOOTPRINT_REL = 0.0075
 """Localized fields: a new crack nucleates only where the mean v+/h over the nodes within this
 (x bounding-box diagonal) exceeds their mean toughness (tips keep the per-node test)."""
@@ -51,9 +52,10 @@ only decides where the separation is nearly isotropic (see topology.node_update)
 GROWTH_REF_STEPS = 20
 """With no initial stress, toughness 1 is the separation of this many growth steps."""
 EXTRA_DEGREE = 24
-"""Room for faces a node may gain by edge splits around it (node -> face table width)."""
+"""Room for faces a node may gain by edge splits around it (node -> face table width, beyond
+the initial largest degree); the table widens by as much again when an event needs more."""
 TIP_FIRST = True
-"""Grow every failing crack tip before a new crack starts (see the module docstring)."""
+"""Grow every failing crack tip before a new crack starts (docs/solver.md)."""
 TIP_PRIORITY = 1e6
 """Added to a free tip's heap key when ``TIP_FIRST``."""
 INITIAL_ROOM = 4096
@@ -63,29 +65,19 @@ PROGRESS_SECONDS = 0.5
 NEAR_REL = 0.12
 """Near-crack radius, a fraction of the shadow radius: a free tip of a localized field that
 comes this close to another crack running alongside it (within ``NEAR_PAR_DEG``) is ended
-there, and no new crack starts this close to one running its way (module docstring)."""
+there, and no new crack starts this close to one running its way (docs/solver.md)."""
 NEAR_PAR_DEG = 60.0
 """Largest angle between a free tip's direction and a nearby crack's segment for that crack to
 count as running alongside it."""
 TIP_REF_FACES = 100_000
 """The tip factor is the share of the excess carried over one edge of a mesh of this many
-equilateral faces covering the surface; shorter steps carry more (see the module docstring)."""
+equilateral faces covering the surface; shorter steps carry more (docs/solver.md)."""
 DIR_SMOOTH = 0.5
 """Length of the crack direction's moving average, relative to the near-crack radius."""
 LIGAMENT_REL = 0.25
 """A free tip arrested this close (x the shadow radius) to another crack or the boundary ahead
-of it breaks through the ligament between them (:func:`_bridge`)."""
+of it breaks through the ligament between them (:func:`.rules.bridge`)."""
 LIGAMENT_CONE_DEG = 45.0
-"""Half-angle of the cone ahead of an arrested tip in which :func:`_bridge` looks."""
-NEAR_QUEUE = 8192
-"""Most nodes the near-crack search around one tip visits."""
-
-# Indices into the counter array shared by the kernels.
-(_HEAP, _NN, _NF, _NS, _STEP, _EVENTS, _STAMP, _NCRACK, _ABORT, _GROW, _DEP,
- _REFRESH, _NUC_EDGE, _NUC_VETO, _NUC_NEAR, _TIP_NEAR, _IDLE, _FIRST, _SATURATED,
- _BRIDGE) = range(20)
-# Return codes of _run.
-_MORE, _DONE, _FULL = 0, 1, 2
-
+"""Half-angle of the cone ahead of an arrested tip in which :func:`.rules.bridge` looks."""
 UPDATE_CHUNK = 4096
-"""Faces or nodes per parallel work item of :func:`_update_all` (one set of scratch each)."""
+"""Faces or nodes per parallel work item of :func:`.update.update_all` (one set of scratch each)."""

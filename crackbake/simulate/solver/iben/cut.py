@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from crackbake.simulate.solver.iben.vec import angle
+from crackbake.simulate.solver.iben.vec import angle, cross3, dot3, norm3
 from crackbake.simulate.solver.topology import on_boundary, separate, split_edge, spoke_count
 
 
@@ -25,18 +25,18 @@ def crack_plane(s, w, c):
         vn0 += area[f] * nrm[f, 0]
         vn1 += area[f] * nrm[f, 1]
         vn2 += area[f] * nrm[f, 2]
-    lvn = np.sqrt(vn0 * vn0 + vn1 * vn1 + vn2 * vn2)
+    lvn = norm3(vn0, vn1, vn2)
     if lvn == 0.0:
         return False
     vn0 /= lvn
     vn1 /= lvn
     vn2 /= lvn
     e0, e1, e2 = vec[c, 0], vec[c, 1], vec[c, 2]
-    en = e0 * vn0 + e1 * vn1 + e2 * vn2
+    en = dot3(e0, e1, e2, vn0, vn1, vn2)
     nc0 = e0 - en * vn0
     nc1 = e1 - en * vn1
     nc2 = e2 - en * vn2
-    lnc = np.sqrt(nc0 * nc0 + nc1 * nc1 + nc2 * nc2)
+    lnc = norm3(nc0, nc1, nc2)
     if lnc < 1e-6:
         return False
     nc0 /= lnc
@@ -45,9 +45,7 @@ def crack_plane(s, w, c):
     g = w.geo
     g[0, 0], g[0, 1], g[0, 2] = X[c, 0], X[c, 1], X[c, 2]
     g[1, 0], g[1, 1], g[1, 2] = nc0, nc1, nc2
-    g[2, 0] = vn1 * nc2 - vn2 * nc1
-    g[2, 1] = vn2 * nc0 - vn0 * nc2
-    g[2, 2] = vn0 * nc1 - vn1 * nc0
+    g[2, 0], g[2, 1], g[2, 2] = cross3(vn0, vn1, vn2, nc0, nc1, nc2)
     return True
 
 
@@ -64,8 +62,8 @@ def normal_stress(s, w, c):
     for j in range(NFc[c]):
         f = NF[c, j]
         p = pr[f]
-        a1 = p[2] * nc0 + p[3] * nc1 + p[4] * nc2
-        a2 = p[5] * nc0 + p[6] * nc1 + p[7] * nc2
+        a1 = dot3(p[2], p[3], p[4], nc0, nc1, nc2)
+        a2 = dot3(p[5], p[6], p[7], nc0, nc1, nc2)
         sig_n += area[f] * (p[0] * a1 * a1 + p[1] * a2 * a2)
     return max(sig_n / asum, 0.0) if asum > 0 else 0.0
 
@@ -90,17 +88,17 @@ def crossings(s, w, c):
             k += 1
         a = F[f, (k + 1) % 3]
         b = F[f, (k + 2) % 3]
-        da = (X[a, 0] - xc0) * nc0 + (X[a, 1] - xc1) * nc1 + (X[a, 2] - xc2) * nc2
-        db = (X[b, 0] - xc0) * nc0 + (X[b, 1] - xc1) * nc1 + (X[b, 2] - xc2) * nc2
+        da = dot3(X[a, 0] - xc0, X[a, 1] - xc1, X[a, 2] - xc2, nc0, nc1, nc2)
+        db = dot3(X[b, 0] - xc0, X[b, 1] - xc1, X[b, 2] - xc2, nc0, nc1, nc2)
         if da == db or da * db > 0:
             continue
         tt = da / (da - db)
         p0 = X[a, 0] + tt * (X[b, 0] - X[a, 0]) - xc0
         p1 = X[a, 1] + tt * (X[b, 1] - X[a, 1]) - xc1
         p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - xc2
-        along = p0 * tc0 + p1 * tc1 + p2 * tc2
+        along = dot3(p0, p1, p2, tc0, tc1, tc2)
         side = 0 if along > 0 else 1
-        dist = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        dist = norm3(p0, p1, p2)
         if dist < sd[side]:
             sd[side] = dist
             sa[side] = a

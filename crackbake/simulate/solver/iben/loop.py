@@ -9,7 +9,6 @@ segments and cast their shadow, :func:`update_ring`, :func:`end_near_tips`,
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from crackbake.simulate.solver.iben.constants import GROWTH_REF_STEPS
@@ -23,8 +22,12 @@ from crackbake.simulate.solver.iben.cut import (
     open_node,
     split_tips,
 )
+from crackbake.simulate.solver.iben.element import face_update
+from crackbake.simulate.solver.iben.heap import heap_pop
 from crackbake.simulate.solver.iben.relax import region, relax
 from crackbake.simulate.solver.iben.rules import bridge, footprint_fails, near_other, smooth_dir
+from crackbake.simulate.solver.iben.separation import node_update
+from crackbake.simulate.solver.iben.shadow import shadow_add
 from crackbake.simulate.solver.iben.state import (
     ABORTED,
     BRIDGED,
@@ -49,23 +52,22 @@ from crackbake.simulate.solver.iben.state import (
     STAMP,
     STEP,
     TIPS_NEAR,
+    WIDEN,
 )
 from crackbake.simulate.solver.iben.update import key, push, rebuild_heap, update_state
-from crackbake.simulate.solver.topology import (
-    face_update,
-    heap_pop,
-    node_update,
-    on_boundary,
-    shadow_add,
-)
+from crackbake.simulate.solver.iben.vec import norm3
+from crackbake.simulate.solver.topology import on_boundary
+
+_WIDEN = 2  # crack_event: the table needs widening
 
 
 @njit(cache=True)
 def run(s, p, w, chunk):
     """Advance the crack loop on state ``s`` by at most ``chunk`` steps.
 
-    Returns ``MORE`` (chunk done), ``DONE`` (finished) or ``FULL`` (the state arrays need more
-    room: grow them and call again).
+    Returns ``MORE`` (chunk done), ``DONE`` (finished), ``FULL`` (the state arrays need more
+    room: grow them and call again) or ``WIDEN`` (the node -> face table is too narrow for
+    the next event: widen it and call again).
     """
     cnt = s.cnt
     done = 0
@@ -87,8 +89,11 @@ def run(s, p, w, chunk):
             done += 1
             continue
         c = pick(s, p, w)
-        if c >= 0 and crack_event(s, p, w, c):
-            done += 1
+        if c >= 0:
+            event = crack_event(s, p, w, c)
+            if event == _WIDEN:
+                return WIDEN
+            done += event
 
 
 @njit(cache=True, inline="always")
@@ -194,13 +199,14 @@ def pick(s, p, w):
 
 @njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def crack_event(s, p, w, c):
-    """Cut node ``c`` and update everything around it; returns whether a crack event happened
-    (otherwise ``c`` is refused, or marked dead when it cannot be cut)."""
+    """Cut node ``c`` and update everything around it; returns 1 when a crack event happened,
+    0 when ``c`` is refused (or marked dead when it cannot be cut), ``_WIDEN`` when the node
+    -> face table has no room for the event's splits (``c`` is queued again, unchanged)."""
     cnt = s.cnt
     nucleate = s.crack_of[c] < 0
     if not crack_plane(s, w, c):
         s.dead[c] = True
-        return False
+        return 0
     if nucleate and p.near_rad > 0:
         # No new crack right beside an existing one (permanently: cracks never heal), nor
         # where the near-crack rule would end both its tips at once; such starts only
@@ -212,23 +218,26 @@ def crack_event(s, p, w, c):
             cnt[NUC_NEAR] += 1
             if near == 1:
                 s.nonuc[c] = True
-            return False
+            return 0
     sig_n = normal_stress(s, w, c)
     crossings(s, w, c)
     choose_tips(s, p, w, c)
     drop_back_cuts(s, p, w, c)
     nt = (w.tip[0] >= 0) + (w.tip[1] >= 0)
     interior = not on_boundary(s.F, s.NF, s.NFc, c)
-    if not (nt >= (2 if interior else 1) and has_room(s, w, c)):
+    if nt < (2 if interior else 1):
         s.dead[c] = True
         cnt[ABORTED] += 1
-        return False
+        return 0
+    if not has_room(s, w, c):
+        push(s, c, p.tip_first)
+        return _WIDEN
     split_tips(s, w)
     nsplit, ncen = open_node(s, w, c)
     if nsplit == 0:
         s.dead[c] = True
         cnt[ABORTED] += 1
-        return False
+        return 0
     cnt[STAMP] += 1
     stamp = cnt[STAMP]
     cid, excess = record(s, p, w, c, nucleate, interior, sig_n)
@@ -251,7 +260,7 @@ def crack_event(s, p, w, c):
     if cnt[FIRST_CRACK] < 0:
         cnt[FIRST_CRACK] = cnt[GROWTH_STEPS]
     cnt[IDLE] = 0
-    return True
+    return 1
 
 
 @njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
@@ -303,7 +312,7 @@ def record(s, p, w, c, nucleate, interior, sig_n):
         d0 = X[t, 0] - xc0
         d1 = X[t, 1] - xc1
         d2 = X[t, 2] - xc2
-        seglen = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        seglen = norm3(d0, d1, d2)
         w.segl[side] = seglen
         s.clen[cid] += seglen
         if s.G.shape[0] >= 2 and sig_n > 0.0:

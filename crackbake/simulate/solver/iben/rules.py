@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from crackbake.simulate.solver.iben.vec import cross3, dot3, norm3
+
 
 @njit(cache=True, inline="always")
 def next_stamp(w):
@@ -28,7 +30,7 @@ def _enqueue_near(s, w, n, x0, x1, x2, r2, vstamp, tail):
             e0 = X[y, 0] - x0
             e1 = X[y, 1] - x1
             e2 = X[y, 2] - x2
-            if e0 * e0 + e1 * e1 + e2 * e2 <= r2:
+            if dot3(e0, e1, e2, e0, e1, e2) <= r2:
                 queue[tail] = y
                 tail += 1
     return tail
@@ -69,7 +71,7 @@ def bridge(s, w, t, cid, rad, coscone, own_len):
     to_boundary = own_len >= rad
     p = pid[t]
     d0, d1, d2 = pdir[p, 0], pdir[p, 1], pdir[p, 2]
-    ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    ld = norm3(d0, d1, d2)
     if ld == 0.0 or rad <= 0.0:
         return False
     x0, x1, x2 = X[t, 0], X[t, 1], X[t, 2]
@@ -81,8 +83,8 @@ def bridge(s, w, t, cid, rad, coscone, own_len):
             e0 = X[n, 0] - x0
             e1 = X[n, 1] - x1
             e2 = X[n, 2] - x2
-            le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-            if 0.0 < le < bd and (e0 * d0 + e1 * d1 + e2 * d2) >= coscone * le * ld:
+            le = norm3(e0, e1, e2)
+            if 0.0 < le < bd and dot3(e0, e1, e2, d0, d1, d2) >= coscone * le * ld:
                 best = n
                 bd = le
     if best < 0:
@@ -97,10 +99,8 @@ def bridge(s, w, t, cid, rad, coscone, own_len):
     e1 = X[best, 1] - x1
     e2 = X[best, 2] - x2
     # Cut normal: in the tangent plane, perpendicular to the way to the target.
-    c0 = vn1 * e2 - vn2 * e1
-    c1 = vn2 * e0 - vn0 * e2
-    c2 = vn0 * e1 - vn1 * e0
-    lc = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    c0, c1, c2 = cross3(vn0, vn1, vn2, e0, e1, e2)
+    lc = norm3(c0, c1, c2)
     if lc == 0.0:
         return False
     s.vec[t, 0], s.vec[t, 1], s.vec[t, 2] = c0 / lc, c1 / lc, c2 / lc
@@ -118,7 +118,7 @@ def near_other(s, w, t, cid, d0, d1, d2, rad, cospar, rad_any):
     """
     X, pid, pcid, pdir, vst, queue = s.X, s.pid, s.pcid, s.pdir, w.vst, w.queue
     vstamp = next_stamp(w)
-    ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    ld = norm3(d0, d1, d2)
     r2 = max(rad, rad_any) ** 2
     ra2 = rad_any * rad_any
     x0, x1, x2 = X[t, 0], X[t, 1], X[t, 2]
@@ -136,11 +136,11 @@ def near_other(s, w, t, cid, d0, d1, d2, rad, cospar, rad_any):
             e0 = X[n, 0] - x0
             e1 = X[n, 1] - x1
             e2 = X[n, 2] - x2
-            if e0 * e0 + e1 * e1 + e2 * e2 <= ra2:
+            if dot3(e0, e1, e2, e0, e1, e2) <= ra2:
                 return 1
             u0, u1, u2 = pdir[p, 0], pdir[p, 1], pdir[p, 2]
-            lu = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
-            if lu > 0.0 and ld > 0.0 and abs(u0 * d0 + u1 * d1 + u2 * d2) >= cospar * lu * ld:
+            lu = norm3(u0, u1, u2)
+            if lu > 0.0 and ld > 0.0 and abs(dot3(u0, u1, u2, d0, d1, d2)) >= cospar * lu * ld:
                 if rad_any == 0.0:
                     return 2
                 found = 2
@@ -156,17 +156,17 @@ def smooth_dir(pc, pt, d0, d1, d2, length, pdir):
     A world-scale memory: a single segment's direction zig-zags across the sim triangles, and
     the finer the mesh the more it does, so tests on it would depend on the resolution.
     """
-    ld = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    ld = norm3(d0, d1, d2)
     if ld == 0.0:
         return
     u0, u1, u2 = pdir[pc, 0], pdir[pc, 1], pdir[pc, 2]
     w = np.exp(-ld / length) if length > 0.0 else 0.0
-    if u0 * d0 + u1 * d1 + u2 * d2 < 0.0:
+    if dot3(u0, u1, u2, d0, d1, d2) < 0.0:
         w = -w
     e0 = w * u0 + (1.0 - abs(w)) * d0 / ld
     e1 = w * u1 + (1.0 - abs(w)) * d1 / ld
     e2 = w * u2 + (1.0 - abs(w)) * d2 / ld
-    le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    le = norm3(e0, e1, e2)
     if le > 0.0:
         pdir[pt, 0], pdir[pt, 1], pdir[pt, 2] = e0 / le, e1 / le, e2 / le
 

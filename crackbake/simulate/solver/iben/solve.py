@@ -43,10 +43,12 @@ from crackbake.simulate.solver.iben.state import (
     SEGS,
     STEP,
     TIPS_NEAR,
+    WIDEN,
     LoopParams,
     State,
     grow,
     grown,
+    widen,
     work,
 )
 from crackbake.simulate.solver.iben.update import incidence, rebuild_heap, update_all
@@ -226,8 +228,8 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
         t_call = time.perf_counter()
         code = run(s, p, w, chunk)
         now = time.perf_counter()
-        if code == FULL:
-            s = grow(s, has_growth)
+        if code == FULL or code == WIDEN:
+            s = grow(s, has_growth) if code == FULL else widen(s, C.EXTRA_DEGREE)
             w = work(s)
             continue
         if now - t_call < 0.05:

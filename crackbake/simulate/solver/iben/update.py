@@ -6,8 +6,10 @@ import numpy as np
 from numba import njit, prange
 
 from crackbake.simulate.solver.iben.constants import TIP_PRIORITY, UPDATE_CHUNK
+from crackbake.simulate.solver.iben.element import face_update
+from crackbake.simulate.solver.iben.heap import heap_push
+from crackbake.simulate.solver.iben.separation import node_update
 from crackbake.simulate.solver.iben.state import HEAP, NODES
-from crackbake.simulate.solver.topology import face_update, heap_push, node_update
 
 
 @njit(cache=True)
