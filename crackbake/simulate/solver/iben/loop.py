@@ -103,8 +103,13 @@ def _node_update(s, w, p, n, raw):
 
 
 @njit(cache=True, inline="always")
-def _face_update(s, w, f):
-    face_update(f, s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr, s.G, s.gp, w.fr, w.r6)
+def _update_faces(s, w, faces, count):
+    """Recompute ``faces[:count]`` (the state's fields are read once: each read of a field
+    costs a reference count in the loop)."""
+    X, F, S, area, nrm, grad, pr, G, gp, fr, r6 = (s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr,
+                                                   s.G, s.gp, w.fr, w.r6)
+    for i in range(count):
+        face_update(faces[i], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
 
 
 @njit(cache=True, inline="always")
@@ -176,8 +181,7 @@ def pick(s, p, w):
         # The crack budget is spent (only existing cracks may grow), or c lies beside one.
         return -1
     if s.G.shape[0] >= 2 and s.nevl[c] != cnt[DEPOSITS]:
-        for j in range(s.NFc[c]):
-            _face_update(s, w, s.NF[c, j])
+        _update_faces(s, w, s.NF[c], s.NFc[c])
         _node_update(s, w, p, c, not nucleate)
         s.nevl[c] = cnt[DEPOSITS]
         cnt[REFRESHED] += 1
@@ -186,7 +190,7 @@ def pick(s, p, w):
         if not s.val[c] > s.taun[c]:
             s.nver[c] += 1
             return -1
-        if cnt[HEAP] > 0 and key(s, c, p.tip_first) < s.hk[0]:
+        if cnt[HEAP] > 0 and key(s.val, s.taun, s.crack_of, c, p.tip_first) < s.hk[0]:
             push(s, c, p.tip_first)
             return -1
     if nucleate and p.nuc_rad > 0:
@@ -248,12 +252,10 @@ def crack_event(s, p, w, c):
     nrf, nrn = region(s, w, nrf, stamp, p.rings)
     if p.nrelax > 0 and p.rate > 0:
         relax(s, w, nrf, nrn, stamp, p.nrelax, p.rate)
-        for i in range(nrf):
-            _face_update(s, w, w.regf[i])
+        _update_faces(s, w, w.regf, nrf)
     elif s.G.shape[0] >= 2:
         # The new shadow reaches the whole region: refresh its faces.
-        for i in range(nrf):
-            _face_update(s, w, w.regf[i])
+        _update_faces(s, w, w.regf, nrf)
     update_region(s, p, w, nrn)
     cnt[STEP] += 1
     cnt[EVENTS] += 1
@@ -329,19 +331,19 @@ def record(s, p, w, c, nucleate, interior, sig_n):
 def update_ring(s, w, ncen, nsplit, stamp):
     """Stamp and recompute the faces around the event's centres (``w.regf``; returns their
     count); the split nodes start without residual."""
+    rho, NF, NFc, fst, centers, regf = s.rho, s.NF, s.NFc, s.fst, w.centers, w.regf
     nrf = 0
     for q in range(ncen):
-        n = w.centers[q]
+        n = centers[q]
         if q <= nsplit:
-            s.rho[n] = 0.0
-        for j in range(s.NFc[n]):
-            f = s.NF[n, j]
-            if s.fst[f] != stamp:
-                s.fst[f] = stamp
-                w.regf[nrf] = f
+            rho[n] = 0.0
+        for j in range(NFc[n]):
+            f = NF[n, j]
+            if fst[f] != stamp:
+                fst[f] = stamp
+                regf[nrf] = f
                 nrf += 1
-    for i in range(nrf):
-        _face_update(s, w, w.regf[i])
+    _update_faces(s, w, w.regf, nrf)
     return nrf
 
 
@@ -387,25 +389,31 @@ def push_residual(s, p, w, cid, excess):
 def update_region(s, p, w, nrn):
     """Recompute the region's nodes, apply the tip rules to this event's tips (ligament
     failure, near-crack end) and re-queue the nodes."""
-    tip, near_end = w.tip, w.near_end
+    X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec = (s.X, s.F, s.S, s.NF, s.NFc, s.area,
+                                                            s.nrm, s.grad, s.pr, s.rho, s.val,
+                                                            s.vec)
+    crack_of, taun, nevl, G, gp, tipn, cnt = s.crack_of, s.taun, s.nevl, s.G, s.gp, s.tipn, s.cnt
+    sc, acc, ev, regn, tip, near_end = w.sc, w.acc, w.ev, w.regn, w.tip, w.near_end
+    grain, seed = p.grain, p.seed
     for i in range(nrn):
-        n = w.regn[i]
-        _node_update(s, w, p, n, s.crack_of[n] >= 0)
-        s.nevl[n] = s.cnt[DEPOSITS]
+        n = regn[i]
+        node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of[n] >= 0,
+                    grain, seed, sc, acc, ev, G, gp, tipn)
+        nevl[n] = cnt[DEPOSITS]
         # Only this event's tips: an older arrested tip was looked at when it stopped, and
         # looking again at every nearby event would cost a search per event.
         mine = n == tip[0] or n == tip[1]
         ended = (n == tip[0] and near_end[0]) or (n == tip[1] and near_end[1])
-        if (mine and s.crack_of[n] >= 0 and (ended or not s.val[n] > s.taun[n])
-                and p.lig_rad > 0):
+        if mine and crack_of[n] >= 0 and (ended or not val[n] > taun[n]) and p.lig_rad > 0:
             if _bridge(s, p, w, n):
                 ended = False
         if ended:
             # The near-crack rule ends this tip like one that met a crack.
-            s.crack_of[n] = -1
+            crack_of[n] = -1
             for a in range(3):
                 for b in range(3):
-                    s.rho[n, a, b] = 0.0
-            _node_update(s, w, p, n, False)
-            s.cnt[TIPS_NEAR] += 1
+                    rho[n, a, b] = 0.0
+            node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, False, grain,
+                        seed, sc, acc, ev, G, gp, tipn)
+            cnt[TIPS_NEAR] += 1
         push(s, n, p.tip_first)

@@ -50,11 +50,12 @@ def incidence(nf, F, NF, NFc):
             NFc[n] += 1
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
-def key(s, n, tip_first):
-    """Heap key: v+/tau, plus TIP_PRIORITY for free crack tips when ``tip_first``."""
-    k = s.val[n] / s.taun[n]
-    if tip_first and s.crack_of[n] >= 0:
+@njit(cache=True)
+def key(val, taun, crack_of, n, tip_first):
+    """Heap key of node ``n``: v+/tau, plus TIP_PRIORITY for free crack tips when
+    ``tip_first``."""
+    k = val[n] / taun[n]
+    if tip_first and crack_of[n] >= 0:
         k += TIP_PRIORITY
     return k
 
@@ -62,18 +63,22 @@ def key(s, n, tip_first):
 @njit(cache=True)
 def rebuild_heap(s, tip_first):
     """Heap of every live node that fails now."""
-    s.cnt[HEAP] = 0
-    for n in range(s.cnt[NODES]):
-        if not s.dead[n] and s.taun[n] > 0 and s.val[n] > s.taun[n]:
-            heap_push(s.hk, s.hnode, s.hv, s.cnt, key(s, n, tip_first), n, s.nver[n])
+    val, taun, crack_of, dead, nver, cnt = s.val, s.taun, s.crack_of, s.dead, s.nver, s.cnt
+    cnt[HEAP] = 0
+    for n in range(cnt[NODES]):
+        if not dead[n] and taun[n] > 0 and val[n] > taun[n]:
+            heap_push(s.hk, s.hnode, s.hv, cnt, key(val, taun, crack_of, n, tip_first), n,
+                      nver[n])
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def push(s, n, tip_first):
     """Invalidate node ``n``'s heap entries and push it again if it fails."""
-    s.nver[n] += 1
-    if not s.dead[n] and s.taun[n] > 0 and s.val[n] > s.taun[n]:
-        if not heap_push(s.hk, s.hnode, s.hv, s.cnt, key(s, n, tip_first), n, s.nver[n]):
+    nver, val, taun = s.nver, s.val, s.taun
+    nver[n] += 1
+    if not s.dead[n] and taun[n] > 0 and val[n] > taun[n]:
+        k = key(val, taun, s.crack_of, n, tip_first)
+        if not heap_push(s.hk, s.hnode, s.hv, s.cnt, k, n, nver[n]):
             rebuild_heap(s, tip_first)
 
 
