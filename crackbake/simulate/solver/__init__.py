@@ -4,7 +4,7 @@ Two methods share the FEM kernels of :mod:`crackbake.simulate.solver.fem`:
 
 * ``iben`` (default): Iben & O'Brien 2006/2009 — separation tensors, a max-priority queue, cracks
   cut through triangles (edge splits, node splits), residual pushed to the tips, local
-  quasi-static relaxation.  :mod:`crackbake.simulate.solver.iben`.
+  quasi-static relaxation.  :mod:`crackbake.simulate.solver.iben` (docs/solver.md).
 * ``thesis``: the 2023 NCCA MSc variant — tensors computed once, each crack grown to its end along
   mesh edges, scalar relaxation between cracks.  :mod:`crackbake.simulate.solver.thesis`.
 

@@ -48,7 +48,7 @@ NUC_FOOTPRINT_REL = 0.0075
 (x bounding-box diagonal) exceeds their mean toughness (tips keep the per-node test)."""
 GRAIN = 0.05
 """Weight of a node's seeded grain direction, relative to v+, in choosing the crack normal; it
-only decides where the separation is nearly isotropic (see topology.node_update)."""
+only decides where the separation is nearly isotropic (see :func:`.separation.node_update`)."""
 GROWTH_REF_STEPS = 20
 """With no initial stress, toughness 1 is the separation of this many growth steps."""
 EXTRA_DEGREE = 24

@@ -1,4 +1,10 @@
-"""Per-face FEM of the iben loop: geometry and the principal split of the effective stress."""
+"""Per-face FEM of the iben loop: geometry and the principal split of the effective stress.
+
+The formulas are those of :mod:`crackbake.simulate.solver.fem` (tested against it in
+tests/test_iben.py), written per element for use inside the loop: corner forces
+``f_i = -A S± g_i`` are rebuilt from the stored principal split ``pr`` whenever a node needs
+them, which is cheaper in memory than storing them and costs only a few flops.
+"""
 
 from __future__ import annotations
 
