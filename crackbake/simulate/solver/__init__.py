@@ -20,7 +20,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError
 
-METHODS = ("iben", "thesis")
+__all__ = ["CrackPath", "SolverParams", "SolverResult"]
 
 
 @dataclass(frozen=True)
