@@ -160,3 +160,38 @@ def gl_ctx(gl_session):
     assert gl_session.error == "GL_NO_ERROR"
     yield gl_session
     assert gl_session.error == "GL_NO_ERROR"
+
+
+# ------------------------------------------------------------------ solver fields (test_iben,
+# test_resolution)
+
+
+def stress_of(stress: np.ndarray, growth=None) -> SimpleNamespace:
+    """Duck-typed stress field: per-face ``stress`` (M, 3, 3) and optional ``growth``."""
+    return SimpleNamespace(stress=stress, growth=growth, weight=np.ones(len(stress)), impacts=[])
+
+
+def uniform_stress(sim, s: float = 1.0) -> SimpleNamespace:
+    """Isotropic in-plane tension ``s`` (xx = yy) on every face of a z = 0 plate."""
+    st = np.zeros((len(sim.faces), 3, 3))
+    st[:, 0, 0] = st[:, 1, 1] = s
+    return stress_of(st)
+
+
+def impact_stress(sim, centre=(0.5, 0.5, 0.0), radius: float = 0.25) -> SimpleNamespace:
+    """Glass impact: ``w (r r^T + 1.25 t t^T)``, ``w = 2 cos(d / radius)`` within
+    ``d <= pi radius / 2`` of ``centre`` (r radial, t hoop)."""
+    c = sim.vertices[sim.faces].mean(1) - np.asarray(centre)
+    d = np.linalg.norm(c, axis=1)
+    w = np.where(d <= np.pi * radius / 2, 2 * np.cos(d / radius), 0.0)
+    r = c / np.maximum(d, 1e-12)[:, None]
+    t = np.cross([0.0, 0.0, 1.0], r)
+    return stress_of(w[:, None, None] * (np.einsum("ea,eb->eab", r, r)
+                                         + 1.25 * np.einsum("ea,eb->eab", t, t)))
+
+
+def largest_eigen(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Test oracle: largest eigenvalue (N,) and its unit eigenvector (N, 3) of symmetric 3x3
+    tensors, by numpy."""
+    w, v = np.linalg.eigh(tensors)
+    return w[:, -1], v[:, :, -1]

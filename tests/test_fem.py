@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import largest_eigen
 
 from crackbake.simulate.solver.fem import (
     face_frames,
     face_geometry,
-    largest_eigen,
     node_forces,
     outer_over_norm,
-    relaxation_update,
     separation_tensors,
     split_tension,
 )
@@ -105,14 +104,3 @@ def test_outer_over_norm():
     a = np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 0.0]])
     m = outer_over_norm(a)
     assert np.allclose(m[0], np.outer(a[0], a[0]) / 5.0) and np.allclose(m[1], 0)
-
-
-def test_relaxation_of_rigid_motion_is_zero_and_stretch_is_exact():
-    v, f = grid(3, 1.0, z_rot=0.2)
-    area, normal, grad = face_geometry(v, f)
-    assert np.allclose(relaxation_update(f, normal, grad, np.tile([0.1, -0.2, 0.3], (len(v), 1))),
-                       0)
-    # A displacement field d(x) = eps * x gives strain eps * P (in plane), exactly.
-    eps = 0.01
-    ds = relaxation_update(f, normal, grad, eps * v)
-    assert np.allclose(ds, eps * in_plane_identity(normal))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_iben import impact, plate, uniform
+from conftest import impact_stress, sim_plate, uniform_stress
 
 from crackbake.io.mesh import load_mesh
 from crackbake.params import Impact, RunParams
@@ -34,9 +34,9 @@ PARAMS = {
                            max_steps=200_000),
 }
 CELLS = {"100k": 224, "400k": 447, "1M": 707}  # 2 n^2 faces on an n x n grid
-# The jittered unit plates and fields of test_iben: a glass impact (radius 0.25, hoop 1.25) and
+# Jittered unit plates (conftest.sim_plate) under a glass impact (radius 0.25, hoop 1.25) and
 # uniform shrinkage.
-FIELDS = {"glass": impact, "shrink": uniform}
+FIELDS = {"glass": impact_stress, "shrink": uniform_stress}
 
 
 def _length(res) -> float:
@@ -46,7 +46,7 @@ def _length(res) -> float:
 
 def _tangential_share(res, lo: float = 0.35, hi: float = 0.65) -> float:
     """Share of the crack length between ``lo`` and ``hi`` x the impact's reach (pi r / 2 of
-    test_iben's impact at the plate centre) that runs within 60 degrees of the hoop direction:
+    conftest.impact_stress at the plate centre) that runs within 60 degrees of the hoop direction:
     the concentric links.  Inside ``lo`` the cracks are radial; beyond ``hi`` the radial
     stress left between radial cracks is below the toughness, so links cannot form there."""
     reach = np.pi * 0.25 / 2
@@ -70,7 +70,7 @@ def plate_runs():
     seeds 0 and 1."""
     out = {}
     for size, n in CELLS.items():
-        sims = [plate(n, seed=seed + 1) for seed in (0, 1)]
+        sims = [sim_plate(n, seed=seed + 1) for seed in (0, 1)]
         for name in PARAMS:
             runs = [solve_iben(sim, FIELDS[name](sim),
                                dataclasses.replace(PARAMS[name], seed=seed))
@@ -87,9 +87,9 @@ def plate_runs():
 def test_plate_resolution_independence(plate_runs, name, pair):
     """100k -> 400k halves the edge length; 400k -> 1M shortens it 1.6x."""
     (n0, l0, _), (n1, l1, _) = plate_runs[name, pair[0]], plate_runs[name, pair[1]]
-    print(name, pair, n0, n1, l0, l1)
-    assert abs(n1 / n0 - 1) <= RES_TOLERANCE, (n0, n1)
-    assert abs(l1 / l0 - 1) <= RES_TOLERANCE, (l0, l1)
+    figures = f"{name} {pair}: cracks {n0:.1f} -> {n1:.1f}, length {l0:.2f} -> {l1:.2f}"
+    assert abs(n1 / n0 - 1) <= RES_TOLERANCE, figures
+    assert abs(l1 / l0 - 1) <= RES_TOLERANCE, figures
 
 
 @pytest.mark.slow
@@ -102,8 +102,7 @@ def test_plate_glass_concentric_links(plate_runs, size):
     read the raw stress (they turned back into the raw hoop direction).
     """
     share = plate_runs["glass", size][2]
-    print(size, share)
-    assert share > 0.13
+    assert share > 0.13, f"tangential share {share:.3f} at {size}"
 
 
 def _spot(preset: str, faces: int) -> tuple[int, float]:
@@ -130,6 +129,6 @@ def test_spot_resolution_independence(preset):
     """
     n0, l0 = _spot(preset, 100_000)
     n1, l1 = _spot(preset, 400_000)
-    print(preset, n0, n1, l0, l1)
-    assert abs(l1 / l0 - 1) <= RES_TOLERANCE
-    assert abs(n1 / n0 - 1) <= RES_TOLERANCE
+    figures = f"{preset}: cracks {n0} -> {n1}, length {l0:.2f} -> {l1:.2f}"
+    assert abs(l1 / l0 - 1) <= RES_TOLERANCE, figures
+    assert abs(n1 / n0 - 1) <= RES_TOLERANCE, figures

@@ -4,7 +4,7 @@ Two methods share the FEM kernels of :mod:`crackbake.simulate.solver.fem`:
 
 * ``iben`` (default): Iben & O'Brien 2006/2009 — separation tensors, a max-priority queue, cracks
   cut through triangles (edge splits, node splits), residual pushed to the tips, local
-  quasi-static relaxation.  :mod:`crackbake.simulate.solver.iben`.
+  quasi-static relaxation.  :mod:`crackbake.simulate.solver.iben` (docs/solver.md).
 * ``thesis``: the 2023 NCCA MSc variant — tensors computed once, each crack grown to its end along
   mesh edges, scalar relaxation between cracks.  :mod:`crackbake.simulate.solver.thesis`.
 
@@ -18,7 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-METHODS = ("iben", "thesis")
+from crackbake.errors import CrackbakeError
+
+__all__ = ["CrackPath", "SolverParams", "SolverResult"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +69,31 @@ class SolverParams:
     crack_width: float | None = None
     depth_ratio: float = 0.5
     seed: int = 0
+
+    def validate(self) -> None:
+        """Raise :class:`crackbake.errors.CrackbakeError` naming the first value out of range.
+
+        The one check of these parameters; the solvers call it before they start.
+        """
+        if not self.toughness > 0:
+            raise CrackbakeError(f"toughness is {self.toughness}; it must be > 0 (try 1.0)")
+        if not 0 <= self.tip_factor <= 1:
+            raise CrackbakeError(
+                f"tip factor is {self.tip_factor}; it must be in [0, 1] (try 0.75)")
+        if self.method == "thesis" and not 0.0 <= self.relax_share <= 1.0:
+            raise CrackbakeError(f"relax_share must be in 0..1 (got {self.relax_share})")
+        if self.relax_steps < 0 or not self.relax_rate >= 0:
+            raise CrackbakeError("relax steps and relax rate must be >= 0 (try 3 and 0.1)")
+        if self.max_cracks < 0 or self.max_steps < 0:
+            raise CrackbakeError("max cracks and max steps must be >= 0")
+        if self.max_crack_length is not None and not self.max_crack_length > 0:
+            raise CrackbakeError(
+                f"max crack length is {self.max_crack_length}; it must be > 0 mesh units"
+            )
+        if self.crack_width is not None and not self.crack_width > 0:
+            raise CrackbakeError(f"crack width is {self.crack_width}; it must be > 0 mesh units")
+        if not self.depth_ratio >= 0:
+            raise CrackbakeError(f"depth ratio is {self.depth_ratio}; it must be >= 0")
 
 
 @dataclass(eq=False)

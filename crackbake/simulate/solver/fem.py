@@ -144,33 +144,3 @@ def corner_incidence(faces: np.ndarray, n_nodes: int):
     return csr_matrix(
         (np.ones(len(idx)), (idx, np.arange(len(idx)))), shape=(n_nodes, len(idx))
     )
-
-
-def largest_eigen(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Largest eigenvalue and its unit eigenvector of symmetric 3x3 tensors.
-
-    Returns
-    -------
-    value : (N,) float64
-    vector : (N, 3) float64
-    """
-    w, v = np.linalg.eigh(tensors)
-    return w[:, -1], v[:, :, -1]
-
-
-def relaxation_update(
-    faces: np.ndarray,
-    normal: np.ndarray,
-    grad: np.ndarray,
-    displacement: np.ndarray,
-) -> np.ndarray:
-    """Strain change of each face from virtual node displacements, (M, 3, 3).
-
-    ``dS_e = sym(P_e (sum_i d_i g_ei^T))`` with ``P_e`` the projection onto the face plane: the
-    first-order (small-strain) change that the quasi-static relaxation of Iben & O'Brien adds to
-    the stress (method.md §A8).
-    """
-    d = displacement[faces]  # (M, 3 corners, 3)
-    d = d - np.einsum("eia,ea->ei", d, normal)[..., None] * normal[:, None, :]
-    m = np.einsum("eia,eib->eab", d, grad)
-    return 0.5 * (m + np.swapaxes(m, 1, 2))

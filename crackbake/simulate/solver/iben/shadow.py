@@ -1,0 +1,86 @@
+"""The world-scale stress shadow: a uniform grid of released stress (docs/solver.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def shadow_at(x0, x1, x2, G, gp, out):
+    """Released stress at a point: trilinear interpolation of the cell-centred grid -> out[6]."""
+    for q in range(6):
+        out[q] = 0.0
+    if G.shape[0] < 2:
+        return
+    cs = gp[3]
+    u0 = (x0 - gp[0]) / cs - 0.5
+    u1 = (x1 - gp[1]) / cs - 0.5
+    u2 = (x2 - gp[2]) / cs - 0.5
+    i0 = min(max(int(np.floor(u0)), 0), G.shape[0] - 2)
+    i1 = min(max(int(np.floor(u1)), 0), G.shape[1] - 2)
+    i2 = min(max(int(np.floor(u2)), 0), G.shape[2] - 2)
+    w0 = min(max(u0 - i0, 0.0), 1.0)
+    w1 = min(max(u1 - i1, 0.0), 1.0)
+    w2 = min(max(u2 - i2, 0.0), 1.0)
+    for a in range(2):
+        wa = w0 if a else 1.0 - w0
+        for b in range(2):
+            wb = w1 if b else 1.0 - w1
+            for c in range(2):
+                w = wa * wb * (w2 if c else 1.0 - w2)
+                if w == 0.0:
+                    continue
+                for q in range(6):
+                    out[q] += w * G[i0 + a, i1 + b, i2 + c, q]
+
+
+@njit(cache=True)
+def face_shadow(f, X, F, G, gp, out):
+    """Released stress at the centroid of face f -> out[6] (see :func:`shadow_at`)."""
+    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
+              (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, out)
+
+
+@njit(cache=True)
+def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
+    """Deposit ``amount * n n^T * k(r)`` with a compact kernel around p into the grid.
+
+    ``k(r) = (1 - r²/R²)² / (16 R / 15)`` for ``r < R`` (R = ``gp[4]``): its integral across a
+    straight line is 1, so a long crack whose segments each deposit ``length x normal stress``
+    releases exactly its normal stress on the crack line, fading to nothing at distance R.
+    """
+    if G.shape[0] < 2:
+        return
+    cs = gp[3]
+    rk = gp[4]
+    norm = amount / (16.0 * rk / 15.0)
+    lo0 = max(int(np.floor((p0 - rk - gp[0]) / cs)), 0)
+    hi0 = min(int(np.floor((p0 + rk - gp[0]) / cs)), G.shape[0] - 1)
+    lo1 = max(int(np.floor((p1 - rk - gp[1]) / cs)), 0)
+    hi1 = min(int(np.floor((p1 + rk - gp[1]) / cs)), G.shape[1] - 1)
+    lo2 = max(int(np.floor((p2 - rk - gp[2]) / cs)), 0)
+    hi2 = min(int(np.floor((p2 + rk - gp[2]) / cs)), G.shape[2] - 1)
+    t00 = n0 * n0
+    t01 = n0 * n1
+    t02 = n0 * n2
+    t11 = n1 * n1
+    t12 = n1 * n2
+    t22 = n2 * n2
+    for i in range(lo0, hi0 + 1):
+        d0 = gp[0] + (i + 0.5) * cs - p0
+        for j in range(lo1, hi1 + 1):
+            d1 = gp[1] + (j + 0.5) * cs - p1
+            for k in range(lo2, hi2 + 1):
+                d2 = gp[2] + (k + 0.5) * cs - p2
+                r2 = (d0 * d0 + d1 * d1 + d2 * d2) / (rk * rk)
+                if r2 >= 1.0:
+                    continue
+                w = norm * (1.0 - r2) * (1.0 - r2)
+                G[i, j, k, 0] += w * t00
+                G[i, j, k, 1] += w * t01
+                G[i, j, k, 2] += w * t02
+                G[i, j, k, 3] += w * t11
+                G[i, j, k, 4] += w * t12
+                G[i, j, k, 5] += w * t22

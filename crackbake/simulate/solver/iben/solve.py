@@ -1,0 +1,291 @@
+"""The iben driver: set up the state, run the compiled loop in chunks, collect the result."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from types import SimpleNamespace
+
+import numpy as np
+
+from crackbake.errors import CrackbakeError
+from crackbake.geometry import edges
+from crackbake.simulate.solver import SolverParams, SolverResult
+from crackbake.simulate.solver.iben import constants as C
+from crackbake.simulate.solver.iben.calibration import (
+    flaw,
+    footprint_factor,
+    percentile_ref,
+    shadow_grid,
+    surface_wide,
+)
+from crackbake.simulate.solver.iben.chain import chain
+from crackbake.simulate.solver.iben.loop import run
+from crackbake.simulate.solver.iben.state import (
+    ABORTED,
+    BRIDGED,
+    CRACKS,
+    DONE,
+    EVENTS,
+    FACES,
+    FIRST_CRACK,
+    FULL,
+    GROWTH_STEPS,
+    MORE,
+    N_COUNTERS,
+    NODES,
+    NUC_EDGE,
+    NUC_NEAR,
+    NUC_VETOED,
+    REFRESHED,
+    SATURATED,
+    SEGS,
+    STEP,
+    TIPS_NEAR,
+    WIDEN,
+    LoopParams,
+    State,
+    grow,
+    grown,
+    widen,
+    work,
+)
+from crackbake.simulate.solver.iben.update import incidence, rebuild_heap, update_all
+
+logger = logging.getLogger(__name__)
+
+
+def solve_iben(sim, field, params: SolverParams, *,
+               progress: Callable[[str], None] | None = None) -> SolverResult:
+    """Grow cracks with the Iben & O'Brien hybrid method (docs/solver.md).
+
+    Parameters
+    ----------
+    sim : SimMesh-like
+        ``vertices (N, 3)`` float64, ``faces (M, 3)`` int64, ``asset_face (M,)`` int64; a
+        triangulated 2-manifold surface, possibly with boundary.
+    field : StressField-like
+        ``stress (M, 3, 3)`` world in-plane stress per face (tension positive); ``growth``
+        ``(M, 3, 3)`` or None, added per quasi-static growth step.
+    params : SolverParams
+        ``max_cracks`` bounds the distinct cracks started, ``max_steps`` the solver steps.
+    progress : ignored
+        Deprecated: progress goes to this module's logger (INFO, at most every
+        ``PROGRESS_SECONDS``).  Accepted until the pipeline stops passing it.
+
+    Returns
+    -------
+    SolverResult
+        ``stats`` holds ``tau`` (separation per unit edge length at toughness 1 x toughness),
+        ``events``, ``cracks`` (distinct cracks started), ``aborted``, ``growth_steps``,
+        ``refreshed`` (lazy heap re-evaluations), ``edge_starts`` (cracks started on a crack
+        or the boundary), ``nucleations_vetoed`` (refused by the footprint test),
+        ``nucleations_near`` (refused beside an existing crack), ``tips_ended_near`` (by the
+        near-crack rule), ``ligaments_broken`` (steps a tip took through a ligament),
+        ``tips_arrested`` (free tips left below the toughness), ``shadow_radius``,
+        ``stopped`` (why the run ended: ``max steps``, ``max cracks``, ``saturated`` or
+        ``at rest``), ``loop_seconds`` (the crack loop alone), ``seconds``; and
+        ``origins``, where and when each crack started and its length.
+    """
+    del progress
+    params.validate()
+    t0 = time.perf_counter()
+    s, mesh = _setup(sim, field, params)
+    cal = _calibrate(s, mesh, params)
+    p = _loop_params(s, mesh, cal, params)
+    t_loop = time.perf_counter()
+    s = _run_chunks(s, p, mesh.has_growth) if cal.tau > 0 else s
+    loop_seconds = time.perf_counter() - t_loop
+    return _result(s, mesh, cal, params, loop_seconds, t0)
+
+
+def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
+    """The initial state: the mesh with room for a few thousand events (grown on demand),
+    faces and nodes evaluated; and the initial mesh's own figures."""
+    X0 = np.ascontiguousarray(sim.vertices, dtype=np.float64)
+    F0 = np.ascontiguousarray(sim.faces, dtype=np.int64)
+    S0 = np.ascontiguousarray(field.stress, dtype=np.float64)
+    n0, m0 = len(X0), len(F0)
+    if m0 == 0 or S0.shape != (m0, 3, 3):
+        raise CrackbakeError(
+            f"stress field has shape {S0.shape} for {m0} simulation faces; rebuild the field"
+        )
+    growth = getattr(field, "growth", None)
+    has_growth = growth is not None and bool(np.any(growth))
+    room = int(min(params.max_steps, C.INITIAL_ROOM)) + 16
+    ncap, mcap, scap = n0 + 10 * room, m0 + 4 * room, 6 * room
+    edge, uses = edges(F0, n0)
+    bnd = np.zeros(n0, bool)
+    bnd[edge[uses == 1].ravel()] = True
+    elen = np.linalg.norm(X0[edge[:, 0]] - X0[edge[:, 1]], axis=1)
+    hsum = np.bincount(edge.ravel(), np.repeat(elen, 2), minlength=n0)
+    hcnt = np.bincount(edge.ravel(), minlength=n0)
+    h_node = hsum / np.maximum(hcnt, 1)
+    width = int(np.bincount(F0.ravel(), minlength=n0).max()) + C.EXTRA_DEGREE
+    G, gp = shadow_grid(X0)
+    clen = np.zeros(min(1024, room))
+    cnt = np.zeros(N_COUNTERS, np.int64)
+    cnt[FIRST_CRACK] = -1
+    cnt[NODES], cnt[FACES] = n0, m0
+    zi = lambda cap: np.zeros(cap, np.int64)  # noqa: E731
+    s = State(
+        X=grown(X0, ncap), F=grown(F0, mcap), S=grown(S0, mcap),
+        AF=grown(np.asarray(sim.asset_face, dtype=np.int64), mcap),
+        GR=(grown(np.asarray(growth, dtype=np.float64), mcap) if has_growth
+            else np.zeros((1, 3, 3))),
+        area=np.zeros(mcap), nrm=np.zeros((mcap, 3)), grad=np.zeros((mcap, 3, 3)),
+        pr=np.zeros((mcap, 8)), fst=zi(mcap), NF=np.zeros((ncap, width), np.int64),
+        NFc=zi(ncap), rho=np.zeros((ncap, 3, 3)), val=np.zeros(ncap), vec=np.zeros((ncap, 3)),
+        taun=np.zeros(ncap), hn=grown(h_node, ncap), pid=np.arange(ncap, dtype=np.int64),
+        onb=grown(bnd, ncap), crack_of=np.full(ncap, -1, np.int64), nver=zi(ncap),
+        dead=np.zeros(ncap, bool), nonuc=np.zeros(ncap, bool), nst=zi(ncap), nevl=zi(ncap),
+        lchk=zi(ncap), tipn=np.zeros((ncap, 3)), segof=np.full(ncap, -1, np.int64),
+        pcid=np.full(ncap, -1, np.int64), pdir=np.zeros((ncap, 3)),
+        hk=np.zeros(ncap + 65536), hnode=zi(ncap + 65536), hv=zi(ncap + 65536),
+        segp=np.zeros((scap, 2), np.int64), seg_alive=np.zeros(scap, bool),
+        seg_info=np.zeros((scap, 3)), clen=clen, corig=np.zeros((len(clen), 5)), G=G, gp=gp,
+        cnt=cnt,
+    )
+    incidence(m0, s.F, s.NF, s.NFc)
+    mesh = SimpleNamespace(X0=X0, F0=F0, S0=S0, n0=n0, m0=m0, bnd=bnd, h_node=h_node,
+                           has_growth=has_growth, seed=params.seed % (1 << 52))
+    _update_all(s, mesh, s.S)
+    if np.any(s.area[:m0] <= 0):
+        raise CrackbakeError("the simulation mesh has zero-area faces; clean the mesh first")
+    return s, mesh
+
+
+def _update_all(s: State, mesh: SimpleNamespace, stress: np.ndarray, nn: int | None = None,
+                nf: int | None = None) -> None:
+    """Recompute the initial (or the first nn / nf) faces and nodes of ``s`` with ``stress``."""
+    update_all(mesh.n0 if nn is None else nn, mesh.m0 if nf is None else nf, s.X, s.F, stress,
+               s.area, s.nrm, s.grad, s.pr, s.NF, s.NFc, s.rho, s.val, s.vec, s.crack_of, s.G,
+               s.gp, C.GRAIN, mesh.seed, s.tipn)
+
+
+def _calibrate(s: State, mesh: SimpleNamespace, params: SolverParams) -> SimpleNamespace:
+    """Toughness per node (relative to the initial field, with flaws and the footprint
+    factor), and whether the field is localized (docs/solver.md, "Resolution independence")."""
+    n0, h_node, bnd = mesh.n0, mesh.h_node, mesh.bnd
+    ref = percentile_ref(s.val[:n0] / np.maximum(h_node, 1e-300), bnd)
+    if ref == 0.0 and mesh.has_growth:
+        # No initial stress: toughness is relative to GROWTH_REF_STEPS steps of growth.
+        # The compiled kernels measure it, so the reference is the separation the loop sees.
+        _update_all(s, mesh, s.GR)
+        ref = C.GROWTH_REF_STEPS * percentile_ref(s.val[:n0] / np.maximum(h_node, 1e-300), bnd)
+        _update_all(s, mesh, s.S)
+    tau = params.toughness * ref
+    norm0 = s.val[:n0] / np.maximum(h_node, 1e-300)
+    if ref == 0.0 and mesh.has_growth:
+        _update_all(s, mesh, s.GR)
+        norm0 = s.val[:n0] / np.maximum(h_node, 1e-300)
+        _update_all(s, mesh, s.S)
+    fac = flaw(params.seed, mesh.X0) * footprint_factor(mesh.X0, norm0, bnd)
+    s.taun[:] = grown(tau * h_node * fac, len(s.taun))
+    # The near-crack rule is for localized fields only (the footprint factor's criterion).
+    return SimpleNamespace(tau=tau, localized=not surface_wide(norm0, bnd))
+
+
+def _loop_params(s: State, mesh: SimpleNamespace, cal: SimpleNamespace,
+                 params: SolverParams) -> LoopParams:
+    X0, F0 = mesh.X0, mesh.F0
+    radius = float(s.gp[4])
+    near_rad = C.NEAR_REL * radius
+    nuc_rad = 0.0 if not cal.localized else C.NUC_FOOTPRINT_REL * float(
+        np.linalg.norm(X0.max(0) - X0.min(0)))
+    # The tip factor's reference step: the edge of an equilateral triangle of a
+    # TIP_REF_FACES-face mesh of this surface (about the default simulation's edge length).
+    total_area = 0.5 * float(np.linalg.norm(
+        np.cross(X0[F0[:, 1]] - X0[F0[:, 0]], X0[F0[:, 2]] - X0[F0[:, 0]]), axis=1).sum())
+    tip_len = (float(np.sqrt(4.0 * total_area / (np.sqrt(3.0) * C.TIP_REF_FACES)))
+               if C.TIP_REF_FACES else 0.0)
+    max_len = np.inf if params.max_crack_length is None else float(params.max_crack_length)
+    return LoopParams(
+        alpha=float(params.tip_factor), rate=float(params.relax_rate),
+        nrelax=int(params.relax_steps), max_len=float(max_len),
+        snap=float(np.radians(C.SNAP_DEG)), snap_b=float(np.radians(C.SNAP_BOUNDARY_DEG)),
+        snap_t=float(C.SNAP_T), rings=int(C.RELAX_RINGS), gain=float(C.SHADOW_GAIN),
+        back=float(np.radians(C.BACK_DEG)), tip_first=bool(C.TIP_FIRST), grain=float(C.GRAIN),
+        seed=int(mesh.seed), near_rad=float(near_rad),
+        near_cos=float(np.cos(np.radians(C.NEAR_PAR_DEG))), nuc_rad=float(nuc_rad),
+        dir_len=float(C.DIR_SMOOTH * near_rad), tip_len=tip_len, tip_near=bool(cal.localized),
+        lig_rad=float(C.LIGAMENT_REL * radius),
+        lig_cos=float(np.cos(np.radians(C.LIGAMENT_CONE_DEG))),
+        nuc_any=float(C.RELAX_RINGS * tip_len), max_cracks=int(params.max_cracks),
+        max_steps=int(params.max_steps),
+    )
+
+
+def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
+    """Run the compiled loop to its end in chunks of about a tenth of a second (so progress
+    stays responsive without a clock inside the compiled loop); grow the state when full."""
+    rebuild_heap(s, bool(C.TIP_FIRST))
+    w = work(s)
+    chunk = 64
+    last_msg = time.perf_counter()
+    while True:
+        t_call = time.perf_counter()
+        code = run(s, p, w, chunk)
+        now = time.perf_counter()
+        if code == FULL or code == WIDEN:
+            s = grow(s, has_growth) if code == FULL else widen(s, C.EXTRA_DEGREE)
+            w = work(s)
+            continue
+        if now - t_call < 0.05:
+            chunk = min(chunk * 2, 1 << 20)
+        elif now - t_call > 0.2:
+            chunk = max(chunk // 2, 16)
+        if now - last_msg >= C.PROGRESS_SECONDS and code == MORE:
+            logger.info("iben: %d crack events, %d cracks, %d/%d steps", s.cnt[EVENTS],
+                        s.cnt[CRACKS], s.cnt[STEP], p.max_steps)
+            last_msg = now
+        if code == DONE:
+            return s
+
+
+def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: SolverParams,
+            loop_seconds: float, t0: float) -> SolverResult:
+    cnt = s.cnt
+    nn, nf, ns = int(cnt[NODES]), int(cnt[FACES]), int(cnt[SEGS])
+    # Bring every face and node up to date with the final shadow (the heap was lazy).
+    _update_all(s, mesh, s.S, nn, nf)
+    steps = int(cnt[STEP])
+    alive = s.seg_alive[:ns]
+    cracks = chain(s.segp[:ns][alive], s.seg_info[:ns][alive], s.X, s.onb, steps, params,
+                   mesh.X0)
+    taun, val = s.taun, s.val
+    sep = np.where(taun[:nn] > 0, val[:nn] / np.where(taun[:nn] > 0, taun[:nn], 1.0), 0.0)
+    pr = s.pr[:nf]
+    # Effective stress (what the cracks left): l1 d1 d1^T + l2 d2 d2^T.
+    s_final = (pr[:, 0, None, None] * np.einsum("ea,eb->eab", pr[:, 2:5], pr[:, 2:5])
+               + pr[:, 1, None, None] * np.einsum("ea,eb->eab", pr[:, 5:8], pr[:, 5:8]))
+    ncrack = int(cnt[CRACKS])
+    return SolverResult(
+        cracks=cracks, vertices=s.X[:nn].copy(), faces=s.F[:nf].copy(),
+        asset_face=s.AF[:nf].copy(), stress_initial=mesh.S0.copy(), stress_final=s_final,
+        separation=sep, steps=steps,
+        origins=np.column_stack([s.corig[:ncrack], s.clen[:ncrack]]),
+        stats={
+            "tau": float(cal.tau),
+            "events": int(cnt[EVENTS]),
+            "cracks": ncrack,
+            "paths": len(cracks),
+            "aborted": int(cnt[ABORTED]),
+            "growth_steps": int(cnt[GROWTH_STEPS]),
+            "stopped": ("max steps" if steps >= params.max_steps
+                        else "saturated" if cnt[SATURATED]
+                        else "max cracks" if cnt[CRACKS] >= params.max_cracks
+                        else "at rest"),
+            "refreshed": int(cnt[REFRESHED]),
+            "edge_starts": int(cnt[NUC_EDGE]),
+            "nucleations_vetoed": int(cnt[NUC_VETOED]),
+            "nucleations_near": int(cnt[NUC_NEAR]),
+            "tips_ended_near": int(cnt[TIPS_NEAR]),
+            "ligaments_broken": int(cnt[BRIDGED]),
+            "tips_arrested": int(np.count_nonzero(s.crack_of[:nn] >= 0)),
+            "shadow_radius": float(s.gp[4]),
+            "loop_seconds": loop_seconds,
+            "seconds": time.perf_counter() - t0,
+        },
+    )
