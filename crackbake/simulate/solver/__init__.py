@@ -80,8 +80,9 @@ class SolverParams:
         if not 0 <= self.tip_factor <= 1:
             raise CrackbakeError(
                 f"tip factor is {self.tip_factor}; it must be in [0, 1] (try 0.75)")
-        if self.method == "thesis" and not 0.0 <= self.relax_share <= 1.0:
-            raise CrackbakeError(f"relax_share must be in 0..1 (got {self.relax_share})")
+        if not 0.0 <= self.relax_share <= 1.0:
+            raise CrackbakeError(
+                f"relax share is {self.relax_share}; it must be in [0, 1] (try 0.05)")
         if self.relax_steps < 0 or not self.relax_rate >= 0:
             raise CrackbakeError("relax steps and relax rate must be >= 0 (try 3 and 0.1)")
         if self.max_cracks < 0 or self.max_steps < 0:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
 from types import SimpleNamespace
 
 import numpy as np
@@ -56,8 +55,7 @@ from crackbake.simulate.solver.iben.update import incidence, rebuild_heap, updat
 logger = logging.getLogger(__name__)
 
 
-def solve_iben(sim, field, params: SolverParams, *,
-               progress: Callable[[str], None] | None = None) -> SolverResult:
+def solve_iben(sim, field, params: SolverParams) -> SolverResult:
     """Grow cracks with the Iben & O'Brien hybrid method (docs/solver.md).
 
     Parameters
@@ -70,9 +68,6 @@ def solve_iben(sim, field, params: SolverParams, *,
         ``(M, 3, 3)`` or None, added per quasi-static growth step.
     params : SolverParams
         ``max_cracks`` bounds the distinct cracks started, ``max_steps`` the solver steps.
-    progress : ignored
-        Deprecated: progress goes to this module's logger (INFO, at most every
-        ``PROGRESS_SECONDS``).  Accepted until the pipeline stops passing it.
 
     Returns
     -------
@@ -87,8 +82,8 @@ def solve_iben(sim, field, params: SolverParams, *,
         ``stopped`` (why the run ended: ``max steps``, ``max cracks``, ``saturated`` or
         ``at rest``), ``loop_seconds`` (the crack loop alone), ``seconds``; and
         ``origins``, where and when each crack started and its length.
+        Progress goes to this module's logger (INFO, at most every ``PROGRESS_SECONDS``).
     """
-    del progress
     params.validate()
     t0 = time.perf_counter()
     s, mesh = _setup(sim, field, params)

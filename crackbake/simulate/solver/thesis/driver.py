@@ -9,7 +9,6 @@ import time as _time
 
 import numpy as np
 
-from crackbake.errors import CrackbakeError
 from crackbake.geometry import vertex_normals
 from crackbake.simulate.solver import CrackPath, SolverParams, SolverResult
 from crackbake.simulate.solver.fem import (
@@ -126,16 +125,6 @@ def _taper(
     return width * np.clip(scale, 0.0, 1.0)
 
 
-def _check(params: SolverParams) -> None:
-    # toughness and tip_factor repeat the iben solver's checks (in other words); relax_share is
-    # checked only here.  All three can go once SolverParams validates itself.
-    if not params.toughness > 0:
-        raise CrackbakeError(f"toughness must be > 0 (got {params.toughness}); try 1")
-    for name in ("tip_factor", "relax_share"):
-        if not 0.0 <= getattr(params, name) <= 1.0:
-            raise CrackbakeError(f"{name} must be in 0..1 (got {getattr(params, name)})")
-
-
 def _separation(x: np.ndarray, faces: np.ndarray, stress: np.ndarray):
     """Separation tensors (N, 3, 3) from the initial stress, once (method.md §A3-A5), and their
     largest eigenvalue (N,), middle eigenvalue (N,) and largest eigenvector (N, 3)."""
@@ -230,7 +219,7 @@ def solve_thesis(sim, field, params: SolverParams) -> SolverResult:
         ``separation`` = final ``v+ / tau``.  ``stats`` holds counts, ``tau`` and timings.
         Progress goes to this module's logger.
     """
-    _check(params)
+    params.validate()
     t0 = _time.perf_counter()
     x = np.ascontiguousarray(sim.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(sim.faces, dtype=np.int64)
