@@ -8,6 +8,7 @@ never cut cracks or stress.
 
 from __future__ import annotations
 
+import io
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +17,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import face_cross, weld_by_position, welded_vertex_normals
+from crackbake.io import obj_checks
 
 # Still importable from here for callers outside io/ (tests/test_uv.py imports vertex_normals);
 # the implementations live in crackbake.geometry.
@@ -137,14 +139,47 @@ def _read_file(path: Path):
             f"{path}: unsupported format '{suffix or '(none)'}'; "
             f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
         )
+    data = None
+    if suffix == ".obj":
+        data = _read_bytes(path)
+        checked = obj_checks.prepare_obj(data, path)
+        source = str(path) if checked is data else io.BytesIO(checked)
+        data = checked
+    else:
+        with open(path, "rb") as fh:
+            head = fh.read(len(obj_checks.BOM))
+        # A byte-order mark hides the first token of text formats from trimesh.
+        source = io.BytesIO(_read_bytes(path)[len(head):]) if head == obj_checks.BOM else str(path)
     try:
-        loaded = trimesh.load(str(path), file_type=suffix[1:], process=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # numpy on corrupt numbers
+            # From bytes, the resolver still finds materials and buffers beside the file.
+            extra = {} if isinstance(source, str) else {
+                "resolver": trimesh.resolvers.FilePathResolver(str(path))
+            }
+            loaded = trimesh.load(source, file_type=suffix[1:], process=False, **extra)
     except Exception as exc:  # trimesh raises many types for corrupt input
+        known = obj_checks.explain_bad_index(data, path) if data is not None else None
+        if known is not None:
+            raise known from exc
         raise CrackbakeError(
-            f"{path}: could not read the {suffix[1:].upper()} file ({exc}); "
-            "check that it is a valid mesh"
+            f"{path}: could not read the {suffix[1:].upper()} file "
+            f"({type(exc).__name__}: {_one_line(exc)}); check that it is a valid mesh"
         ) from exc
-    return loaded
+    return loaded, data
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise CrackbakeError(f"{path}: cannot read the file ({exc.strerror}); check it") from exc
+
+
+def _one_line(exc: Exception, limit: int = 160) -> str:
+    """An exception's text on one line, shortened (trimesh messages can span lines)."""
+    text = " ".join(str(exc).split()) or "no details"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
@@ -167,7 +202,8 @@ def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices).all(axis=1)).sum())
         raise CrackbakeError(
-            f"{path}: {bad} vertices have NaN or infinite coordinates; repair the mesh first"
+            f"{path}: {bad} vert{'ices have' if bad != 1 else 'ex has'} NaN or infinite "
+            "coordinates; repair the mesh first"
         )
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
@@ -195,7 +231,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     import trimesh
 
     path = Path(path)
-    loaded = _read_file(path)
+    loaded, obj_text = _read_file(path)
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):
@@ -209,6 +245,8 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     else:
         geoms = []
     geoms = [g for g in geoms if len(g.faces) > 0]
+    if obj_text is not None:
+        obj_checks.warn_dropped_faces(obj_text, sum(len(g.faces) for g in geoms), path)
     if not geoms:
         kind = type(loaded).__name__
         what = "a point cloud" if kind == "PointCloud" else "no triangles"
