@@ -12,7 +12,7 @@ import click
 
 from crackbake import __version__
 from crackbake.display import Display, display_mode
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.params import (
     FORMATS,
     METHODS,
@@ -251,9 +251,6 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.version_option(__version__, "-V", "--version", prog_name="crackbake")
 def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> None:
     """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
-    from crackbake.errors import CrackbakeWarning
-    from crackbake.pipeline import run
-
     t0 = time.perf_counter()
     recorded: list[str] = []
     stderr = sys.stderr
@@ -264,7 +261,10 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
         display.warn(str(message))
 
     try:
-        params = _run_params(mesh, options)
+        # Checked before the pipeline's heavy imports (GL, numba): a typo fails in 0.2 s.
+        params = _run_params(mesh, options).validate()
+        from crackbake.pipeline import run
+
         with warnings.catch_warnings(), display:
             warnings.simplefilter("always", CrackbakeWarning)
             warnings.showwarning = show
