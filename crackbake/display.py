@@ -5,7 +5,7 @@ Four modes, picked by :func:`display_mode`:
 ``live``
     stderr is a terminal: one status line per stage, redrawn in place (``\\r``) with the stage's
     newest detail (solver steps, bake passes, files) and its running time, then kept as
-    ``<stage> ... done (1.2 s)`` when the next stage starts.
+    ``<stage>[: <detail>], done in 1.2 s`` when the next stage starts.
 ``verbose``
     ``-v``: every record as its own line with the time since start, terminal or not.
 ``plain``
@@ -133,8 +133,8 @@ class Display(logging.Handler):
 
     def _finish_stage(self, done: bool) -> None:
         secs = time.perf_counter() - self._stage_t0
-        line = f"{_CLEAR}{self._stage} ... done ({secs:.1f} s)\n" if done else _CLEAR
-        self._write(line)
+        detail = f": {self._detail}" if self._detail else ""
+        self._write(f"{_CLEAR}{self._stage}{detail}, done in {secs:.1f} s\n" if done else _CLEAR)
         self._stage, self._detail = None, ""
 
     def _draw(self) -> None:
