@@ -256,3 +256,12 @@ def test_indices_like_10_are_not_index_0(tmp_path):
     obj = tmp_path / "ten.obj"
     obj.write_text(verts + "f 10 1 2\nf 1 10 11\nf 2 11 10\n")
     assert len(load_mesh(obj).faces) == 3
+
+
+def test_coordinates_beyond_float32_are_refused(tmp_path):
+    """Found by tests/test_fuzz.py: one vertex at 1e308 crashed the sim mesh build."""
+    obj = tmp_path / "huge.obj"
+    obj.write_text("v 1e308 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
+    with pytest.raises(CrackbakeError, match="vertex coordinates reach 1e\\+308, beyond the "
+                       "1e\\+38 the GPU bake's 32-bit floats hold; scale the mesh down"):
+        load_mesh(obj)

@@ -28,6 +28,9 @@ __all__ = ["Mesh", "load_mesh", "vertex_normals", "weld_by_position", "SUPPORTED
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 # Key of the vertex colours in :attr:`Mesh.attributes` (also how error messages list them).
 VERTEX_COLOURS = "(vertex colours)"
+# Largest vertex coordinate: the bake uploads positions as 32-bit floats (max 3.4e38), and
+# squared lengths of bigger ones overflow even in float64 sums.
+COORDINATE_MAX = 1e38
 # PLY vertex properties that are geometry, not painted attributes.
 _PLY_GEOMETRY = {"x", "y", "z", "nx", "ny", "nz"}
 
@@ -204,6 +207,12 @@ def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
         raise CrackbakeError(
             f"{path}: {bad} vert{'ices have' if bad != 1 else 'ex has'} NaN or infinite "
             "coordinates; repair the mesh first"
+        )
+    biggest = float(np.abs(vertices).max(initial=0.0))
+    if biggest > COORDINATE_MAX:
+        raise CrackbakeError(
+            f"{path}: vertex coordinates reach {biggest:.3g}, beyond the {COORDINATE_MAX:g} the "
+            "GPU bake's 32-bit floats hold; scale the mesh down (or re-export it in larger units)"
         )
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
