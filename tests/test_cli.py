@@ -131,3 +131,14 @@ def test_tiny_impact_radius_is_raised_to_the_sim_edge(tmp_path):
     assert side["stats"]["cracks"] > 0
     # The radius the field used is recorded, and it is the raised one.
     assert side["impacts"][0]["radius"] > 0.001
+
+
+def test_error_on_a_terminal_clears_the_live_line(plate, tmp_path):
+    rc, term, _ = run_on_pty([str(plate), "--impact", "1e308,1e308,1e308", *QUICK, "-o", "e"],
+                             tmp_path)
+    assert rc == 2
+    assert re.search(r"loading .*, done in \d+\.\d s", term)
+    # What stays on screen after the last clear: the error alone.
+    assert term.rsplit("\x1b[K", 1)[-1].strip().startswith(
+        "error: impact point (1e+308, 1e+308, 1e+308) is 7.06e+307 mesh diagonals")
+    assert not (tmp_path / "e").exists()

@@ -265,3 +265,10 @@ def test_coordinates_beyond_float32_are_refused(tmp_path):
     with pytest.raises(CrackbakeError, match="vertex coordinates reach 1e\\+308, beyond the "
                        "1e\\+38 the GPU bake's 32-bit floats hold; scale the mesh down"):
         load_mesh(obj)
+
+
+def test_weight_map_folder_is_named_a_folder(tmp_path):
+    from crackbake.io.images import load_weight_map
+
+    with pytest.raises(CrackbakeError, match="the weight map is a folder; pass an image file"):
+        load_weight_map(tmp_path)
