@@ -7,6 +7,7 @@ the same clear errors as the command line) and the manifest records it.
 from __future__ import annotations
 
 import math
+import numbers
 import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
 from functools import cache
@@ -68,8 +69,10 @@ def _check_range(
     """Refuse ``value`` outside ``low..high`` (NaN and infinities included); ``None`` passes."""
     if value is None:
         return
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise CrackbakeError(f"{flag} {value!r} is not a number; give a number")
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise CrackbakeError(f"{flag} '{value}' is not a number; give a number")
+    # numpy scalars from scripts: plain Python numbers, so messages never show np.int64(...).
+    value = int(value) if isinstance(value, numbers.Integral) else float(value)
     ok = math.isfinite(value) and (low < value if low_open else low <= value) and value <= high
     if not ok:
         above = f"above {low:g}" if low_open else f"from {low:g}"
@@ -81,8 +84,13 @@ def _check_range(
 
 def _check_impact(imp: Impact) -> None:
     """The bounds :func:`parse_impact` applies, for impacts built in code."""
-    if len(imp.point) != 3 or not all(math.isfinite(float(c)) for c in imp.point):
-        raise CrackbakeError(f"impact point {imp.point}: must be three finite numbers x, y, z")
+    try:
+        xyz = [float(c) for c in imp.point]
+    except (TypeError, ValueError):
+        xyz = []
+    if len(xyz) != 3 or not all(math.isfinite(c) for c in xyz):
+        shown = ", ".join(f"{c:g}" for c in xyz) if xyz else repr(imp.point)
+        raise CrackbakeError(f"impact point ({shown}): must be three finite numbers x, y, z")
     _check_range("impact radius", imp.radius, 0.0, LENGTH_MAX, " mesh units", True)
     _check_range("impact strength", imp.strength, 0.0, STRESS_MAX, "", True)
 

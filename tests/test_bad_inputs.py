@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from crackbake.params import Impact
+
 REPO = Path(__file__).resolve().parents[1]
 
 # A 4 x 4-cell plate with UVs inside the unit square: solves in a fraction of a second.
@@ -222,3 +224,31 @@ def test_bad_input_is_one_clear_line(results, name, args, message):
     assert r["stdout"] == ""
     assert r["new"] == [], f"left behind: {r['new']}"
 
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"max_steps": np.int64(0)}, "--max-steps 0 is out of range; use a number from 1"),
+        ({"crack_width": np.float32(np.inf)}, "--crack-width inf is out of range"),
+        ({"depth_ratio": np.float64(1e300)},
+         r"--depth-ratio 1e\+300 is out of range; use a number from 0 up to 1000"),
+        ({"noise": True}, "--noise 'True' is not a number"),
+        ({"shrink_rate": "fast"}, "--shrink-rate 'fast' is not a number"),
+        ({"impacts": (Impact(point=(np.float64(np.nan), 0.0, 0.0)),)},
+         r"impact point \(nan, 0, 0\): must be three finite numbers"),
+        ({"impacts": (Impact(point=(0.0, 0.0, 0.0), strength=np.float64(1e300)),)},
+         r"impact strength 1e\+300 is out of range"),
+        ({"directions": ((1.0, 0.0, 0.0, np.float64(-1e300)),)}, "--direction strength -1e\\+300"),
+    ],
+    ids=["int64", "float32 inf", "depth 1e300", "bool", "text", "nan point", "strength",
+         "direction"],
+)
+def test_library_params_give_the_same_plain_messages(fields, message):
+    """Scripts building RunParams with numpy scalars get the CLI's messages, no numpy reprs."""
+    from crackbake.errors import CrackbakeError
+    from crackbake.params import RunParams
+
+    with pytest.raises(CrackbakeError, match=message) as info:
+        RunParams(mesh=Path("plate.obj"), **fields).validate()
+    assert "np." not in str(info.value)
