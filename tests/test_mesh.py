@@ -272,3 +272,17 @@ def test_weight_map_folder_is_named_a_folder(tmp_path):
 
     with pytest.raises(CrackbakeError, match="the weight map is a folder; pass an image file"):
         load_weight_map(tmp_path)
+
+
+def test_obj_checks_span_the_scan_chunks(tmp_path):
+    """The numpy scan reads big files in 4 MiB chunks: line numbers and counts stay exact."""
+    n = 700_000  # 8 bytes a line: 5.6 MB, two chunks
+    body = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n" + b"v 1 2 3\n" * n
+    short = tmp_path / "short.obj"
+    short.write_bytes(body + b"f 1 2 3\nf 1 2\nf 2 3 4\nf 4\n")
+    with pytest.warns(CrackbakeWarning, match="2 face lines with fewer than three corners"):
+        load_mesh(short)
+    zero = tmp_path / "zero.obj"
+    zero.write_bytes(body + b"f 1 2 3\nf 3 2 0\n")
+    with pytest.raises(CrackbakeError, match=f"line {n + 6} uses vertex index 0"):
+        load_mesh(zero)

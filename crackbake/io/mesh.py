@@ -142,10 +142,10 @@ def _read_file(path: Path):
             f"{path}: unsupported format '{suffix or '(none)'}'; "
             f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
         )
-    data = None
+    data, short_faces = None, 0
     if suffix == ".obj":
         data = _read_bytes(path)
-        checked = obj_checks.prepare_obj(data, path)
+        checked, short_faces = obj_checks.prepare_obj(data, path)
         source = str(path) if checked is data else io.BytesIO(checked)
         data = checked
     else:
@@ -169,7 +169,7 @@ def _read_file(path: Path):
             f"{path}: could not read the {suffix[1:].upper()} file "
             f"({type(exc).__name__}: {_one_line(exc)}); check that it is a valid mesh"
         ) from exc
-    return loaded, data
+    return loaded, data, short_faces
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -240,7 +240,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     import trimesh
 
     path = Path(path)
-    loaded, obj_text = _read_file(path)
+    loaded, obj_text, short_faces = _read_file(path)
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):
@@ -255,7 +255,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
         geoms = []
     geoms = [g for g in geoms if len(g.faces) > 0]
     if obj_text is not None:
-        obj_checks.warn_dropped_faces(obj_text, sum(len(g.faces) for g in geoms), path)
+        obj_checks.warn_dropped_faces(short_faces, sum(len(g.faces) for g in geoms), path)
     if not geoms:
         kind = type(loaded).__name__
         what = "a point cloud" if kind == "PointCloud" else "no triangles"

@@ -3,34 +3,99 @@
 trimesh reads a UTF-8 byte-order mark as part of the first vertex line (dropping that vertex and
 failing later with "index 2929 is out of bounds"), drops face lines with fewer than three corners
 without a word, reads ``f 0 1 2`` as the last vertex (OBJ counts from 1), and parses a vertex line
-cut short by reading the next line's numbers.  These checks run on the raw bytes with regular
-expressions (C speed: a 50 MB file costs a fraction of a second) and say what is wrong.
+cut short by reading the next line's numbers.  These checks run on the raw bytes, vectorised
+with numpy (regular expressions took 6 s on a 1M-face file), and say what is wrong.
 """
 
 from __future__ import annotations
 
 import re
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 
 BOM = b"\xef\xbb\xbf"
-# A vertex line with fewer than three coordinates; a face line with fewer than three corners.
-_SHORT_V = re.compile(rb"^v[ \t]+(?:[^\s#]+[ \t]+)?[^\s#]*[ \t]*(?:#[^\n]*)?\r?$", re.M)
-_SHORT_F = re.compile(rb"^f[ \t]+(?:[^\s#]+[ \t]+)?[^\s#]*[ \t]*(?:#[^\n]*)?\r?$", re.M)
-# A face corner whose vertex index is 0 ("0", "0/1", "0//2").
-_ZERO_INDEX = re.compile(rb"^f[ \t][^\n#]*?(?<=[ \t])0(?=[/ \t\r\n#]|\Z)", re.M)
+# A vertex line with fewer than three coordinates; a face line with fewer than three corners
+# (only matched at one known line start: these patterns are too slow to search a whole file).
+_SHORT_V = re.compile(rb"v[ \t]+(?:[^\s#]+[ \t]+)?[^\s#]*[ \t]*(?:#[^\n]*)?\r?$", re.M)
+_SHORT_F = re.compile(rb"f[ \t]+(?:[^\s#]+[ \t]+)?[^\s#]*[ \t]*(?:#[^\n]*)?\r?$", re.M)
 _FACE_LINE = re.compile(rb"^f[ \t]+([^\n#]*)", re.M)
 _VERTEX_LINE = re.compile(rb"^v[ \t]", re.M)
+# Bytes scanned per numpy pass: bounds the scan's memory (about 10 bytes per byte scanned).
+_CHUNK = 1 << 22
+_SPACE, _TAB, _LF, _ZERO = 32, 9, 10, 48
+# Byte -> is whitespace / ends a vertex index (whitespace or "/"): one gather instead of compares.
+_WS = np.zeros(256, dtype=bool)
+_WS[[32, 9, 13, 10]] = True
+_END_INDEX = _WS.copy()
+_END_INDEX[ord("/")] = True
+
+
+@dataclass
+class ObjScan:
+    """What :func:`scan` found: 1-based line numbers (``None``: no such line) and counts."""
+
+    first_short_vertex: int | None = None
+    first_zero_index: int | None = None
+    short_faces: int = 0
+
+
+def _scan_chunk(a: np.ndarray, scan: ObjScan, line0: int) -> int:
+    """Scan one chunk of whole lines (``a`` ends with a newline); return its line count."""
+    nl = np.flatnonzero(a == _LF)
+    starts = np.concatenate(([0], nl[:-1] + 1))
+    second = a[np.minimum(starts + 1, len(a) - 1)]
+    spaced = (second == _SPACE) | (second == _TAB)
+    is_v = (a[starts] == ord("v")) & spaced
+    is_f = (a[starts] == ord("f")) & spaced
+    ws = _WS[a]
+    token = ~ws
+    token[1:] &= ws[:-1]  # a token starts after whitespace
+    counts = np.concatenate(([0], np.cumsum(token, dtype=np.int32)))
+    tokens = counts[nl + 1] - counts[starts]  # per line, the keyword included
+    short_v = np.flatnonzero(is_v & (tokens < 4))
+    if len(short_v) and scan.first_short_vertex is None:
+        scan.first_short_vertex = line0 + int(short_v[0]) + 1
+    scan.short_faces += int(np.count_nonzero(is_f & (tokens < 4)))
+    token &= a == _ZERO
+    token[:-1] &= _END_INDEX[a[1:]]
+    zero = np.flatnonzero(token)  # a "0" or "0/..." token
+    if len(zero) and scan.first_zero_index is None:
+        lines = np.searchsorted(nl, zero)
+        on_face = lines[is_f[lines]]
+        if len(on_face):
+            scan.first_zero_index = line0 + int(on_face[0]) + 1
+    return len(nl)
+
+
+def scan(data: bytes) -> ObjScan:
+    """Short vertex lines, short face lines and vertex index 0, found with numpy in chunks.
+
+    About 0.1 s per 10 MB; a comment at the end of a line counts as more tokens, so a short
+    line with a trailing comment goes unnoticed (trimesh drops those comments anyway).
+    """
+    if not data.endswith(b"\n"):
+        data = data + b"\n"
+    out, start, line0 = ObjScan(), 0, 0
+    while start < len(data):
+        end = data.find(b"\n", min(start + _CHUNK, len(data) - 1))
+        a = np.frombuffer(data, dtype=np.uint8, count=end + 1 - start, offset=start)
+        line0 += _scan_chunk(a, out, line0)
+        start = end + 1
+    return out
 
 
 def _line_no(data: bytes, pos: int) -> int:
     return data.count(b"\n", 0, pos) + 1
 
 
-def prepare_obj(data: bytes, path: Path) -> bytes:
-    """Check the OBJ text; return the bytes trimesh should read.
+def prepare_obj(data: bytes, path: Path) -> tuple[bytes, int]:
+    """Check the OBJ text; return the bytes trimesh should read and how many face lines it
+    will drop (fewer than three corners).
 
     Strips a UTF-8 byte-order mark and drops a last line cut off mid-way (a truncated file), with
     a warning for the cut.
@@ -42,12 +107,6 @@ def prepare_obj(data: bytes, path: Path) -> bytes:
     """
     if data.startswith(BOM):
         data = data[len(BOM):]
-    zero = _ZERO_INDEX.search(data)
-    if zero:
-        raise CrackbakeError(
-            f"{path}: line {_line_no(data, zero.start())} uses vertex index 0, but OBJ indices "
-            "start at 1 (1 is the first vertex, -1 the last); fix the exporter or the file"
-        )
     last_start = data.rfind(b"\n", 0, len(data) - 1) + 1
     if not data.endswith(b"\n") and (
         _SHORT_V.match(data, last_start) or _SHORT_F.match(data, last_start)
@@ -59,23 +118,27 @@ def prepare_obj(data: bytes, path: Path) -> bytes:
             stacklevel=3,
         )
         data = data[:last_start]
-    short_v = _SHORT_V.search(data)
-    if short_v:
+    found = scan(data)
+    if found.first_zero_index is not None:
         raise CrackbakeError(
-            f"{path}: line {_line_no(data, short_v.start())} is a vertex with fewer than three "
+            f"{path}: line {found.first_zero_index} uses vertex index 0, but OBJ indices "
+            "start at 1 (1 is the first vertex, -1 the last); fix the exporter or the file"
+        )
+    if found.first_short_vertex is not None:
+        raise CrackbakeError(
+            f"{path}: line {found.first_short_vertex} is a vertex with fewer than three "
             "coordinates; the file is corrupt or truncated, re-export it"
         )
-    return data
+    return data, found.short_faces
 
 
-def warn_dropped_faces(data: bytes, faces_loaded: int, path: Path) -> None:
-    """Warn when face lines were dropped: each valid line gives at least one triangle."""
-    short = len(_SHORT_F.findall(data))
-    if short:
+def warn_dropped_faces(short_faces: int, faces_loaded: int, path: Path) -> None:
+    """Warn about the face lines trimesh dropped (fewer than three corners)."""
+    if short_faces:
         warnings.warn(
-            f"{path.name}: {short} face line{'s' if short != 1 else ''} with fewer than three "
-            f"corners dropped ({faces_loaded} triangles loaded); the file may be truncated or "
-            "corrupt",
+            f"{path.name}: {short_faces} face line{'s' if short_faces != 1 else ''} with fewer "
+            f"than three corners dropped ({faces_loaded} triangles loaded); the file may be "
+            "truncated or corrupt",
             CrackbakeWarning,
             stacklevel=3,
         )
