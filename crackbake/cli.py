@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import json
-import logging
 import sys
 import time
 import warnings
-from contextlib import contextmanager
 from pathlib import Path
 
 import click
 
 from crackbake import __version__
-from crackbake.errors import CrackbakeError
+from crackbake.display import Display, display_mode
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.params import (
     FORMATS,
     METHODS,
@@ -54,39 +53,33 @@ crack.depth, crack.time, crack.id, crack.distance), <stem>_mask.png, <stem>_dept
 """
 
 
-class _EchoHandler(logging.Handler):
-    """Shows log records on stderr as the CLI's progress lines (``[  1.2s] `` prefix with -v)."""
+class _Command(click.Command):
+    """A click command whose usage errors are one line in crackbake's own style.
 
-    def __init__(self, verbose: bool, t0: float) -> None:
-        super().__init__(logging.INFO)
-        self.verbose = verbose
-        self.t0 = t0
+    click prints three (usage, hint, ``Error: ...``); scripts and people both read one line
+    better: ``error: <what is wrong>; run crackbake --help``, exit code 2.
+    """
 
-    def emit(self, record: logging.LogRecord) -> None:
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
-            elapsed = f"[{time.perf_counter() - self.t0:6.1f}s] " if self.verbose else ""
-            click.echo(f"{elapsed}{record.getMessage()}", err=True)
-        except Exception:  # logging must never break the run
-            self.handleError(record)
+            rv = super().main(args, prog_name, complete_var, False, **extra)
+        except click.ClickException as exc:
+            _err(f"error: {_usage_line(exc)}; run crackbake --help")
+            sys.exit(exc.exit_code)
+        except click.exceptions.Abort:
+            _err("interrupted")
+            sys.exit(130)
+        sys.exit(rv if isinstance(rv, int) else 0)
 
 
-@contextmanager
-def _progress_display(quiet: bool, verbose: bool, t0: float):
-    """Route the ``crackbake`` loggers' records to stderr while the block runs (-q: errors only)."""
-    root = logging.getLogger("crackbake")
-    handler = _EchoHandler(verbose, t0)
-    if quiet:
-        handler.setLevel(logging.ERROR)
-    saved = root.level, root.propagate
-    root.addHandler(handler)
-    root.setLevel(logging.INFO)
-    root.propagate = False  # the CLI owns the display: no second copy via the root logger
-    try:
-        yield
-    finally:
-        root.removeHandler(handler)
-        root.setLevel(saved[0])
-        root.propagate = saved[1]
+def _usage_line(exc: click.ClickException) -> str:
+    """click's message on one line, lower-case start and no closing full stop."""
+    text = " ".join(exc.format_message().split()).replace(". (", " (").rstrip(".")
+    if len(text) > 1 and text[0].isupper() and text[1].islower():
+        text = text[0].lower() + text[1:]
+    return text
 
 
 def _preset_help() -> str:
@@ -114,6 +107,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 
 
 @click.command(
+    cls=_Command,
     epilog=EPILOG,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )
@@ -257,20 +251,21 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.version_option(__version__, "-V", "--version", prog_name="crackbake")
 def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> None:
     """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
-    from crackbake.errors import CrackbakeWarning
-    from crackbake.pipeline import run
-
     t0 = time.perf_counter()
     recorded: list[str] = []
+    stderr = sys.stderr
+    display = Display(stderr, display_mode(stderr, quiet, verbose), t0)
 
     def show(message, category, *_args, **_kwargs) -> None:
         recorded.append(str(message))
-        if not quiet:
-            _err(f"warning: {message}")
+        display.warn(str(message))
 
     try:
-        params = _run_params(mesh, options)
-        with warnings.catch_warnings(), _progress_display(quiet, verbose, t0):
+        # Checked before the pipeline's heavy imports (GL, numba): a typo fails in 0.2 s.
+        params = _run_params(mesh, options).validate()
+        from crackbake.pipeline import run
+
+        with warnings.catch_warnings(), display:
             warnings.simplefilter("always", CrackbakeWarning)
             warnings.showwarning = show
             result = run(params)
@@ -283,7 +278,8 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
     except Exception as exc:  # a bug: say so, keep the traceback behind --verbose
         if verbose:
             raise
-        _err(f"internal error: {type(exc).__name__}: {exc} (rerun with --verbose for details)")
+        text = " ".join(str(exc).split())[:200]
+        _err(f"internal error: {type(exc).__name__}: {text} (rerun with --verbose for details)")
         sys.exit(1)
 
     result.warnings = recorded

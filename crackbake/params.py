@@ -7,6 +7,7 @@ the same clear errors as the command line) and the manifest records it.
 from __future__ import annotations
 
 import math
+import numbers
 import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
 from functools import cache
@@ -26,6 +27,72 @@ SIM_FACES_DEFAULT = 100_000
 #: preset gives one.
 IMPACT_RADIUS_REL_DEFAULT = 0.15
 PRESET_DIR = Path(__file__).resolve().parent / "presets"
+
+#: Largest length in mesh units (widths, radii, distances): squared distances must stay finite in
+#: the bake's float32 (3.4e38), with room for sums.
+LENGTH_MAX = 1e15
+#: Largest stress scale (impact/direction strength, shrink, toughness; 1 = a preset's own): the
+#: solver sums squares of stresses, and 1e300 overflowed to a field with no cracks at all.
+STRESS_MAX = 1e6
+#: Largest simulation mesh (the same bound the sim mesh builder enforces).
+SIM_FACES_MAX = 20_000_000
+UNWRAP_TIMEOUT_RANGE = (1e-3, 1e6)
+#: Range of every bounded option: name -> (low, high, unit shown in messages, low excluded).
+#: Ints include both ends.
+RANGES: dict[str, tuple[float, float, str, bool]] = {
+    "profile": (0.01, 100.0, " (1 = V-shaped crack)", False),
+    "max_distance": (0.0, LENGTH_MAX, " mesh units", True),
+    "detail": (0.0, LENGTH_MAX, " mesh units", True),
+    "max_crack_length": (0.0, LENGTH_MAX, " mesh units", True),
+    "crack_width": (0.0, LENGTH_MAX, " mesh units", True),
+    "toughness": (0.0, STRESS_MAX, "", True),
+    "relax_rate": (0.0, 100.0, "", True),
+    "hoop": (0.0, 100.0, "", True),
+    "depth_ratio": (0.0, 1000.0, "", False),
+    "shrink_rate": (0.0, 100.0, "", False),
+    "noise": (0.0, 10.0, "", False),
+    "shrink": (-STRESS_MAX, STRESS_MAX, "", False),
+    "curvature_bias": (-100.0, 100.0, "", False),
+    "curvature_density": (-100.0, 100.0, "", False),
+    "tip_factor": (0.0, 1.0, "", False),
+    "relax_share": (0.0, 1.0, "", False),
+    "relax_steps": (0, 1000, "", False),
+    "max_cracks": (1, 10_000_000, "", False),
+    "max_steps": (1, 1_000_000_000, "", False),
+    "sim_faces": (100, SIM_FACES_MAX, " faces", False),
+}
+
+
+def _check_range(
+    flag: str, value, low: float, high: float, unit: str = "", low_open: bool = False
+) -> None:
+    """Refuse ``value`` outside ``low..high`` (NaN and infinities included); ``None`` passes."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise CrackbakeError(f"{flag} '{value}' is not a number; give a number")
+    # numpy scalars from scripts: plain Python numbers, so messages never show np.int64(...).
+    value = int(value) if isinstance(value, numbers.Integral) else float(value)
+    ok = math.isfinite(value) and (low < value if low_open else low <= value) and value <= high
+    if not ok:
+        above = f"above {low:g}" if low_open else f"from {low:g}"
+        shown = str(value) if isinstance(value, int) else f"{value:g}"
+        raise CrackbakeError(
+            f"{flag} {shown} is out of range; use a number {above} up to {high:g}{unit}"
+        )
+
+
+def _check_impact(imp: Impact) -> None:
+    """The bounds :func:`parse_impact` applies, for impacts built in code."""
+    try:
+        xyz = [float(c) for c in imp.point]
+    except (TypeError, ValueError):
+        xyz = []
+    if len(xyz) != 3 or not all(math.isfinite(c) for c in xyz):
+        shown = ", ".join(f"{c:g}" for c in xyz) if xyz else repr(imp.point)
+        raise CrackbakeError(f"impact point ({shown}): must be three finite numbers x, y, z")
+    _check_range("impact radius", imp.radius, 0.0, LENGTH_MAX, " mesh units", True)
+    _check_range("impact strength", imp.strength, 0.0, STRESS_MAX, "", True)
 
 #: Solver and stress defaults when neither the command line nor a preset sets them.
 SOLVER_DEFAULTS: dict = {
@@ -103,6 +170,11 @@ def parse_direction(text: str) -> tuple[float, float, float, float]:
         raise CrackbakeError(f"--direction '{text}': {syntax}")
     if not any(xyz):
         raise CrackbakeError(f"--direction '{text}': the direction must not be zero")
+    if abs(strength) > STRESS_MAX or max(abs(c) for c in xyz) > LENGTH_MAX:
+        raise CrackbakeError(
+            f"--direction '{text}': the strength must lie within +-{STRESS_MAX:g} and the "
+            f"direction components within +-{LENGTH_MAX:g}"
+        )
     return (xyz[0], xyz[1], xyz[2], strength)
 
 
@@ -126,10 +198,16 @@ def parse_impact(text: str) -> Impact:
         raise CrackbakeError(f"--impact '{text}': {syntax}") from None
     if len(xyz) != 3 or not all(math.isfinite(c) for c in xyz):
         raise CrackbakeError(f"--impact '{text}': {syntax}")
-    if radius is not None and not (math.isfinite(radius) and radius > 0):
-        raise CrackbakeError(f"--impact '{text}': the radius must be a positive number")
-    if not (math.isfinite(strength) and strength > 0):
-        raise CrackbakeError(f"--impact '{text}': the strength must be a positive number")
+    if radius is not None and not (math.isfinite(radius) and 0 < radius <= LENGTH_MAX):
+        raise CrackbakeError(
+            f"--impact '{text}': the radius must be a number above 0 up to {LENGTH_MAX:g} "
+            "(mesh units)"
+        )
+    if not (math.isfinite(strength) and 0 < strength <= STRESS_MAX):
+        raise CrackbakeError(
+            f"--impact '{text}': the strength must be a number above 0 up to {STRESS_MAX:g} "
+            "(1 = the preset's own)"
+        )
     return Impact(point=xyz, radius=radius, strength=strength)  # type: ignore[arg-type]
 
 
@@ -245,16 +323,8 @@ class RunParams:
             )
         if self.uv not in UV_MODES:
             raise CrackbakeError(f"--uv '{self.uv}' is unknown; use one of {', '.join(UV_MODES)}")
-        if self.padding is not None and self.padding < 0:
-            raise CrackbakeError(f"--padding {self.padding} must be >= 0 texels")
-        if self.dilate is not None and self.dilate < 0:
-            raise CrackbakeError(f"--dilate {self.dilate} must be >= 0 texels")
-        if self.max_distance is not None and not (
-            math.isfinite(self.max_distance) and self.max_distance > 0
-        ):
-            raise CrackbakeError(f"--max-distance {self.max_distance} must be > 0 (mesh units)")
-        if not (math.isfinite(self.profile) and self.profile > 0):
-            raise CrackbakeError(f"--profile {self.profile} must be > 0 (1 = V-shaped crack)")
+        _check_range("--padding", self.padding, 0, RES_MAX, " texels")
+        _check_range("--dilate", self.dilate, 0, RES_MAX, " texels")
         if not self.formats:
             raise CrackbakeError(f"--formats is empty; use a subset of {','.join(FORMATS)}")
         bad = [f for f in self.formats if f not in FORMATS]
@@ -262,8 +332,7 @@ class RunParams:
             raise CrackbakeError(
                 f"--formats: unknown format '{bad[0]}'; use a subset of {','.join(FORMATS)}"
             )
-        if not self.unwrap_timeout > 0:
-            raise CrackbakeError(f"--unwrap-timeout {self.unwrap_timeout} must be > 0 seconds")
+        _check_range("--unwrap-timeout", self.unwrap_timeout, *UNWRAP_TIMEOUT_RANGE, " s")
         if not TILE_MIN <= self.tile <= TILE_MAX:
             raise CrackbakeError(
                 f"tile size {self.tile} is out of range; use {TILE_MIN}..{TILE_MAX}"
@@ -276,32 +345,19 @@ class RunParams:
             raise CrackbakeError(
                 f"--method '{self.method}' is unknown; use one of {', '.join(METHODS)}"
             )
-        for name in ("detail", "toughness", "relax_rate", "max_crack_length", "crack_width",
-                     "hoop"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0):
-                flag = "--" + name.replace("_", "-")
-                raise CrackbakeError(f"{flag} {value} must be a positive number")
-        for name in ("depth_ratio", "shrink_rate", "noise"):
-            value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value >= 0):
-                flag = "--" + name.replace("_", "-")
-                raise CrackbakeError(f"{flag} {value} must be >= 0")
-        for name in ("tip_factor", "relax_share"):
-            value = getattr(self, name)
-            if value is not None and not (0 <= value <= 1):
-                flag = "--" + name.replace("_", "-")
-                raise CrackbakeError(f"{flag} {value} must lie in 0..1")
-        for name, low in (("relax_steps", 0), ("max_cracks", 1), ("max_steps", 1),
-                          ("sim_faces", 100)):
-            value = getattr(self, name)
-            if value is not None and value < low:
-                flag = "--" + name.replace("_", "-")
-                raise CrackbakeError(f"{flag} {value} must be >= {low}")
-        if self.shrink is not None and not math.isfinite(self.shrink):
-            raise CrackbakeError(f"--shrink {self.shrink} must be a finite number")
-        if self.weight_map is not None and not Path(self.weight_map).exists():
-            raise CrackbakeError(f"--weight-map {self.weight_map}: file not found")
+        for name, bounds in RANGES.items():
+            _check_range("--" + name.replace("_", "-"), getattr(self, name), *bounds)
+        for imp in self.impacts:
+            _check_impact(imp)
+        for d in self.directions:
+            _check_range("--direction strength", d[3], -STRESS_MAX, STRESS_MAX)
+        if self.weight_map is not None:
+            if Path(self.weight_map).is_dir():
+                raise CrackbakeError(
+                    f"--weight-map {self.weight_map}: is a folder; pass an image file"
+                )
+            if not Path(self.weight_map).exists():
+                raise CrackbakeError(f"--weight-map {self.weight_map}: file not found")
         return self
 
     def resolved(self) -> tuple[RunParams, dict]:

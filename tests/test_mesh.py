@@ -173,3 +173,116 @@ def test_vertex_attributes_are_read_with_the_mesh(tmp_path):
     assert np.allclose(vertex_weights(mesh, None), 0.2126)  # luminance of pure red
     with pytest.raises(CrackbakeError, match=r"no vertex attribute 'paint'; available: .*wt"):
         vertex_weights(mesh, "paint")
+
+
+# --- text encodings and damaged OBJ files (issue 9) -----------------------------------------
+
+
+def _same_mesh(a, b) -> None:
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+    assert np.array_equal(a.uv, b.uv)
+
+
+def test_utf8_bom_obj_loads_like_the_plain_file(tmp_path, recwarn):
+    """trimesh read the BOM into the first vertex line: "index 2929 is out of bounds"."""
+    bom = tmp_path / "bom.obj"
+    bom.write_bytes(b"\xef\xbb\xbf" + EXAMPLE.read_bytes())
+    _same_mesh(load_mesh(bom), load_mesh(EXAMPLE))
+    assert not [w for w in recwarn if issubclass(w.category, CrackbakeWarning)]
+
+
+def test_bom_on_other_text_formats(tmp_path):
+    plain = tmp_path / "cube.off"
+    trimesh.creation.box().export(plain)
+    bom = tmp_path / "bom.off"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    a, b = load_mesh(plain), load_mesh(bom)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+
+
+def test_non_utf8_obj_loads(tmp_path):
+    """One Latin-1 byte in a comment or material name needs trimesh's charset_normalizer."""
+    latin = tmp_path / "latin1.obj"
+    latin.write_bytes("# modèle exporté, café\no Kuh_Größe\n".encode("latin-1")
+                      + EXAMPLE.read_bytes())
+    _same_mesh(load_mesh(latin), load_mesh(EXAMPLE))
+
+
+def test_truncated_obj_warns_with_the_cut_line(tmp_path):
+    data = EXAMPLE.read_bytes()
+    cut = tmp_path / "cut.obj"
+    cut.write_bytes(data[: len(data) * 2 // 3])  # ends mid-way through a face line
+    with pytest.warns(CrackbakeWarning, match=r"the last line \(line \d+\) is cut off mid-way; "
+                      "dropped it. The file looks truncated"):
+        m = load_mesh(cut)
+    # spot's faces are triangles: every complete face line before the cut is kept.
+    complete = data[: len(data) * 2 // 3].rsplit(b"\n", 1)[0].count(b"\nf ")
+    assert len(m.faces) == complete and 0 < complete < 5856
+
+
+def test_short_face_lines_are_counted_in_a_warning(tmp_path):
+    obj = tmp_path / "short.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4\nf 3\nf 2 4 3\n")
+    with pytest.warns(CrackbakeWarning, match=r"short.obj: 2 face lines with fewer than three "
+                      r"corners dropped \(2 triangles loaded\)"):
+        m = load_mesh(obj)
+    assert len(m.faces) == 2
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n",
+         "line 4 uses vertex index 0, but OBJ indices start at 1"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/2 3/3\nf 0/1 1/2 2/3\n", "OBJ indices start at 1"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 2 3 7\nf 1 2 -5\n",
+         r"2 face lines use vertices the file does not have \(line 5: vertex 7, but only 3 "
+         r"vertices\); the file is truncated or corrupt"),
+        ("v 0 0 0\nv 1 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\n",
+         "line 2 is a vertex with fewer than three coordinates"),
+    ],
+    ids=["index 0", "index 0 with uv", "missing vertices", "short vertex"],
+)
+def test_damaged_obj_is_refused_clearly(tmp_path, text, message):
+    obj = tmp_path / "bad.obj"
+    obj.write_text(text)
+    with pytest.raises(CrackbakeError, match=message) as info:
+        load_mesh(obj)
+    assert "\n" not in str(info.value)
+
+
+def test_indices_like_10_are_not_index_0(tmp_path):
+    verts = "".join(f"v {i} {i * i % 7} {i % 3}\n" for i in range(12))
+    obj = tmp_path / "ten.obj"
+    obj.write_text(verts + "f 10 1 2\nf 1 10 11\nf 2 11 10\n")
+    assert len(load_mesh(obj).faces) == 3
+
+
+def test_coordinates_beyond_float32_are_refused(tmp_path):
+    """Found by tests/test_fuzz.py: one vertex at 1e308 crashed the sim mesh build."""
+    obj = tmp_path / "huge.obj"
+    obj.write_text("v 1e308 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
+    with pytest.raises(CrackbakeError, match="vertex coordinates reach 1e\\+308, beyond the "
+                       "1e\\+38 the GPU bake's 32-bit floats hold; scale the mesh down"):
+        load_mesh(obj)
+
+
+def test_weight_map_folder_is_named_a_folder(tmp_path):
+    from crackbake.io.images import load_weight_map
+
+    with pytest.raises(CrackbakeError, match="the weight map is a folder; pass an image file"):
+        load_weight_map(tmp_path)
+
+
+def test_obj_checks_span_the_scan_chunks(tmp_path):
+    """The numpy scan reads big files in 4 MiB chunks: line numbers and counts stay exact."""
+    n = 700_000  # 8 bytes a line: 5.6 MB, two chunks
+    body = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n" + b"v 1 2 3\n" * n
+    short = tmp_path / "short.obj"
+    short.write_bytes(body + b"f 1 2 3\nf 1 2\nf 2 3 4\nf 4\n")
+    with pytest.warns(CrackbakeWarning, match="2 face lines with fewer than three corners"):
+        load_mesh(short)
+    zero = tmp_path / "zero.obj"
+    zero.write_bytes(body + b"f 1 2 3\nf 3 2 0\n")
+    with pytest.raises(CrackbakeError, match=f"line {n + 6} uses vertex index 0"):
+        load_mesh(zero)

@@ -189,6 +189,13 @@ INVALID = [
     ("time > 1", _set(["cracks", 0, "time", 2], 1.5), "time outside \\[0, 1\\]"),
     ("time < 0", _set(["cracks", 1, "time", 0], -0.1), "time outside \\[0, 1\\]"),
     ("float face", _set(["cracks", 0, "faces", 0], 0.5), "'faces' is not an array of integers"),
+    # JSON true/false are Python bools, an int subclass: never a face index or a coordinate.
+    ("true face", _set(["cracks", 0, "faces", 0], True), "'faces' is not an array of integers"),
+    ("false face", _set(["cracks", 1, "faces", 1], False), "'faces' is not an array of integers"),
+    ("bool point", _set(["cracks", 0, "points", 1, 0], True), "'points' is not an array of"),
+    ("bool width", _set(["cracks", 0, "width", 0], False), "'width' is not an array of numbers"),
+    ("negative width plain", _set(["cracks", 0, "width", 2], -5.0), r"negative width \(-5\);"),
+    ("time range plain", _set(["cracks", 0, "time", 2], 1.5), r"\(range 0\.\.1\.5\)"),
     ("dup id", _set(["cracks", 1, "id"], 7), "crack id 7 is used twice"),
     ("id text", _set(["cracks", 1, "id"], "two"), "has id 'two'; crack ids must be integers"),
     (
@@ -214,6 +221,7 @@ def test_validation_errors(name, mutate, message):
         from_dict(data, source="cracks.json")
     text = str(info.value)
     assert text.startswith("cracks.json: ") and "\n" not in text and ";" in text
+    assert "np." not in text  # numbers as the user wrote them, never numpy reprs
 
 
 def test_not_json(tmp_path):

@@ -33,6 +33,8 @@ def load_weight_map(path) -> np.ndarray:
         Missing or unreadable file.
     """
     path = Path(path)
+    if path.is_dir():
+        raise CrackbakeError(f"{path}: the weight map is a folder; pass an image file")
     if not path.is_file():
         raise CrackbakeError(f"{path}: weight map not found; check the path")
     try:

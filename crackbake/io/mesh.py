@@ -8,6 +8,7 @@ never cut cracks or stress.
 
 from __future__ import annotations
 
+import io
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +17,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import face_cross, weld_by_position, welded_vertex_normals
+from crackbake.io import obj_checks
 
 # Still importable from here for callers outside io/ (tests/test_uv.py imports vertex_normals);
 # the implementations live in crackbake.geometry.
@@ -26,6 +28,9 @@ __all__ = ["Mesh", "load_mesh", "vertex_normals", "weld_by_position", "SUPPORTED
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 # Key of the vertex colours in :attr:`Mesh.attributes` (also how error messages list them).
 VERTEX_COLOURS = "(vertex colours)"
+# Largest vertex coordinate: the bake uploads positions as 32-bit floats (max 3.4e38), and
+# squared lengths of bigger ones overflow even in float64 sums.
+COORDINATE_MAX = 1e38
 # PLY vertex properties that are geometry, not painted attributes.
 _PLY_GEOMETRY = {"x", "y", "z", "nx", "ny", "nz"}
 
@@ -137,14 +142,47 @@ def _read_file(path: Path):
             f"{path}: unsupported format '{suffix or '(none)'}'; "
             f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
         )
+    data, short_faces = None, 0
+    if suffix == ".obj":
+        data = _read_bytes(path)
+        checked, short_faces = obj_checks.prepare_obj(data, path)
+        source = str(path) if checked is data else io.BytesIO(checked)
+        data = checked
+    else:
+        with open(path, "rb") as fh:
+            head = fh.read(len(obj_checks.BOM))
+        # A byte-order mark hides the first token of text formats from trimesh.
+        source = io.BytesIO(_read_bytes(path)[len(head):]) if head == obj_checks.BOM else str(path)
     try:
-        loaded = trimesh.load(str(path), file_type=suffix[1:], process=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # numpy on corrupt numbers
+            # From bytes, the resolver still finds materials and buffers beside the file.
+            extra = {} if isinstance(source, str) else {
+                "resolver": trimesh.resolvers.FilePathResolver(str(path))
+            }
+            loaded = trimesh.load(source, file_type=suffix[1:], process=False, **extra)
     except Exception as exc:  # trimesh raises many types for corrupt input
+        known = obj_checks.explain_bad_index(data, path) if data is not None else None
+        if known is not None:
+            raise known from exc
         raise CrackbakeError(
-            f"{path}: could not read the {suffix[1:].upper()} file ({exc}); "
-            "check that it is a valid mesh"
+            f"{path}: could not read the {suffix[1:].upper()} file "
+            f"({type(exc).__name__}: {_one_line(exc)}); check that it is a valid mesh"
         ) from exc
-    return loaded
+    return loaded, data, short_faces
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise CrackbakeError(f"{path}: cannot read the file ({exc.strerror}); check it") from exc
+
+
+def _one_line(exc: Exception, limit: int = 160) -> str:
+    """An exception's text on one line, shortened (trimesh messages can span lines)."""
+    text = " ".join(str(exc).split()) or "no details"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
@@ -167,7 +205,14 @@ def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices).all(axis=1)).sum())
         raise CrackbakeError(
-            f"{path}: {bad} vertices have NaN or infinite coordinates; repair the mesh first"
+            f"{path}: {bad} vert{'ices have' if bad != 1 else 'ex has'} NaN or infinite "
+            "coordinates; repair the mesh first"
+        )
+    biggest = float(np.abs(vertices).max(initial=0.0))
+    if biggest > COORDINATE_MAX:
+        raise CrackbakeError(
+            f"{path}: vertex coordinates reach {biggest:.3g}, beyond the {COORDINATE_MAX:g} the "
+            "GPU bake's 32-bit floats hold; scale the mesh down (or re-export it in larger units)"
         )
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise CrackbakeError(f"{path}: faces index missing vertices; repair the mesh first")
@@ -195,7 +240,7 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     import trimesh
 
     path = Path(path)
-    loaded = _read_file(path)
+    loaded, obj_text, short_faces = _read_file(path)
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):
@@ -209,6 +254,8 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     else:
         geoms = []
     geoms = [g for g in geoms if len(g.faces) > 0]
+    if obj_text is not None:
+        obj_checks.warn_dropped_faces(short_faces, sum(len(g.faces) for g in geoms), path)
     if not geoms:
         kind = type(loaded).__name__
         what = "a point cloud" if kind == "PointCloud" else "no triangles"

@@ -37,7 +37,8 @@ def _array(value: Any, source: str, where: str, key: str, integer: bool = False)
     """Convert one JSON array, refusing non-numbers (bools and strings included)."""
     what = "integers" if integer else "numbers"
     try:
-        arr = np.asarray(value)
+        # JSON true/false are Python bools, an int subclass numpy would take as 1/0.
+        arr = None if _has_bool(value) else np.asarray(value)
     except ValueError:  # ragged nested lists
         arr = None
     # An empty list comes back as float64; it is a valid (if short) array of either kind.
@@ -51,6 +52,16 @@ def _array(value: Any, source: str, where: str, key: str, integer: bool = False)
             source, f"{where} '{key}' is not an array of {what}; write it as a list of {what}"
         )
     return arr.astype(np.int64 if integer else np.float64)
+
+
+def _has_bool(value: Any) -> bool:
+    """Whether a JSON value (nested lists) holds ``true`` or ``false`` anywhere."""
+    if isinstance(value, bool):
+        return True
+    if isinstance(value, list):
+        return any(v is True or v is False or (isinstance(v, list) and _has_bool(v))
+                   for v in value)
+    return False
 
 
 def parse_crack(raw: Any, index: int, source: str) -> Crack:
@@ -104,13 +115,14 @@ def parse_crack(raw: Any, index: int, source: str) -> Crack:
     for key in ("width", "depth"):
         if (arrays[key] < 0).any():
             raise fail(
-                source, f"{where} has negative {key} ({arrays[key].min()!r}); {key} must be >= 0"
+                source,
+                f"{where} has negative {key} ({float(arrays[key].min()):g}); {key} must be >= 0",
             )
     t = arrays["time"]
     if ((t < 0) | (t > 1)).any():
         raise fail(
             source,
-            f"{where} has time outside [0, 1] (range {t.min()!r}..{t.max()!r}); "
+            f"{where} has time outside [0, 1] (range {float(t.min()):g}..{float(t.max()):g}); "
             "rescale time to 0..1",
         )
     return Crack(id=cid, **arrays)

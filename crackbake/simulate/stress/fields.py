@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from crackbake.errors import CrackbakeWarning
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import unit_rows, vertex_normals
 from crackbake.io.mesh import Mesh
 from crackbake.simulate.solver.fem import face_frames, face_geometry
@@ -101,7 +101,44 @@ class _Geometry:
     centroid: np.ndarray  # (M, 3)
 
 
+# An impact point farther than this many bounding-box diagonals from the mesh is a typo (or a
+# point in other units), not an intent: snapping it would pick an arbitrary spot.
+IMPACT_MAX_DIAGONALS = 10.0
+
+
+def _check_impact_near(point, geo: _Geometry) -> None:
+    """Refuse an impact point far off the mesh (``CrackbakeError``)."""
+    p = _finite_vector(point, "impact point")
+    lo, hi = geo.vertices.min(axis=0), geo.vertices.max(axis=0)
+    # Per-axis gap to the box, so 1e308 coordinates do not overflow a norm.
+    gap = float(np.max(np.maximum(np.maximum(lo - p, p - hi), 0.0)))
+    diag = float(np.linalg.norm(hi - lo))
+    if gap > IMPACT_MAX_DIAGONALS * diag:
+        shown = ", ".join(f"{float(x):g}" for x in p)
+        raise CrackbakeError(
+            f"impact point ({shown}) is {gap / diag:.3g} mesh diagonals from the surface; "
+            f"give a point on or near the mesh (its bounding box spans "
+            f"{', '.join(f'{float(x):g}' for x in lo)} to {', '.join(f'{float(x):g}' for x in hi)})"
+        )
+
+
+def _impact_radius(radius: float, sim) -> float:
+    """The radius raised to the sim edge length (smaller would stress no face at all)."""
+    h = float(getattr(sim, "edge_length", 0.0) or 0.0)
+    if radius < h:
+        warnings.warn(
+            f"impact radius {radius:g} is below the simulation edge length {h:.4g}; using "
+            f"{h:.4g} (raise --detail/--sim-faces for finer impacts)",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+        return h
+    return radius
+
+
 def _impact_field(sim, geo: _Geometry, src: ImpactSource, radius: float) -> tuple[np.ndarray, dict]:
+    _check_impact_near(src.point, geo)
+    radius = _impact_radius(radius, sim)
     reach = 0.5 * np.pi * radius
     dist, snapped, face = impact_distance(sim, src.point, max_distance=reach)
     moved = float(np.linalg.norm(snapped - np.asarray(src.point, dtype=np.float64)))
@@ -117,9 +154,10 @@ def _impact_field(sim, geo: _Geometry, src: ImpactSource, radius: float) -> tupl
     d_face = nodal.mean(axis=1)  # inf when any corner is out of reach
     # Inside the source face the surface is flat, so the straight distance is the geodesic one.
     d_face[face] = np.linalg.norm(geo.centroid[face] - snapped)
-    active = np.flatnonzero(d_face <= reach)
+    # The source face always takes part: a radius about its size must still stress it.
+    active = np.union1d(np.flatnonzero(d_face <= reach), [face])
     stress = np.zeros((len(geo.faces), 3, 3))
-    w = src.strength * 2.0 * np.cos(d_face[active] / radius)
+    w = src.strength * 2.0 * np.cos(np.minimum(d_face[active], reach) / radius)
     n = geo.normal[active]
     # Radial direction: the surface gradient of the distance.  First-order fast marching biases
     # that gradient towards mesh edges (up to ~20 degrees on irregular meshes), so where it

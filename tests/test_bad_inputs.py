@@ -1,0 +1,254 @@
+"""The bad-input catalogue: every input a user can get wrong, run as a real ``crackbake`` process.
+
+Each case must exit with code 2, print exactly one line on stderr (``error: ...``, no traceback,
+no numpy repr), and leave nothing behind: no output folder, no staging folder, no stray file.
+The cases run concurrently in a module fixture (one process each, a few at a time) so the whole
+catalogue costs a few seconds of wall clock; each case is still its own test.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from crackbake.params import Impact
+
+REPO = Path(__file__).resolve().parents[1]
+
+# A 4 x 4-cell plate with UVs inside the unit square: solves in a fraction of a second.
+N = 4
+PLATE = "\n".join(
+    [f"v {i / N:g} {j / N:g} {0.02 * ((i * 7 + j * 3) % 5):g}" for i in range(N + 1)
+     for j in range(N + 1)]
+    + [f"vt {0.05 + 0.9 * i / N:g} {0.05 + 0.9 * j / N:g}" for i in range(N + 1)
+       for j in range(N + 1)]
+    + [
+        line
+        for i in range(N)
+        for j in range(N)
+        for a, b in [(i * (N + 1) + j + 1, (i + 1) * (N + 1) + j + 1)]
+        for line in (f"f {a}/{a} {b}/{b} {b + 1}/{b + 1}",
+                     f"f {a}/{a} {b + 1}/{b + 1} {a + 1}/{a + 1}")
+    ]
+) + "\n"
+TRI = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n"
+
+
+def _sidecar(plate: Path) -> dict:
+    """A valid one-crack sidecar for the plate (made in-process with the library)."""
+    from crackbake.io.mesh import load_mesh
+    from crackbake.io.sidecar import to_dict
+    from crackbake.network import Crack, CrackNetwork, mesh_info
+
+    mesh = load_mesh(plate)
+    tri = mesh.vertices[mesh.faces[0]]
+    pts = np.array([tri @ [0.6, 0.2, 0.2], tri @ [0.2, 0.6, 0.2]])
+    crack = Crack(id=0, points=pts, faces=np.array([0, 0]), time=np.array([0.0, 1.0]),
+                  width=np.array([0.01, 0.01]), depth=np.array([0.005, 0.005]))
+    return to_dict(CrackNetwork(cracks=[crack], mesh=mesh_info(mesh)))
+
+
+def _inputs(folder: Path) -> None:
+    """Every input file the cases name, written into ``folder``."""
+    (folder / "plate.obj").write_text(PLATE)
+    side = _sidecar(folder / "plate.obj")
+    (folder / "side.json").write_text(json.dumps(side))
+    bad = json.loads(json.dumps(side))
+    bad["cracks"][0]["faces"][0] = True
+    (folder / "bool_face.json").write_text(json.dumps(bad))
+    bad = json.loads(json.dumps(side))
+    bad["cracks"][0]["width"][0] = -5.0
+    (folder / "neg_width.json").write_text(json.dumps(bad))
+    bad = json.loads(json.dumps(side))
+    bad["mesh"]["faces"] = 7
+    (folder / "other_mesh.json").write_text(json.dumps(bad))
+    (folder / "corrupt.json").write_text('{"format": "crackbake-cracks", ')
+    (folder / "notes.txt").write_text("hello")
+    (folder / "empty.obj").write_bytes(b"")
+    (folder / "points.obj").write_text(TRI)
+    (folder / "words.obj").write_text("hello world\nthis is not a mesh\n")
+    (folder / "zero_index.obj").write_text(TRI + "f 0 1 2\n")
+    (folder / "missing_vertex.obj").write_text(TRI + "f 1 2 3\nf 2 4 9\n")
+    (folder / "short_vertex.obj").write_text("v 0 0 0\nv 1 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\n")
+    (folder / "nan.obj").write_text("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
+    (folder / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    (folder / "letters.obj").write_text(TRI + "f 1 x 3\n")
+    (folder / "garbage.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\n\x00\xff" * 3)
+    (folder / "garbage.glb").write_bytes(b"glTF\x02\x00\x00\x00" + bytes(range(40)))
+    (folder / "garbage.stl").write_bytes(b"solid x\nfacet normal 0 0 nan\nendsolid\n")
+    (folder / "noext").write_text(PLATE)
+    (folder / "not_an_image.png").write_text("not a png")
+    (folder / "maps").mkdir()
+
+
+IMPACT = "0.5,0.5,0.05"
+# (case id, arguments, words the one stderr line must hold).  "{d}" is the case folder.
+CASES: list[tuple[str, list[str], str]] = [
+    # --- command line syntax (click) ---
+    ("no arguments", [], "missing argument 'MESH'"),
+    ("unknown option", ["plate.obj", "--foo"], "no such option '--foo'"),
+    ("res not a number", ["plate.obj", "--res", "abc"], "'abc' is not a valid integer"),
+    ("unknown preset", ["plate.obj", "--preset", "granite"], "'granite' is not one of"),
+    ("unknown method", ["plate.obj", "--method", "magic"], "'magic' is not one of"),
+    ("unknown uv mode", ["plate.obj", "--uv", "guess"], "'guess' is not one of"),
+    ("unknown format", ["plate.obj", "--formats", "jpg"], "comma-separated subset"),
+    ("empty formats", ["plate.obj", "--formats", ","], "comma-separated subset"),
+    # --- ranges ---
+    ("res too small", ["plate.obj", "--shrink", "1", "--res", "10"], "--res 10 is out of range"),
+    ("res too big", ["plate.obj", "--shrink", "1", "--res", "20000"], "--res 20000"),
+    ("crack width 1e300", ["plate.obj", "--impact", IMPACT, "--crack-width", "1e300"],
+     "--crack-width 1e+300 is out of range"),
+    ("crack width negative", ["plate.obj", "--shrink", "1", "--crack-width", "-1"],
+     "--crack-width -1 is out of range"),
+    ("depth ratio nan", ["plate.obj", "--shrink", "1", "--depth-ratio", "nan"],
+     "--depth-ratio nan is out of range"),
+    ("profile zero", ["plate.obj", "--shrink", "1", "--profile", "0"], "--profile 0 is out"),
+    ("max distance inf", ["plate.obj", "--shrink", "1", "--max-distance", "inf"],
+     "--max-distance inf"),
+    ("max steps overflow", ["plate.obj", "--shrink", "1", "--max-steps", "9" * 20],
+     "--max-steps 99999999999999999999 is out of range"),
+    ("tip factor 2", ["plate.obj", "--shrink", "1", "--tip-factor", "2"], "--tip-factor 2 is"),
+    ("hoop 1e300", ["plate.obj", "--impact", IMPACT, "--hoop", "1e300"], "--hoop 1e+300"),
+    ("shrink inf", ["plate.obj", "--shrink", "inf"], "--shrink inf is out of range"),
+    ("noise negative", ["plate.obj", "--shrink", "1", "--noise", "-1"], "--noise -1 is out"),
+    ("toughness negative", ["plate.obj", "--shrink", "1", "--toughness", "-1"], "--toughness -1"),
+    ("curvature syntax", ["plate.obj", "--curvature", "abc"], "expected BIAS[:DENSITY]"),
+    ("curvature 1e300", ["plate.obj", "--curvature", "1e300"], "--curvature-bias 1e+300"),
+    ("sim faces 5", ["plate.obj", "--shrink", "1", "--sim-faces", "5"], "--sim-faces 5 is out"),
+    ("seed negative", ["plate.obj", "--shrink", "1", "--seed", "-1"], "--seed -1"),
+    ("unwrap timeout inf", ["plate.obj", "--shrink", "1", "--unwrap-timeout", "inf"],
+     "--unwrap-timeout inf"),
+    ("padding negative", ["plate.obj", "--shrink", "1", "--padding", "-1"], "--padding -1"),
+    ("dilate negative", ["plate.obj", "--shrink", "1", "--dilate", "-3"], "--dilate -3"),
+    # --- impacts and directions ---
+    ("impact syntax", ["plate.obj", "--impact", "1,2"], "expected X,Y,Z[:RADIUS[:STRENGTH]]"),
+    ("impact nan", ["plate.obj", "--impact", "nan,0,0"], "--impact 'nan,0,0'"),
+    ("impact radius negative", ["plate.obj", "--impact", "0.5,0.5,0:-1"], "the radius must"),
+    ("impact strength 1e300", ["plate.obj", "--impact", f"{IMPACT}:0.2:1e300"],
+     "the strength must be a number above 0 up to 1e+06"),
+    ("impact strength zero", ["plate.obj", "--impact", f"{IMPACT}:0.2:0"], "the strength must"),
+    ("impact far away", ["plate.obj", "--impact", "1e308,1e308,1e308", "--sim-faces", "300"],
+     "mesh diagonals from the surface"),
+    ("direction zero", ["plate.obj", "--direction", "0,0,0"], "must not be zero"),
+    ("direction 1e300", ["plate.obj", "--direction", "1,0,0:1e300"], "the strength must lie"),
+    ("nothing to crack", ["plate.obj"], "nothing to crack"),
+    ("preset needs impact", ["plate.obj", "--preset", "glass"], "needs an impact point"),
+    # --- mesh files ---
+    ("mesh missing", ["missing.obj", "--shrink", "1"], "file not found"),
+    ("mesh is a folder", ["maps", "--shrink", "1"], "is a directory"),
+    ("wrong suffix", ["notes.txt", "--shrink", "1"], "unsupported format '.txt'"),
+    ("no suffix", ["noext", "--shrink", "1"], "unsupported format '(none)'"),
+    ("empty obj", ["empty.obj", "--shrink", "1"], "no triangles"),
+    ("vertices only", ["points.obj", "--shrink", "1"], "crackbake needs a triangle mesh"),
+    ("text not obj", ["words.obj", "--shrink", "1"], "crackbake needs a triangle mesh"),
+    ("obj index 0", ["zero_index.obj", "--shrink", "1"], "OBJ indices start at 1"),
+    ("obj missing vertex", ["missing_vertex.obj", "--shrink", "1"],
+     "vertices the file does not have (line 6: vertex 9, but only 4 vertices)"),
+    ("obj short vertex", ["short_vertex.obj", "--shrink", "1"], "fewer than three coordinates"),
+    ("obj nan vertex", ["nan.obj", "--shrink", "1"], "1 vertex has NaN"),
+    ("obj zero area", ["flat.obj", "--shrink", "1"], "every face has zero area"),
+    ("obj letters", ["letters.obj", "--shrink", "1"], "could not read the OBJ file"),
+    ("ply garbage", ["garbage.ply", "--shrink", "1"], "could not read the PLY file"),
+    ("glb garbage", ["garbage.glb", "--shrink", "1"], "could not read the GLB file"),
+    ("stl garbage", ["garbage.stl", "--shrink", "1"], "garbage.stl"),
+    # --- weight maps and attributes ---
+    ("weight map missing", ["plate.obj", "--shrink", "1", "--weight-map", "none.png"],
+     "--weight-map none.png: file not found"),
+    ("weight map folder", ["plate.obj", "--shrink", "1", "--weight-map", "maps"],
+     "--weight-map maps: is a folder; pass an image file"),
+    ("weight map corrupt", ["plate.obj", "--shrink", "1", "--weight-map", "not_an_image.png"],
+     "could not read the weight map"),
+    ("weight attribute missing", ["plate.obj", "--shrink", "1", "--weight-attribute", "paint"],
+     "paint"),
+    # --- sidecars ---
+    ("sidecar missing", ["plate.obj", "--cracks", "none.json"], "file not found"),
+    ("sidecar corrupt", ["plate.obj", "--cracks", "corrupt.json"], "not valid JSON"),
+    ("sidecar bool face", ["plate.obj", "--cracks", "bool_face.json"],
+     "'faces' is not an array of integers"),
+    ("sidecar negative width", ["plate.obj", "--cracks", "neg_width.json"],
+     "negative width (-5); width must be >= 0"),
+    ("sidecar other mesh", ["plate.obj", "--cracks", "other_mesh.json"],
+     "bake it on the mesh it was made for"),
+]
+
+
+def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
+    name, args, _ = case
+    folder = root / name.replace(" ", "_")
+    shutil.copytree(root / "_inputs", folder)
+    before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
+    t0 = time.perf_counter()
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache")}
+    r = subprocess.run(
+        [sys.executable, "-m", "crackbake", "--res", "64", "-o", "out", *args],
+        cwd=folder, capture_output=True, text=True, env=env, timeout=300,
+    )
+    after = sorted(p.relative_to(folder) for p in folder.rglob("*"))
+    return {"secs": time.perf_counter() - t0, "rc": r.returncode, "stderr": r.stderr,
+            "stdout": r.stdout, "new": [str(p) for p in after if p not in before]}
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> dict:
+    root = tmp_path_factory.mktemp("bad_inputs")
+    (root / "_inputs").mkdir()
+    _inputs(root / "_inputs")
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        done = pool.map(lambda c: _run_case(root, c), CASES)
+        return {case[0]: res for case, res in zip(CASES, done, strict=True)}
+
+
+def test_catalogue_is_large_and_unique():
+    names = [c[0] for c in CASES]
+    assert len(names) >= 40 and len(set(names)) == len(names)
+
+
+@pytest.mark.parametrize(("name", "args", "message"), CASES, ids=[c[0] for c in CASES])
+def test_bad_input_is_one_clear_line(results, name, args, message):
+    r = results[name]
+    lines = r["stderr"].splitlines()
+    assert r["rc"] == 2, r["stderr"]
+    assert len(lines) == 1, r["stderr"]
+    line = lines[0]
+    assert line.startswith("error: ") and message in line, line
+    assert "Traceback" not in line and "np." not in line and "internal error" not in line
+    assert r["stdout"] == ""
+    assert r["new"] == [], f"left behind: {r['new']}"
+
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"max_steps": np.int64(0)}, "--max-steps 0 is out of range; use a number from 1"),
+        ({"crack_width": np.float32(np.inf)}, "--crack-width inf is out of range"),
+        ({"depth_ratio": np.float64(1e300)},
+         r"--depth-ratio 1e\+300 is out of range; use a number from 0 up to 1000"),
+        ({"noise": True}, "--noise 'True' is not a number"),
+        ({"shrink_rate": "fast"}, "--shrink-rate 'fast' is not a number"),
+        ({"impacts": (Impact(point=(np.float64(np.nan), 0.0, 0.0)),)},
+         r"impact point \(nan, 0, 0\): must be three finite numbers"),
+        ({"impacts": (Impact(point=(0.0, 0.0, 0.0), strength=np.float64(1e300)),)},
+         r"impact strength 1e\+300 is out of range"),
+        ({"directions": ((1.0, 0.0, 0.0, np.float64(-1e300)),)}, "--direction strength -1e\\+300"),
+    ],
+    ids=["int64", "float32 inf", "depth 1e300", "bool", "text", "nan point", "strength",
+         "direction"],
+)
+def test_library_params_give_the_same_plain_messages(fields, message):
+    """Scripts building RunParams with numpy scalars get the CLI's messages, no numpy reprs."""
+    from crackbake.errors import CrackbakeError
+    from crackbake.params import RunParams
+
+    with pytest.raises(CrackbakeError, match=message) as info:
+        RunParams(mesh=Path("plate.obj"), **fields).validate()
+    assert "np." not in str(info.value)
