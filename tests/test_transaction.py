@@ -41,7 +41,8 @@ class Run:
     def __init__(self, args: list[str], out: Path, cwd: Path) -> None:
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         self.proc = subprocess.Popen(
-            [*CLI, *args, "-o", str(out)],
+            # -v: stage lines on stderr even though it is a pipe (the tests wait for them).
+            [*CLI, *args, "-v", "-o", str(out)],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
             text=True,
@@ -294,7 +295,7 @@ def test_unusable_inputs_and_outputs_fail_before_the_solver(nouv_obj, tmp_path, 
     before = sorted(p.name for p in tmp_path.iterdir())
     target = out if out.startswith("/") else str(tmp_path / out)
     t = time.perf_counter()
-    r = CliRunner().invoke(main, [str(nouv_obj), "--preset", "mud", *extra, "-o", target])
+    r = CliRunner().invoke(main, [str(nouv_obj), "--preset", "mud", *extra, "-v", "-o", target])
     assert r.exit_code == 2, r.output
     last = r.stderr.splitlines()[-1]
     assert last.startswith("error: ") and message.format(tmp=tmp_path) in last
