@@ -77,12 +77,13 @@ def mutated_obj(draw) -> bytes:
     return data
 
 
-def test_mutated_objs_run_or_fail_cleanly(tmp_path):
+def _fuzz(tmp_path, examples: int) -> list[str]:
+    """Run ``examples`` mutated OBJs; return "ok" or "refused" per file."""
     from crackbake.pipeline import run
 
     seen: list[str] = []
 
-    @settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
+    @settings(max_examples=examples, deadline=None, derandomize=True, database=None,
               suppress_health_check=list(HealthCheck))
     @given(mutated_obj())
     def one(data: bytes) -> None:
@@ -105,10 +106,22 @@ def test_mutated_objs_run_or_fail_cleanly(tmp_path):
 
     one()
     print(f"fuzz: {len(seen)} files, {seen.count('ok')} ran, {seen.count('refused')} refused")
+    return seen
+
+
+@pytest.mark.slow  # about 25-40 s on two busy cores
+def test_mutated_objs_run_or_fail_cleanly(tmp_path):
+    seen = _fuzz(tmp_path, EXAMPLES)
     assert len(seen) >= min(300, EXAMPLES)
     # The mutations must reach both outcomes, or the test proves nothing.
     assert seen.count("ok") >= 30 and seen.count("refused") >= 30, (
         seen.count("ok"), seen.count("refused"))
+
+
+def test_mutated_objs_quick(tmp_path):
+    """The first 40 files of the same search, for the quick suite."""
+    seen = _fuzz(tmp_path, 40)
+    assert len(seen) >= 40 and "ok" in seen and "refused" in seen
 
 
 @pytest.mark.parametrize("data", [BASE, b"\xef\xbb\xbf" + BASE, BASE.replace(b"\n", b"\r\n")],
