@@ -1,6 +1,6 @@
 #version 430 core
 // Measures, in world units, the distance from this texel's surface point to the crack segments
-// listed for its asset face, and turns it into the crack channels.  Working in world space makes
+// listed for its face's bin (crackbake/bake/grid.py), and turns it into the crack channels.  Working in world space makes
 // the width independent of UV stretch and continuous across UV seams.
 
 struct Segment {
@@ -11,8 +11,9 @@ struct Segment {
 };
 
 layout(std430, binding = 0) readonly buffer Segments { Segment seg[]; };
-layout(std430, binding = 1) readonly buffer FaceStart { uint face_start[]; };
-layout(std430, binding = 2) readonly buffer Candidates { uint cand[]; };
+layout(std430, binding = 1) readonly buffer FaceBin { uint face_bin[]; };
+layout(std430, binding = 2) readonly buffer BinStart { uint bin_start[]; };
+layout(std430, binding = 3) readonly buffer Candidates { uint cand[]; };
 
 uniform float u_max_distance;   // distance channel clamp, mesh units
 uniform float u_shape;          // depth profile exponent: 1 = V, < 1 fuller (U-like), > 1 sharper
@@ -29,7 +30,7 @@ layout(location = 5) out float o_id;        // R32F
 layout(location = 6) out float o_inside;    // R8
 
 void main() {
-    uint f = uint(gl_PrimitiveID);
+    uint bin = face_bin[uint(gl_PrimitiveID)];
     vec3 p = v_world;
     // World-space footprint of one texel; the surface is affine inside a face.
     vec3 dpx = dFdx(p);
@@ -43,7 +44,7 @@ void main() {
     float coverage = 0.0;
     float depth = 0.0;
 
-    for (uint k = face_start[f]; k < face_start[f + 1u]; ++k) {
+    for (uint k = bin_start[bin]; k < bin_start[bin + 1u]; ++k) {
         Segment s = seg[cand[k]];
         vec3 ab = s.b.xyz - s.a.xyz;
         float len2 = dot(ab, ab);

@@ -1,8 +1,8 @@
 """GPU bake of a crack network into UV-space texture maps.
 
 The asset's faces are drawn at their UV positions; every fragment knows its world position and
-its face, loops over the crack segments listed for that face and measures world-space distances.
-So widths are in mesh units whatever the UV stretch, and a crack crossing a UV seam continues on
+its face, loops over the crack segments listed for the face's bin (:mod:`crackbake.bake.grid`:
+nearby faces share one list, so memory stays linear) and measures world-space distances.  So widths are in mesh units whatever the UV stretch, and a crack crossing a UV seam continues on
 both islands.  Large images are drawn in tiles, and empty texels are then filled from their
 nearest island (dilation) so bilinear filtering and mip-maps never pull in background.
 
@@ -16,10 +16,10 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from crackbake.bake.context import GLScope, shader_source
 from crackbake.bake.dilation import dilate
+from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import TILE_DEFAULT
@@ -84,68 +84,6 @@ class CrackMaps:
             "crack.distance": self.distance,
             "crack.id": self.crack_id,
         }
-
-
-def face_candidates(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    uv: np.ndarray,
-    segments: Segments,
-    res: int,
-    max_distance: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-face lists of the crack segments that can influence the face's texels.
-
-    A segment is listed for a face when their bounding spheres come within the face's reach:
-    the distance clamp, or the widest crack's half width plus the face's largest texel footprint
-    (so the anti-aliasing ramp is never cut off).
-
-    Returns
-    -------
-    face_start : (F + 1,) uint32
-        Candidates of face ``f`` are ``candidates[face_start[f]:face_start[f + 1]]``.
-    candidates : (K,) uint32
-        Segment indices, ascending within each face.
-    """
-    n_faces = len(faces)
-    if len(segments.a) == 0:
-        return np.zeros(n_faces + 1, np.uint32), np.zeros(1, np.uint32)
-    tri = vertices[faces]
-    centre = tri.mean(axis=1)
-    radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
-
-    # Largest world length of one texel along any edge of the face (handles stretched UVs).
-    tuv = uv[faces] * res
-    edge_world = np.linalg.norm(np.roll(tri, -1, axis=1) - tri, axis=2)
-    edge_uv = np.linalg.norm(np.roll(tuv, -1, axis=1) - tuv, axis=2)
-    texel = np.max(edge_world / np.maximum(edge_uv, 1e-9), axis=1)
-    texel = np.minimum(texel, radius * 2 + 1e-12)  # UV-degenerate faces get no texels anyway
-
-    half_width = 0.5 * float(segments.width.max())
-    reach = np.maximum(max_distance, half_width + 1.5 * texel)
-
-    mid = 0.5 * (segments.a + segments.b)
-    half_len = 0.5 * np.linalg.norm(segments.b - segments.a, axis=1)
-    tree = cKDTree(mid)
-    hits = tree.query_ball_point(
-        centre, radius + reach + half_len.max(), workers=-1, return_sorted=False
-    )
-    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=n_faces)
-    seg_idx = np.fromiter(
-        (i for h in hits for i in h), dtype=np.int64, count=int(counts.sum())
-    )
-    face_idx = np.repeat(np.arange(n_faces), counts)
-    keep = np.linalg.norm(centre[face_idx] - mid[seg_idx], axis=1) <= (
-        radius[face_idx] + reach[face_idx] + half_len[seg_idx]
-    )
-    face_idx, seg_idx = face_idx[keep], seg_idx[keep]
-    order = np.lexsort((seg_idx, face_idx))
-    face_idx, seg_idx = face_idx[order], seg_idx[order]
-    face_start = np.zeros(n_faces + 1, np.int64)
-    np.cumsum(np.bincount(face_idx, minlength=n_faces), out=face_start[1:])
-    if len(seg_idx) == 0:
-        seg_idx = np.zeros(1, np.int64)  # GL refuses empty buffers
-    return face_start.astype(np.uint32), seg_idx.astype(np.uint32)
 
 
 def _segment_buffer(segments: Segments) -> np.ndarray:
@@ -218,11 +156,11 @@ def bake_cracks(
         raise CrackbakeError(f"profile shape {profile_shape} must be > 0 (1 = V profile)")
     max_distance = _max_distance(vertices, segments, max_distance)
 
-    face_start, cand = face_candidates(vertices, faces, uv, segments, res, max_distance)
+    bins = face_bins(vertices, faces, uv, segments, res, max_distance)
     timings["candidates"] = time.perf_counter() - t0
 
     images = _render(
-        ctx, vertices, faces, uv, segments, res, tile, face_start, cand,
+        ctx, vertices, faces, uv, segments, res, tile, bins,
         float(max_distance), float(profile_shape), timings,
     )  # fmt: skip
 
@@ -237,8 +175,7 @@ def _render(
     segments: Segments,
     res: int,
     tile: int,
-    face_start: np.ndarray,
-    cand: np.ndarray,
+    bins: FaceBins,
     max_distance: float,
     profile_shape: float,
     timings: dict[str, float],
@@ -249,20 +186,25 @@ def _render(
     with GLScope(ctx) as gl:
         ctx = gl.ctx
         t1 = time.perf_counter()
-        # Non-indexed corners so gl_PrimitiveID is the face index.
-        corner = np.empty((len(faces) * 3, 5), np.float32)
-        corner[:, 0:2] = uv[faces].reshape(-1, 2)
-        corner[:, 2:5] = vertices[faces].reshape(-1, 3)
+        vertex = np.empty((len(vertices), 5), np.float32)
+        vertex[:, 0:2] = uv
+        vertex[:, 2:5] = vertices
         prog = gl.keep(
             ctx.program(
                 vertex_shader=shader_source("crack_bake.vert"),
                 fragment_shader=shader_source("crack_bake.frag"),
             )
         )
-        vbo = gl.keep(ctx.buffer(corner.tobytes()))
-        vao = gl.keep(ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")]))
-        for binding, data in enumerate((_segment_buffer(segments), face_start, cand)):
-            gl.keep(ctx.buffer(data.tobytes())).bind_to_storage_buffer(binding)
+        vbo = gl.keep(ctx.buffer(vertex))
+        ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
+        del vertex
+        vao = gl.keep(
+            ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
+                             index_element_size=4)
+        )  # fmt: skip
+        buffers = (_segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates)
+        for binding, data in enumerate(buffers):
+            gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
         prog["u_res"].value = float(res)
         prog["u_max_distance"].value = max_distance
         prog["u_shape"].value = profile_shape
