@@ -11,7 +11,9 @@ widest crack plus one texel footprint (the anti-aliasing ramp).  The footprint o
 Frobenius norm of its texel-to-world Jacobian, which bounds the footprint the shader measures along
 any direction.  A bin lists every segment whose bounding box comes within the largest reach of its
 faces of the bin's bounding box, so its list holds every segment that can matter to its texels,
-ascending, and the shader's walk in list order keeps the nearest segment with the lowest index.
+with a lower bound of its distance to the bin.  Lists run in ascending bound, so the shader stops
+as soon as the bound passes both the nearest crack found and the anti-aliasing reach; it keeps
+the nearest segment with the lowest index on ties, so the maps do not depend on the list order.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from numba import njit, prange
 from crackbake.network import Segments
 
 #: Bin edge (smallest level) as a fraction of the distance clamp.
-BIN_PER_REACH = 0.5
+BIN_PER_REACH = 0.25
 #: Relative slack on reaches, covering float32 rounding in the shader.
 _SLACK = 1e-3
 
@@ -40,13 +42,17 @@ class FaceBins:
     bin_start : (B + 1,) uint32
         Candidates of bin ``b`` are ``candidates[bin_start[b]:bin_start[b + 1]]``.
     candidates : (K,) uint32
-        Segment indices, ascending within each bin (one entry at least: GL refuses empty
-        buffers).
+        Segment indices (one entry at least: GL refuses empty buffers), each bin's in ascending
+        ``bounds`` order, ties in ascending index.
+    bounds : (K,) float32
+        A lower bound, mesh units, on the distance from any point of the bin's faces to the
+        segment: the shader stops its walk once the bound passes what can still matter.
     """
 
     face_bin: np.ndarray
     bin_start: np.ndarray
     candidates: np.ndarray
+    bounds: np.ndarray
 
 
 def face_reach(
@@ -93,7 +99,7 @@ def bin_faces(vertices: np.ndarray, faces: np.ndarray, cell: float, size: np.nda
     level = np.ceil(np.log2(np.maximum(size / cell, 1.0))).astype(np.int64)
     level = np.minimum(level, 40)
     origin = vertices.min(axis=0)
-    idx = np.floor((0.5 * (lo + hi) - origin) / (cell * 2.0 ** level)[:, None]).astype(np.int64)
+    idx = np.floor((0.5 * (lo + hi) - origin) / (cell * 2.0**level)[:, None]).astype(np.int64)
     idx = np.clip(idx, 0, (1 << 18) - 1)  # the caller keeps cells >= extent / 2**16
     key = ((level << 18 | idx[:, 0]) << 18 | idx[:, 1]) << 18 | idx[:, 2]
     return np.unique(key, return_inverse=True)[1].reshape(-1)
@@ -127,7 +133,7 @@ def face_bins(
     n_faces = len(faces)
     if len(segments.a) == 0 or n_faces == 0:
         return FaceBins(np.zeros(n_faces, np.uint32), np.zeros(2, np.uint32),
-                        np.zeros(1, np.uint32))  # fmt: skip
+                        np.zeros(1, np.uint32), np.zeros(1, np.float32))  # fmt: skip
     half_width = 0.5 * float(segments.width.max())
     reach = face_reach(vertices, faces, uv, res, max_distance, half_width)
     extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
@@ -141,19 +147,22 @@ def face_bins(
     bin_lo = np.minimum.reduceat(tri.min(axis=1), first, axis=0)
     bin_hi = np.maximum.reduceat(tri.max(axis=1), first, axis=0)
     # float32 positions in the shader are off by about 1e-7 of their magnitude.
-    bin_reach = np.maximum.reduceat(reach[order], first) + 1e-6 * float(np.abs(vertices).max())
+    slack = 1e-6 * float(np.abs(vertices).max()) + _SLACK * max_distance
+    bin_reach = np.maximum.reduceat(reach[order], first) + slack
     del tri
 
     a, b = np.asarray(segments.a, np.float64), np.asarray(segments.b, np.float64)
     seg_lo, seg_hi = np.minimum(a, b), np.maximum(a, b)
     grid = _segment_grid(seg_lo, seg_hi, cell)
     args = (bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, *grid)
-    counts = _bin_candidates(*args, np.zeros(1, np.int64), np.zeros(0, np.uint32), False)
+    empty = np.zeros(0, np.uint32), np.zeros(0, np.float32)
+    counts = _bin_candidates(*args, np.zeros(1, np.int64), *empty, 0.0, False)
     bin_start = np.zeros(len(first) + 1, np.int64)
     np.cumsum(counts, out=bin_start[1:])
     candidates = np.zeros(max(int(bin_start[-1]), 1), np.uint32)
-    _bin_candidates(*args, bin_start, candidates, True)
-    return FaceBins(face_bin.astype(np.uint32), bin_start.astype(np.uint32), candidates)
+    bounds = np.zeros(len(candidates), np.float32)
+    _bin_candidates(*args, bin_start, candidates, bounds, slack, True)
+    return FaceBins(face_bin.astype(np.uint32), bin_start.astype(np.uint32), candidates, bounds)
 
 
 def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
@@ -171,9 +180,11 @@ def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
     seg = np.repeat(np.arange(len(seg_lo), dtype=np.int64), count)
     local = np.arange(len(seg), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
     sx, sy = span[seg, 0], span[seg, 1]
-    flat = ((c0[seg, 2] + local // (sx * sy)) * dims[1] + c0[seg, 1] + (local // sx) % sy) * dims[
-        0
-    ] + c0[seg, 0] + local % sx
+    flat = (
+        ((c0[seg, 2] + local // (sx * sy)) * dims[1] + c0[seg, 1] + (local // sx) % sy) * dims[0]
+        + c0[seg, 0]
+        + local % sx
+    )
     order = np.argsort(flat, kind="stable")
     n_cells = int(np.prod(dims))
     cell_start = np.zeros(n_cells + 1, np.int64)
@@ -184,9 +195,9 @@ def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
 @njit(parallel=True, cache=True)
 def _bin_candidates(
     bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, origin, cell, dims, cell_start, cell_items,
-    bin_start, out, fill,
+    bin_start, out, bound, slack, fill,
 ):  # fmt: skip
-    """Count (``fill`` False) or write (True) each bin's segments, ascending and unique."""
+    """Count (``fill`` False) or write (True) each bin's segments and their distance bounds."""
     n_bins = bin_lo.shape[0]
     counts = np.zeros(n_bins, np.int64)
     for bi in prange(n_bins):
@@ -210,6 +221,7 @@ def _bin_candidates(
                     c = (z * dims[1] + y) * dims[0] + x
                     n += cell_start[c + 1] - cell_start[c]
         found = np.empty(n, np.int64)
+        gaps = np.empty(n, np.float64)
         m = 0
         r2 = r * r
         for z in range(c0[2], c1[2] + 1):
@@ -225,13 +237,22 @@ def _bin_candidates(
                                 gap2 += g * g
                         if gap2 <= r2:
                             found[m] = s
+                            gaps[m] = gap2
                             m += 1
-        found = np.sort(found[:m])
+        by_index = np.argsort(found[:m])
+        keep = np.empty(m, np.int64)
         u = 0
         for j in range(m):
-            if j == 0 or found[j] != found[j - 1]:
-                if fill:
-                    out[bin_start[bi] + u] = found[j]
+            if j == 0 or found[by_index[j]] != found[by_index[j - 1]]:
+                keep[u] = by_index[j]
                 u += 1
         counts[bi] = u
+        if fill:
+            keep = keep[:u]
+            # mergesort is stable: equal bounds keep ascending segment order.
+            order = np.argsort(gaps[keep], kind="mergesort")
+            for j in range(u):
+                e = keep[order[j]]
+                out[bin_start[bi] + j] = found[e]
+                bound[bin_start[bi] + j] = max(np.sqrt(gaps[e]) - slack, 0.0)
     return counts

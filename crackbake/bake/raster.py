@@ -1,10 +1,12 @@
 """GPU bake of a crack network into UV-space texture maps.
 
-The asset's faces are drawn at their UV positions; every fragment knows its world position and
-its face, loops over the crack segments listed for the face's bin (:mod:`crackbake.bake.grid`:
-nearby faces share one list, so memory stays linear) and measures world-space distances.  So widths are in mesh units whatever the UV stretch, and a crack crossing a UV seam continues on
-both islands.  Large images are drawn in tiles, and empty texels are then filled from their
-nearest island (dilation) so bilinear filtering and mip-maps never pull in background.
+The asset's faces are drawn at their UV positions in two passes: the first records each texel's
+world position, texel footprint and face bin; the second, once per texel, loops over the crack
+segments listed for that bin (:mod:`crackbake.bake.grid`: nearby faces share one list, so memory
+stays linear in faces + segments) and measures world-space distances.  So widths are in mesh
+units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
+images are drawn in bands, and empty texels are then filled from their nearest island
+(dilation) so bilinear filtering and mip-maps never pull in background.
 
 All returned images have row 0 at the top (UV v = 1), the order image files store.
 """
@@ -136,7 +138,7 @@ def bake_cracks(
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
         Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
-        texels (19 bytes each on the GL side).
+        texels (67 bytes each on the GL side).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
 
@@ -189,9 +191,15 @@ def _render(
         vertex = np.empty((len(vertices), 5), np.float32)
         vertex[:, 0:2] = uv
         vertex[:, 2:5] = vertices
-        prog = gl.keep(
+        surface = gl.keep(
             ctx.program(
                 vertex_shader=shader_source("crack_bake.vert"),
+                fragment_shader=shader_source("crack_surface.frag"),
+            )
+        )
+        prog = gl.keep(
+            ctx.program(
+                vertex_shader=shader_source("crack_screen.vert"),
                 fragment_shader=shader_source("crack_bake.frag"),
             )
         )
@@ -199,18 +207,23 @@ def _render(
         ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
         del vertex
         vao = gl.keep(
-            ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
+            ctx.vertex_array(surface, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
                              index_element_size=4)
         )  # fmt: skip
-        buffers = (_segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates)
+        screen = gl.keep(ctx.vertex_array(prog, []))
+        buffers = (
+            _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
+        )
         for binding, data in enumerate(buffers):
             gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
-        prog["u_res"].value = float(res)
+        surface["u_res"].value = float(res)
         prog["u_max_distance"].value = max_distance
+        prog["u_half_width"].value = 0.5 * float(segments.width.max()) if len(segments.a) else 0.0
         prog["u_shape"].value = profile_shape
 
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
-        # of the planar channel images (no interleaved copy), and GL memory stays bounded.
+        # of the planar channel images (no interleaved copy), and GL memory stays bounded
+        # (67 bytes a texel: 48 for the surface pass, 19 for the maps).
         band = max(1, min(res, (tile * tile) // res))
         names = ("mask", "width", "time", "depth", "distance", "id", "inside")
         dtypes = ("f2", "f2", "f2", "f4", "f4", "f4", "f1")
@@ -218,18 +231,25 @@ def _render(
             n: np.empty((res, res), {"f1": np.uint8, "f2": np.float16, "f4": np.float32}[d])
             for n, d in zip(names, dtypes, strict=True)
         }
+        gbuffer = [gl.keep(ctx.texture((res, band), 4, dtype="f4")) for _ in range(3)]
+        for unit, tex in enumerate(gbuffer):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            tex.use(unit)
+        gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer))
         textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
         fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
-        fbo.use()
         ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
         timings["setup"] = time.perf_counter() - t1
         t_draw = t_read = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
-            fbo.clear(0.0, 0.0, 0.0, 0.0)
-            prog["u_tile"].value = (0.0, float(y0), float(res), float(band))
+            gfbo.use()
+            gfbo.clear(0.0, 0.0, 0.0, 0.0)
+            surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
             vao.render(moderngl.TRIANGLES)
+            fbo.use()
+            screen.render(moderngl.TRIANGLES, vertices=3)
             ctx.finish()
             tb = time.perf_counter()
             for k, (n, d) in enumerate(zip(names, dtypes, strict=True)):
