@@ -68,37 +68,38 @@ def face_reach(
         texel-to-world Jacobian (0 for faces of no UV area: they draw no texels), plus a small
         slack.
     """
-    tri = vertices[faces]
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    tuv = uv[faces] * res
-    q1, q2 = tuv[:, 1] - tuv[:, 0], tuv[:, 2] - tuv[:, 0]
+    # Corner columns, not (F, 3, 3) gathers: numpy reduces those slowly along the short axis.
+    p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
+    e1, e2 = p1 - p0, p2 - p0
+    del p0, p1, p2
+    t0, t1, t2 = (uv[faces[:, k]] * res for k in range(3))
+    q1, q2 = t1 - t0, t2 - t0
     det = q1[:, 0] * q2[:, 1] - q1[:, 1] * q2[:, 0]
     # J = [e1 e2] [q1 q2]^-1, columns d(world)/d(texel x), d(world)/d(texel y).
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         dpx = (e1 * q2[:, 1:2] - e2 * q1[:, 1:2]) / det[:, None]
         dpy = (e2 * q1[:, 0:1] - e1 * q2[:, 0:1]) / det[:, None]
-        foot = np.sqrt((dpx**2).sum(axis=1) + (dpy**2).sum(axis=1))
+        foot = np.sqrt(np.einsum("ij,ij->i", dpx, dpx) + np.einsum("ij,ij->i", dpy, dpy))
     # A face with no UV area draws no texels: its reach never matters.
     foot = np.where(np.isfinite(foot), foot, 0.0)
     return np.maximum(max_distance, half_width + foot) * (1 + _SLACK)
 
 
-def bin_faces(vertices: np.ndarray, faces: np.ndarray, cell: float, size: np.ndarray) -> np.ndarray:
-    """Bin of each face: the cell holding its centroid, in a grid as coarse as ``size``.
+def bin_faces(lo: np.ndarray, hi: np.ndarray, cell: float, size: np.ndarray) -> np.ndarray:
+    """Bin of each face (bounding box ``lo``, ``hi``: (F, 3)): the cell holding its box centre,
+    in a grid as coarse as ``size``.
 
-    ``size`` (F,) is the face's extent or reach, whichever is larger, so that neither a big
-    face nor one stretched in UV (a large texel footprint) widens the list of many small ones.
+    ``size`` (F,) is the face's extent, or its reach beyond the clamp where larger, so that
+    neither a big face nor one stretched in UV widens the list of many small ones.
 
     Returns
     -------
     (F,) int64
         Bin indices ``0..B-1``, numbered in order of their (level, cell) key.
     """
-    tri = vertices[faces]
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
     level = np.ceil(np.log2(np.maximum(size / cell, 1.0))).astype(np.int64)
     level = np.minimum(level, 40)
-    origin = vertices.min(axis=0)
+    origin = lo.min(axis=0)
     idx = np.floor((0.5 * (lo + hi) - origin) / (cell * 2.0**level)[:, None]).astype(np.int64)
     idx = np.clip(idx, 0, (1 << 18) - 1)  # the caller keeps cells >= extent / 2**16
     key = ((level << 18 | idx[:, 0]) << 18 | idx[:, 1]) << 18 | idx[:, 2]
@@ -138,18 +139,21 @@ def face_bins(
     reach = face_reach(vertices, faces, uv, res, max_distance, half_width)
     extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
     cell = max(BIN_PER_REACH * max(max_distance, half_width), extent / 2**16, 1e-30)
-    size = np.maximum(np.ptp(vertices[faces], axis=1).max(axis=1), reach)
-    face_bin = bin_faces(vertices, faces, cell, size)
+    # A face's bin grows with its extent and with the part of its reach above the clamp (a face
+    # stretched in UV has a wide texel footprint), never with the clamp itself.
+    excess = reach / (1 + _SLACK) - max(max_distance, half_width)
+    lo, hi = _face_boxes(vertices, faces)
+    size = np.maximum((hi - lo).max(axis=1), excess)
+    face_bin = bin_faces(lo, hi, cell, size)
 
     order = np.argsort(face_bin, kind="stable")
     first = np.flatnonzero(np.r_[True, np.diff(face_bin[order]) != 0])
-    tri = vertices[faces[order]]
-    bin_lo = np.minimum.reduceat(tri.min(axis=1), first, axis=0)
-    bin_hi = np.maximum.reduceat(tri.max(axis=1), first, axis=0)
+    bin_lo = np.minimum.reduceat(lo[order], first, axis=0)
+    bin_hi = np.maximum.reduceat(hi[order], first, axis=0)
     # float32 positions in the shader are off by about 1e-7 of their magnitude.
     slack = 1e-6 * float(np.abs(vertices).max()) + _SLACK * max_distance
     bin_reach = np.maximum.reduceat(reach[order], first) + slack
-    del tri
+    del lo, hi
 
     a, b = np.asarray(segments.a, np.float64), np.asarray(segments.b, np.float64)
     seg_lo, seg_hi = np.minimum(a, b), np.maximum(a, b)
@@ -163,6 +167,12 @@ def face_bins(
     bounds = np.zeros(len(candidates), np.float32)
     _bin_candidates(*args, bin_start, candidates, bounds, slack, True)
     return FaceBins(face_bin.astype(np.uint32), bin_start.astype(np.uint32), candidates, bounds)
+
+
+def _face_boxes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World bounding box (lo, hi), each (F, 3), of every face."""
+    p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
+    return np.minimum(np.minimum(p0, p1), p2), np.maximum(np.maximum(p0, p1), p2)
 
 
 def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
