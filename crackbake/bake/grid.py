@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from crackbake.network import Segments
 
@@ -202,7 +202,7 @@ def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
     return origin, float(cell), dims, cell_start, seg[order]
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True)
 def _bin_candidates(
     bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, origin, cell, dims, cell_start, cell_items,
     bin_start, out, bound, slack, fill,
@@ -210,7 +210,7 @@ def _bin_candidates(
     """Count (``fill`` False) or write (True) each bin's segments and their distance bounds."""
     n_bins = bin_lo.shape[0]
     counts = np.zeros(n_bins, np.int64)
-    for bi in prange(n_bins):
+    for bi in range(n_bins):
         r = bin_reach[bi]
         c0 = np.empty(3, np.int64)
         c1 = np.empty(3, np.int64)
