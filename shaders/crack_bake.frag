@@ -1,6 +1,7 @@
 #version 430 core
-// Measures, in world units, the distance from this texel's surface point to the crack segments
-// listed for its asset face, and turns it into the crack channels.  Working in world space makes
+// Second bake pass, once per texel: measures, in world units, the distance from the texel's surface
+// point (recorded by crack_surface.frag) to the crack segments listed for its face's bin
+// (crackbake/bake/grid.py), and turns it into the crack channels.  Working in world space makes
 // the width independent of UV stretch and continuous across UV seams.
 
 struct Segment {
@@ -11,13 +12,17 @@ struct Segment {
 };
 
 layout(std430, binding = 0) readonly buffer Segments { Segment seg[]; };
-layout(std430, binding = 1) readonly buffer FaceStart { uint face_start[]; };
-layout(std430, binding = 2) readonly buffer Candidates { uint cand[]; };
+layout(std430, binding = 2) readonly buffer BinStart { uint bin_start[]; };
+layout(std430, binding = 3) readonly buffer Candidates { uint cand[]; };
+layout(std430, binding = 4) readonly buffer Bounds { float cand_bound[]; };  // ascending per bin
 
 uniform float u_max_distance;   // distance channel clamp, mesh units
+uniform float u_half_width;     // half the widest crack's width, mesh units
 uniform float u_shape;          // depth profile exponent: 1 = V, < 1 fuller (U-like), > 1 sharper
 
-in vec3 v_world;
+layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
+layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
+layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y
 
 // One single-channel target per map, so each reads back straight into its own image.
 layout(location = 0) out float o_mask;      // R16F
@@ -29,11 +34,20 @@ layout(location = 5) out float o_id;        // R32F
 layout(location = 6) out float o_inside;    // R8
 
 void main() {
-    uint f = uint(gl_PrimitiveID);
-    vec3 p = v_world;
+    ivec2 texel = ivec2(gl_FragCoord.xy);
+    vec4 point = texelFetch(u_point, texel, 0);
+    vec4 gx = texelFetch(u_dpx, texel, 0);
+    if (gx.w == 0.0) {
+        // No face here: the background the gutter fill replaces.
+        o_mask = 0.0; o_width = 0.0; o_time = 0.0; o_depth = 0.0;
+        o_distance = 0.0; o_id = 0.0; o_inside = 0.0;
+        return;
+    }
+    uint bin = uint(point.w);
+    vec3 p = point.xyz;
     // World-space footprint of one texel; the surface is affine inside a face.
-    vec3 dpx = dFdx(p);
-    vec3 dpy = dFdy(p);
+    vec3 dpx = gx.xyz;
+    vec3 dpy = texelFetch(u_dpy, texel, 0).xyz;
     float texel_iso = 0.5 * (length(dpx) + length(dpy));
 
     float best_d = u_max_distance;
@@ -43,8 +57,15 @@ void main() {
     float coverage = 0.0;
     float depth = 0.0;
 
-    for (uint k = face_start[f]; k < face_start[f + 1u]; ++k) {
-        Segment s = seg[cand[k]];
+    // Farther than this a segment adds no coverage or depth: the ramp ends within half a width
+    // plus one footprint, and the footprint along any direction is at most |(|dpx|, |dpy|)|.
+    float cover_reach = u_half_width + length(vec2(length(dpx), length(dpy)));
+    int best_seg = -1;
+    for (uint k = bin_start[bin]; k < bin_start[bin + 1u]; ++k) {
+        // Segments come nearest-bound first: the rest cannot be nearer or add coverage.
+        if (cand_bound[k] > max(best_d, cover_reach)) break;
+        uint si = cand[k];
+        Segment s = seg[si];
         vec3 ab = s.b.xyz - s.a.xyz;
         float len2 = dot(ab, ab);
         float t = len2 > 0.0 ? clamp(dot(p - s.a.xyz, ab) / len2, 0.0, 1.0) : 0.0;
@@ -78,7 +99,9 @@ void main() {
         }
         coverage = max(coverage, c);
         depth = max(depth, dd);
-        if (d < best_d) {
+        // Ties go to the lowest index, so the result does not depend on the list order.
+        if (d < best_d || (d == best_d && best_seg >= 0 && int(si) < best_seg)) {
+            best_seg = int(si);
             best_d = d;
             best_w = w;
             best_time = mix(s.dt.z, s.dt.w, t);

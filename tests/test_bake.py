@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import plate_mesh
 
 from crackbake.bake.dilation import dilate, nearest_island
-from crackbake.bake.raster import bake_cracks, face_candidates
+from crackbake.bake.grid import face_bins, face_reach
+from crackbake.bake.raster import bake_cracks
 from crackbake.errors import CrackbakeError
 from crackbake.network import Segments
 
@@ -181,29 +184,63 @@ def test_tiled_bake_matches_single_pass(gl_ctx):
         )
 
 
-def test_face_candidates_cover_every_segment_within_reach():
+def _point_segment_distance(p, a, b):
+    ab = b - a
+    t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300), 0, 1)
+    return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
+
+
+def test_face_bins_list_every_segment_within_reach_with_valid_bounds():
+    # A 20 x 20 plate of 800 faces, some stretched in UV, and 300 short segments on it.
     rng = np.random.default_rng(0)
-    v, f, uv = plate(lambda x, y: (x, y))
-    a = rng.random((200, 3)) * [1, 1, 0]
-    b = a + (rng.random((200, 3)) - 0.5) * 0.05 * [1, 1, 0]
-    segs = make_segments(a, b, width=0.001)
-    start, cand = face_candidates(v, f, uv, segs, 256, max_distance=0.05)
-    assert start[0] == 0 and start[-1] == len(cand) or (start[-1] == 0 and len(cand) == 1)
-    # Every segment lies on the plate, so both faces must list those within reach of them.
-    for face in range(2):
-        listed = set(cand[start[face] : start[face + 1]].tolist())
-        tri = v[f[face]][:, :2]
-        mid = 0.5 * (a + b)[:, :2]
+    m = plate_mesh(20)
+    v, f = m.vertices, m.faces
+    uv = v[:, :2] * [1.0, 0.25]  # v squashed 4x: footprints differ along x and y
+    a = rng.random((300, 3)) * [1, 1, 0]
+    b = a + (rng.random((300, 3)) - 0.5) * 0.05 * [1, 1, 0]
+    segs = make_segments(a, b, width=rng.random((300, 2)) * 0.004)
+    bins = face_bins(v, f, uv, segs, 256, max_distance=0.05)
+    reach = face_reach(v, f, uv, 256, 0.05, 0.5 * float(segs.width.max()))
+    assert len(bins.face_bin) == len(f) and bins.bin_start[-1] == len(bins.candidates)
+    n_bins = len(bins.bin_start) - 1
+    assert 1 < n_bins < len(f)  # faces share lists
+    # Sample points on every face: each segment within the face's reach of one is listed in the
+    # face's bin, with a bound no larger than its distance; lists run in ascending bound.
+    w = rng.dirichlet([1, 1, 1], size=(len(f), 8))
+    pts = np.einsum("fkc,fcd->fkd", w, v[f])
+    d = _point_segment_distance(pts[:, :, None, :], a[None, None], b[None, None])
+    for face in range(len(f)):
+        k0, k1 = bins.bin_start[bins.face_bin[face]], bins.bin_start[bins.face_bin[face] + 1]
+        listed = bins.candidates[k0:k1].astype(int)
+        bound = bins.bounds[k0:k1]
+        assert np.all(np.diff(bound) >= 0)
+        near = np.flatnonzero((d[face] < reach[face]).any(axis=0))
+        assert set(near.tolist()) <= set(listed.tolist())
+        closest = d[face][:, listed].min(axis=0)
+        assert np.all(bound <= closest + 1e-7)
 
-        def side(p, q, pts):
-            return (q[0] - p[0]) * (pts[:, 1] - p[1]) - (q[1] - p[1]) * (pts[:, 0] - p[0])
 
-        inside = (
-            (side(tri[0], tri[1], mid) >= 0)
-            & (side(tri[1], tri[2], mid) >= 0)
-            & (side(tri[2], tri[0], mid) >= 0)
-        )
-        assert set(np.flatnonzero(inside).tolist()) <= listed
+def test_bake_matches_a_cpu_reference_of_the_nearest_crack(gl_ctx):
+    # Many segments on a finely tessellated plate: the shader's early stop in the bins' lists
+    # must still find the nearest segment of every texel (distance and id channels).
+    rng = np.random.default_rng(4)
+    m = plate_mesh(16)
+    v, f, uv = m.vertices, m.faces, m.vertices[:, :2].copy()
+    a = rng.random((120, 3)) * [1, 1, 0]
+    b = a + (rng.random((120, 3)) - 0.5) * 0.1 * [1, 1, 0]
+    segs = make_segments(a, b, width=0.002)
+    res = 128
+    maps = bake_cracks(v, f, uv, segs, res, max_distance=0.08, ctx=gl_ctx)
+    ys, xs = np.mgrid[0:res, 0:res]
+    p = np.stack([(xs + 0.5) / res, 1 - (ys + 0.5) / res, np.zeros_like(xs, float)], -1)
+    sample = (slice(3, None, 7), slice(5, None, 7))
+    d = _point_segment_distance(p[sample][:, :, None, :], a, b)
+    nearest = d.min(axis=-1)
+    expect = np.minimum(nearest, 0.08)
+    np.testing.assert_allclose(maps.distance[sample], expect, atol=2e-6)
+    hit = nearest < 0.08 - 1e-5
+    assert hit.sum() > 100
+    assert np.array_equal(maps.crack_id[sample][hit], d.argmin(axis=-1)[hit])
 
 
 def test_nearest_island_matches_brute_force_and_scipy():
@@ -258,3 +295,106 @@ def test_no_cracks_bakes_clean_maps(gl_ctx):
     assert float(m.mask.max()) == 0
     assert (m.crack_id == -1).all()
     assert np.allclose(m.distance, 0.2)
+
+
+def _subdivided_spot(path, levels: int):
+    """examples/spot.obj split ``levels`` times into four (edge midpoints, UVs interpolated)."""
+    from crackbake.io.mesh import load_mesh
+
+    mesh = load_mesh(Path(__file__).resolve().parents[1] / "examples" / "spot.obj")
+    v, f, t = mesh.vertices, mesh.faces, mesh.uv
+    for _ in range(levels):
+        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        ab, bc, ca = (len(v) + inverse.reshape(3, -1)).reshape(3, -1)
+        v = np.concatenate([v, 0.5 * (v[unique[:, 0]] + v[unique[:, 1]])])
+        t = np.concatenate([t, 0.5 * (t[unique[:, 0]] + t[unique[:, 1]])])
+        a, b, c = f.T
+        f = np.concatenate([np.stack(q, -1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c),
+                                                       (ab, bc, ca))])  # fmt: skip
+    with open(path, "w") as fh:
+        np.savetxt(fh, v, fmt="v %.7f %.7f %.7f")
+        np.savetxt(fh, t, fmt="vt %.7f %.7f")
+        np.savetxt(fh, np.repeat(f + 1, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+    return len(f)
+
+
+# Runs the crackbake command in this child process and reports the RSS when the bake starts and
+# the peak while it runs (a sampling thread, switched by the pipeline's stage log lines).
+_STAGE_RSS = """
+import json, logging, os, sys, threading, time
+from crackbake.cli import main
+
+def rss():
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+state = {"stage": "", "start": 0, "peak": 0}
+def sample():
+    while True:
+        if state["stage"] == "bake":
+            state["peak"] = max(state["peak"], rss())
+        time.sleep(0.01)
+
+class Stage(logging.Handler):
+    def emit(self, record):
+        msg = record.getMessage()
+        if msg.startswith("baking "):
+            state["start"] = state["peak"] = rss()
+            state["stage"] = "bake"
+        elif msg.startswith("writing "):
+            state["peak"] = max(state["peak"], rss())
+            state["stage"] = "write"
+
+logging.getLogger("crackbake.pipeline").addHandler(Stage())
+threading.Thread(target=sample, daemon=True).start()
+try:
+    main(sys.argv[1:], standalone_mode=False)
+finally:
+    print(json.dumps(state))
+"""
+
+
+@pytest.mark.slow
+def test_bake_memory_grows_with_faces_and_texels_not_their_product(tmp_path):
+    # 375k faces under the crackle preset (about 15k crack segments).  Per-face candidate lists
+    # (the earlier bake) grew by 2.5 GB here; the bins' lists keep the bake near its images.
+    import json
+    import os
+    import subprocess
+    import sys
+
+    import OpenImageIO as oiio
+
+    n_faces = _subdivided_spot(tmp_path / "spot375k.obj", 3)
+    res = 1024
+    out = tmp_path / "out"
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    r = subprocess.run(
+        [sys.executable, "-c", _STAGE_RSS, str(tmp_path / "spot375k.obj"), "--preset", "crackle",
+         "--res", str(res), "--formats", "exr,png", "-o", str(out), "--quiet"],
+        capture_output=True, text=True, env=env, timeout=600,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    state = json.loads(r.stdout.strip().splitlines()[-1])
+    growth = state["peak"] - state["start"]
+    # Images: 19 bytes a texel in numpy, 67 in GL, about 30 in the gutter fill; faces: the
+    # vertex/index buffers and per-face arrays.  Generous, still 4x under the old growth.
+    bound = 256 * 2**20 + 200 * res * res + 600 * n_faces
+    print(f"bake grew {growth / 2**30:.3f} GiB (bound {bound / 2**30:.2f})")
+    assert state["start"] > 0  # the bake stage was seen
+    assert growth < bound, f"bake grew {growth / 2**30:.2f} GiB (bound {bound / 2**30:.2f})"
+
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["mesh"]["faces"] == n_faces and manifest["cracks"]["cracks"] > 50
+    exr = next(out.glob("*.exr"))
+    img = oiio.ImageBuf(str(exr))
+    assert img.spec().width == res and img.spec().height == res
+    names = list(img.spec().channelnames)
+    pixels = img.get_pixels(oiio.FLOAT)
+    mask = pixels[..., [i for i, n in enumerate(names) if "mask" in n.lower()][0]]
+    assert np.isfinite(pixels).all()
+    # Crackle cracks are thinner than a texel at 1024: coverage, not a solid line.
+    assert 0.005 < float((mask > 0).mean()) < 0.5  # a crack network, neither empty nor flooded
+    assert float(mask.max()) <= 1.0

@@ -1,10 +1,12 @@
 """GPU bake of a crack network into UV-space texture maps.
 
-The asset's faces are drawn at their UV positions; every fragment knows its world position and
-its face, loops over the crack segments listed for that face and measures world-space distances.
-So widths are in mesh units whatever the UV stretch, and a crack crossing a UV seam continues on
-both islands.  Large images are drawn in tiles, and empty texels are then filled from their
-nearest island (dilation) so bilinear filtering and mip-maps never pull in background.
+The asset's faces are drawn at their UV positions in two passes: the first records each texel's
+world position, texel footprint and face bin; the second, once per texel, loops over the crack
+segments listed for that bin (:mod:`crackbake.bake.grid`: nearby faces share one list, so memory
+stays linear in faces + segments) and measures world-space distances.  So widths are in mesh
+units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
+images are drawn in bands, and empty texels are then filled from their nearest island
+(dilation) so bilinear filtering and mip-maps never pull in background.
 
 All returned images have row 0 at the top (UV v = 1), the order image files store.
 """
@@ -16,10 +18,10 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from crackbake.bake.context import GLScope, shader_source
 from crackbake.bake.dilation import dilate
+from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import TILE_DEFAULT
@@ -86,68 +88,6 @@ class CrackMaps:
         }
 
 
-def face_candidates(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    uv: np.ndarray,
-    segments: Segments,
-    res: int,
-    max_distance: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-face lists of the crack segments that can influence the face's texels.
-
-    A segment is listed for a face when their bounding spheres come within the face's reach:
-    the distance clamp, or the widest crack's half width plus the face's largest texel footprint
-    (so the anti-aliasing ramp is never cut off).
-
-    Returns
-    -------
-    face_start : (F + 1,) uint32
-        Candidates of face ``f`` are ``candidates[face_start[f]:face_start[f + 1]]``.
-    candidates : (K,) uint32
-        Segment indices, ascending within each face.
-    """
-    n_faces = len(faces)
-    if len(segments.a) == 0:
-        return np.zeros(n_faces + 1, np.uint32), np.zeros(1, np.uint32)
-    tri = vertices[faces]
-    centre = tri.mean(axis=1)
-    radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
-
-    # Largest world length of one texel along any edge of the face (handles stretched UVs).
-    tuv = uv[faces] * res
-    edge_world = np.linalg.norm(np.roll(tri, -1, axis=1) - tri, axis=2)
-    edge_uv = np.linalg.norm(np.roll(tuv, -1, axis=1) - tuv, axis=2)
-    texel = np.max(edge_world / np.maximum(edge_uv, 1e-9), axis=1)
-    texel = np.minimum(texel, radius * 2 + 1e-12)  # UV-degenerate faces get no texels anyway
-
-    half_width = 0.5 * float(segments.width.max())
-    reach = np.maximum(max_distance, half_width + 1.5 * texel)
-
-    mid = 0.5 * (segments.a + segments.b)
-    half_len = 0.5 * np.linalg.norm(segments.b - segments.a, axis=1)
-    tree = cKDTree(mid)
-    hits = tree.query_ball_point(
-        centre, radius + reach + half_len.max(), workers=-1, return_sorted=False
-    )
-    counts = np.fromiter((len(h) for h in hits), dtype=np.int64, count=n_faces)
-    seg_idx = np.fromiter(
-        (i for h in hits for i in h), dtype=np.int64, count=int(counts.sum())
-    )
-    face_idx = np.repeat(np.arange(n_faces), counts)
-    keep = np.linalg.norm(centre[face_idx] - mid[seg_idx], axis=1) <= (
-        radius[face_idx] + reach[face_idx] + half_len[seg_idx]
-    )
-    face_idx, seg_idx = face_idx[keep], seg_idx[keep]
-    order = np.lexsort((seg_idx, face_idx))
-    face_idx, seg_idx = face_idx[order], seg_idx[order]
-    face_start = np.zeros(n_faces + 1, np.int64)
-    np.cumsum(np.bincount(face_idx, minlength=n_faces), out=face_start[1:])
-    if len(seg_idx) == 0:
-        seg_idx = np.zeros(1, np.int64)  # GL refuses empty buffers
-    return face_start.astype(np.uint32), seg_idx.astype(np.uint32)
-
-
 def _segment_buffer(segments: Segments) -> np.ndarray:
     n = max(len(segments.a), 1)
     buf = np.zeros((n, 4, 4), np.float32)
@@ -198,7 +138,7 @@ def bake_cracks(
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
         Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
-        texels (19 bytes each on the GL side).
+        texels (67 bytes each on the GL side).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
 
@@ -218,11 +158,11 @@ def bake_cracks(
         raise CrackbakeError(f"profile shape {profile_shape} must be > 0 (1 = V profile)")
     max_distance = _max_distance(vertices, segments, max_distance)
 
-    face_start, cand = face_candidates(vertices, faces, uv, segments, res, max_distance)
+    bins = face_bins(vertices, faces, uv, segments, res, max_distance)
     timings["candidates"] = time.perf_counter() - t0
 
     images = _render(
-        ctx, vertices, faces, uv, segments, res, tile, face_start, cand,
+        ctx, vertices, faces, uv, segments, res, tile, bins,
         float(max_distance), float(profile_shape), timings,
     )  # fmt: skip
 
@@ -237,8 +177,7 @@ def _render(
     segments: Segments,
     res: int,
     tile: int,
-    face_start: np.ndarray,
-    cand: np.ndarray,
+    bins: FaceBins,
     max_distance: float,
     profile_shape: float,
     timings: dict[str, float],
@@ -249,26 +188,42 @@ def _render(
     with GLScope(ctx) as gl:
         ctx = gl.ctx
         t1 = time.perf_counter()
-        # Non-indexed corners so gl_PrimitiveID is the face index.
-        corner = np.empty((len(faces) * 3, 5), np.float32)
-        corner[:, 0:2] = uv[faces].reshape(-1, 2)
-        corner[:, 2:5] = vertices[faces].reshape(-1, 3)
-        prog = gl.keep(
+        vertex = np.empty((len(vertices), 5), np.float32)
+        vertex[:, 0:2] = uv
+        vertex[:, 2:5] = vertices
+        surface = gl.keep(
             ctx.program(
                 vertex_shader=shader_source("crack_bake.vert"),
+                fragment_shader=shader_source("crack_surface.frag"),
+            )
+        )
+        prog = gl.keep(
+            ctx.program(
+                vertex_shader=shader_source("crack_screen.vert"),
                 fragment_shader=shader_source("crack_bake.frag"),
             )
         )
-        vbo = gl.keep(ctx.buffer(corner.tobytes()))
-        vao = gl.keep(ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")]))
-        for binding, data in enumerate((_segment_buffer(segments), face_start, cand)):
-            gl.keep(ctx.buffer(data.tobytes())).bind_to_storage_buffer(binding)
-        prog["u_res"].value = float(res)
+        vbo = gl.keep(ctx.buffer(vertex))
+        ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
+        del vertex
+        vao = gl.keep(
+            ctx.vertex_array(surface, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
+                             index_element_size=4)
+        )  # fmt: skip
+        screen = gl.keep(ctx.vertex_array(prog, []))
+        buffers = (
+            _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
+        )
+        for binding, data in enumerate(buffers):
+            gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
+        surface["u_res"].value = float(res)
         prog["u_max_distance"].value = max_distance
+        prog["u_half_width"].value = 0.5 * float(segments.width.max()) if len(segments.a) else 0.0
         prog["u_shape"].value = profile_shape
 
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
-        # of the planar channel images (no interleaved copy), and GL memory stays bounded.
+        # of the planar channel images (no interleaved copy), and GL memory stays bounded
+        # (67 bytes a texel: 48 for the surface pass, 19 for the maps).
         band = max(1, min(res, (tile * tile) // res))
         names = ("mask", "width", "time", "depth", "distance", "id", "inside")
         dtypes = ("f2", "f2", "f2", "f4", "f4", "f4", "f1")
@@ -276,18 +231,25 @@ def _render(
             n: np.empty((res, res), {"f1": np.uint8, "f2": np.float16, "f4": np.float32}[d])
             for n, d in zip(names, dtypes, strict=True)
         }
+        gbuffer = [gl.keep(ctx.texture((res, band), 4, dtype="f4")) for _ in range(3)]
+        for unit, tex in enumerate(gbuffer):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            tex.use(unit)
+        gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer))
         textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
         fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
-        fbo.use()
         ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
         timings["setup"] = time.perf_counter() - t1
         t_draw = t_read = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
-            fbo.clear(0.0, 0.0, 0.0, 0.0)
-            prog["u_tile"].value = (0.0, float(y0), float(res), float(band))
+            gfbo.use()
+            gfbo.clear(0.0, 0.0, 0.0, 0.0)
+            surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
             vao.render(moderngl.TRIANGLES)
+            fbo.use()
+            screen.render(moderngl.TRIANGLES, vertices=3)
             ctx.finish()
             tb = time.perf_counter()
             for k, (n, d) in enumerate(zip(names, dtypes, strict=True)):

@@ -1,0 +1,268 @@
+"""Which crack segments each face's texels must measure, in memory linear in faces + segments.
+
+Faces are grouped into *bins*: cubic cells of a size that grows with the face (so one big face
+never widens the bin of many small ones).  Every bin gets one list of the segments that can
+change any texel of its faces, and each face reads its bin's list.  Per-face lists, the earlier
+design, grew with faces x segments (2.8 GB at 375k faces and 15k segments, killed for memory at
+1.5M faces); bins keep the lists as long as a few per cell of surface.
+
+A segment can change a texel only within the texel's *reach*: the distance clamp, or half the
+widest crack plus one texel footprint (the anti-aliasing ramp).  The footprint of a face is the
+Frobenius norm of its texel-to-world Jacobian, which bounds the footprint the shader measures along
+any direction.  A bin lists every segment whose bounding box comes within the largest reach of its
+faces of the bin's bounding box, so its list holds every segment that can matter to its texels,
+with a lower bound of its distance to the bin.  Lists run in ascending bound, so the shader stops
+as soon as the bound passes both the nearest crack found and the anti-aliasing reach; it keeps
+the nearest segment with the lowest index on ties, so the maps do not depend on the list order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from crackbake.network import Segments
+
+#: Bin edge (smallest level) as a fraction of the distance clamp.
+BIN_PER_REACH = 0.25
+#: Relative slack on reaches, covering float32 rounding in the shader.
+_SLACK = 1e-3
+
+
+@dataclass(eq=False)
+class FaceBins:
+    """Faces grouped into bins, each bin with one candidate list (compressed rows).
+
+    Attributes
+    ----------
+    face_bin : (F,) uint32
+        Bin of each face.
+    bin_start : (B + 1,) uint32
+        Candidates of bin ``b`` are ``candidates[bin_start[b]:bin_start[b + 1]]``.
+    candidates : (K,) uint32
+        Segment indices (one entry at least: GL refuses empty buffers), each bin's in ascending
+        ``bounds`` order, ties in ascending index.
+    bounds : (K,) float32
+        A lower bound, mesh units, on the distance from any point of the bin's faces to the
+        segment: the shader stops its walk once the bound passes what can still matter.
+    """
+
+    face_bin: np.ndarray
+    bin_start: np.ndarray
+    candidates: np.ndarray
+    bounds: np.ndarray
+
+
+def face_reach(
+    vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, res: int, max_distance: float,
+    half_width: float,
+) -> np.ndarray:  # fmt: skip
+    """Distance within which a segment can change a texel of each face, mesh units.
+
+    Returns
+    -------
+    (F,) float64
+        ``max(max_distance, half_width + footprint)``, footprint the Frobenius norm of the face's
+        texel-to-world Jacobian (0 for faces of no UV area: they draw no texels), plus a small
+        slack.
+    """
+    # Corner columns, not (F, 3, 3) gathers: numpy reduces those slowly along the short axis.
+    p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
+    e1, e2 = p1 - p0, p2 - p0
+    del p0, p1, p2
+    t0, t1, t2 = (uv[faces[:, k]] * res for k in range(3))
+    q1, q2 = t1 - t0, t2 - t0
+    det = q1[:, 0] * q2[:, 1] - q1[:, 1] * q2[:, 0]
+    # J = [e1 e2] [q1 q2]^-1, columns d(world)/d(texel x), d(world)/d(texel y).
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        dpx = (e1 * q2[:, 1:2] - e2 * q1[:, 1:2]) / det[:, None]
+        dpy = (e2 * q1[:, 0:1] - e1 * q2[:, 0:1]) / det[:, None]
+        foot = np.sqrt(np.einsum("ij,ij->i", dpx, dpx) + np.einsum("ij,ij->i", dpy, dpy))
+    # A face with no UV area draws no texels: its reach never matters.
+    foot = np.where(np.isfinite(foot), foot, 0.0)
+    return np.maximum(max_distance, half_width + foot) * (1 + _SLACK)
+
+
+def bin_faces(lo: np.ndarray, hi: np.ndarray, cell: float, size: np.ndarray) -> np.ndarray:
+    """Bin of each face (bounding box ``lo``, ``hi``: (F, 3)): the cell holding its box centre,
+    in a grid as coarse as ``size``.
+
+    ``size`` (F,) is the face's extent, or its reach beyond the clamp where larger, so that
+    neither a big face nor one stretched in UV widens the list of many small ones.
+
+    Returns
+    -------
+    (F,) int64
+        Bin indices ``0..B-1``, numbered in order of their (level, cell) key.
+    """
+    level = np.ceil(np.log2(np.maximum(size / cell, 1.0))).astype(np.int64)
+    level = np.minimum(level, 40)
+    origin = lo.min(axis=0)
+    idx = np.floor((0.5 * (lo + hi) - origin) / (cell * 2.0**level)[:, None]).astype(np.int64)
+    idx = np.clip(idx, 0, (1 << 18) - 1)  # the caller keeps cells >= extent / 2**16
+    key = ((level << 18 | idx[:, 0]) << 18 | idx[:, 1]) << 18 | idx[:, 2]
+    return np.unique(key, return_inverse=True)[1].reshape(-1)
+
+
+def face_bins(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    uv: np.ndarray,
+    segments: Segments,
+    res: int,
+    max_distance: float,
+) -> FaceBins:
+    """Bins of faces and the crack segments each bin's texels must measure.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float, faces : (F, 3) int, uv : (V, 2) float
+        The triangles being baked, their world positions and UVs in [0, 1].
+    segments : Segments
+        Crack segments, world space.
+    res : int
+        Texels along the image edge.
+    max_distance : float
+        Distance clamp of the bake, mesh units.
+
+    Returns
+    -------
+    FaceBins
+    """
+    n_faces = len(faces)
+    if len(segments.a) == 0 or n_faces == 0:
+        return FaceBins(np.zeros(n_faces, np.uint32), np.zeros(2, np.uint32),
+                        np.zeros(1, np.uint32), np.zeros(1, np.float32))  # fmt: skip
+    half_width = 0.5 * float(segments.width.max())
+    reach = face_reach(vertices, faces, uv, res, max_distance, half_width)
+    extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
+    cell = max(BIN_PER_REACH * max(max_distance, half_width), extent / 2**16, 1e-30)
+    # A face's bin grows with its extent and with the part of its reach above the clamp (a face
+    # stretched in UV has a wide texel footprint), never with the clamp itself.
+    excess = reach / (1 + _SLACK) - max(max_distance, half_width)
+    lo, hi = _face_boxes(vertices, faces)
+    size = np.maximum((hi - lo).max(axis=1), excess)
+    face_bin = bin_faces(lo, hi, cell, size)
+
+    order = np.argsort(face_bin, kind="stable")
+    first = np.flatnonzero(np.r_[True, np.diff(face_bin[order]) != 0])
+    bin_lo = np.minimum.reduceat(lo[order], first, axis=0)
+    bin_hi = np.maximum.reduceat(hi[order], first, axis=0)
+    # float32 positions in the shader are off by about 1e-7 of their magnitude.
+    slack = 1e-6 * float(np.abs(vertices).max()) + _SLACK * max_distance
+    bin_reach = np.maximum.reduceat(reach[order], first) + slack
+    del lo, hi
+
+    a, b = np.asarray(segments.a, np.float64), np.asarray(segments.b, np.float64)
+    seg_lo, seg_hi = np.minimum(a, b), np.maximum(a, b)
+    grid = _segment_grid(seg_lo, seg_hi, cell)
+    args = (bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, *grid)
+    empty = np.zeros(0, np.uint32), np.zeros(0, np.float32)
+    counts = _bin_candidates(*args, np.zeros(1, np.int64), *empty, 0.0, False)
+    bin_start = np.zeros(len(first) + 1, np.int64)
+    np.cumsum(counts, out=bin_start[1:])
+    candidates = np.zeros(max(int(bin_start[-1]), 1), np.uint32)
+    bounds = np.zeros(len(candidates), np.float32)
+    _bin_candidates(*args, bin_start, candidates, bounds, slack, True)
+    return FaceBins(face_bin.astype(np.uint32), bin_start.astype(np.uint32), candidates, bounds)
+
+
+def _face_boxes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World bounding box (lo, hi), each (F, 3), of every face."""
+    p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
+    return np.minimum(np.minimum(p0, p1), p2), np.maximum(np.maximum(p0, p1), p2)
+
+
+def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
+    """Segments binned by the cells their bounding boxes overlap (origin, cell, dims, CSR)."""
+    origin = seg_lo.min(axis=0)
+    extent = seg_hi.max(axis=0) - origin
+    dims = np.floor(extent / cell).astype(np.int64) + 1
+    while int(np.prod(dims)) > 1 << 22:
+        cell *= 1.25
+        dims = np.floor(extent / cell).astype(np.int64) + 1
+    c0 = np.clip(np.floor((seg_lo - origin) / cell).astype(np.int64), 0, dims - 1)
+    c1 = np.clip(np.floor((seg_hi - origin) / cell).astype(np.int64), 0, dims - 1)
+    span = c1 - c0 + 1
+    count = span.prod(axis=1)
+    seg = np.repeat(np.arange(len(seg_lo), dtype=np.int64), count)
+    local = np.arange(len(seg), dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+    sx, sy = span[seg, 0], span[seg, 1]
+    flat = (
+        ((c0[seg, 2] + local // (sx * sy)) * dims[1] + c0[seg, 1] + (local // sx) % sy) * dims[0]
+        + c0[seg, 0]
+        + local % sx
+    )
+    order = np.argsort(flat, kind="stable")
+    n_cells = int(np.prod(dims))
+    cell_start = np.zeros(n_cells + 1, np.int64)
+    np.cumsum(np.bincount(flat, minlength=n_cells), out=cell_start[1:])
+    return origin, float(cell), dims, cell_start, seg[order]
+
+
+@njit(cache=True)
+def _bin_candidates(
+    bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, origin, cell, dims, cell_start, cell_items,
+    bin_start, out, bound, slack, fill,
+):  # fmt: skip
+    """Count (``fill`` False) or write (True) each bin's segments and their distance bounds."""
+    n_bins = bin_lo.shape[0]
+    counts = np.zeros(n_bins, np.int64)
+    for bi in range(n_bins):
+        r = bin_reach[bi]
+        c0 = np.empty(3, np.int64)
+        c1 = np.empty(3, np.int64)
+        empty = False
+        for k in range(3):
+            lo = np.floor((bin_lo[bi, k] - r - origin[k]) / cell)
+            hi = np.floor((bin_hi[bi, k] + r - origin[k]) / cell)
+            if hi < 0 or lo > dims[k] - 1:
+                empty = True
+            c0[k] = int(max(lo, 0.0))
+            c1[k] = int(min(hi, dims[k] - 1.0))
+        if empty:
+            continue
+        n = 0
+        for z in range(c0[2], c1[2] + 1):
+            for y in range(c0[1], c1[1] + 1):
+                for x in range(c0[0], c1[0] + 1):
+                    c = (z * dims[1] + y) * dims[0] + x
+                    n += cell_start[c + 1] - cell_start[c]
+        found = np.empty(n, np.int64)
+        gaps = np.empty(n, np.float64)
+        m = 0
+        r2 = r * r
+        for z in range(c0[2], c1[2] + 1):
+            for y in range(c0[1], c1[1] + 1):
+                for x in range(c0[0], c1[0] + 1):
+                    c = (z * dims[1] + y) * dims[0] + x
+                    for j in range(cell_start[c], cell_start[c + 1]):
+                        s = cell_items[j]
+                        gap2 = 0.0
+                        for k in range(3):
+                            g = max(seg_lo[s, k] - bin_hi[bi, k], bin_lo[bi, k] - seg_hi[s, k])
+                            if g > 0:
+                                gap2 += g * g
+                        if gap2 <= r2:
+                            found[m] = s
+                            gaps[m] = gap2
+                            m += 1
+        by_index = np.argsort(found[:m])
+        keep = np.empty(m, np.int64)
+        u = 0
+        for j in range(m):
+            if j == 0 or found[by_index[j]] != found[by_index[j - 1]]:
+                keep[u] = by_index[j]
+                u += 1
+        counts[bi] = u
+        if fill:
+            keep = keep[:u]
+            # mergesort is stable: equal bounds keep ascending segment order.
+            order = np.argsort(gaps[keep], kind="mergesort")
+            for j in range(u):
+                e = keep[order[j]]
+                out[bin_start[bi] + j] = found[e]
+                bound[bin_start[bi] + j] = max(np.sqrt(gaps[e]) - slack, 0.0)
+    return counts
