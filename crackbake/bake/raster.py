@@ -169,6 +169,66 @@ def bake_cracks(
     return _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
 
 
+_NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
+_DTYPES = ("f2", "f2", "f2", "f4", "f4", "f4", "f1")
+_NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
+
+
+def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
+              max_distance: float, profile_shape: float):
+    """The surface pass (faces in UV space -> world position, footprint, bin per texel) and the
+    crack pass (one full-screen triangle measuring the cracks per texel), with their buffers."""
+    ctx = gl.ctx
+    vertex = np.empty((len(vertices), 5), np.float32)
+    vertex[:, 0:2] = uv
+    vertex[:, 2:5] = vertices
+    surface = gl.keep(
+        ctx.program(
+            vertex_shader=shader_source("crack_bake.vert"),
+            fragment_shader=shader_source("crack_surface.frag"),
+        )
+    )
+    prog = gl.keep(
+        ctx.program(
+            vertex_shader=shader_source("crack_screen.vert"),
+            fragment_shader=shader_source("crack_bake.frag"),
+        )
+    )
+    vbo = gl.keep(ctx.buffer(vertex))
+    ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
+    vao = gl.keep(
+        ctx.vertex_array(surface, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
+                         index_element_size=4)
+    )  # fmt: skip
+    screen = gl.keep(ctx.vertex_array(prog, []))
+    buffers = (
+        _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
+    )
+    for binding, data in enumerate(buffers):
+        gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
+    surface["u_res"].value = float(res)
+    prog["u_max_distance"].value = max_distance
+    prog["u_half_width"].value = 0.5 * float(segments.width.max()) if len(segments.a) else 0.0
+    prog["u_shape"].value = profile_shape
+    return surface, vao, screen
+
+
+def _targets(gl: GLScope, res: int, band: int):
+    """Framebuffers of one band: the surface pass's three float targets (bound as textures for
+    the crack pass) and the crack pass's one target per channel."""
+    import moderngl
+
+    ctx = gl.ctx
+    gbuffer = [gl.keep(ctx.texture((res, band), 4, dtype="f4")) for _ in range(3)]
+    for unit, tex in enumerate(gbuffer):
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        tex.use(unit)
+    gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer))
+    textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in _DTYPES]
+    fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
+    return gfbo, fbo
+
+
 def _render(
     ctx,
     vertices: np.ndarray,
@@ -186,59 +246,16 @@ def _render(
     import moderngl
 
     with GLScope(ctx) as gl:
-        ctx = gl.ctx
         t1 = time.perf_counter()
-        vertex = np.empty((len(vertices), 5), np.float32)
-        vertex[:, 0:2] = uv
-        vertex[:, 2:5] = vertices
-        surface = gl.keep(
-            ctx.program(
-                vertex_shader=shader_source("crack_bake.vert"),
-                fragment_shader=shader_source("crack_surface.frag"),
-            )
-        )
-        prog = gl.keep(
-            ctx.program(
-                vertex_shader=shader_source("crack_screen.vert"),
-                fragment_shader=shader_source("crack_bake.frag"),
-            )
-        )
-        vbo = gl.keep(ctx.buffer(vertex))
-        ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
-        del vertex
-        vao = gl.keep(
-            ctx.vertex_array(surface, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
-                             index_element_size=4)
-        )  # fmt: skip
-        screen = gl.keep(ctx.vertex_array(prog, []))
-        buffers = (
-            _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
-        )
-        for binding, data in enumerate(buffers):
-            gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
-        surface["u_res"].value = float(res)
-        prog["u_max_distance"].value = max_distance
-        prog["u_half_width"].value = 0.5 * float(segments.width.max()) if len(segments.a) else 0.0
-        prog["u_shape"].value = profile_shape
-
+        surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
+                                         max_distance, profile_shape)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
         # (67 bytes a texel: 48 for the surface pass, 19 for the maps).
         band = max(1, min(res, (tile * tile) // res))
-        names = ("mask", "width", "time", "depth", "distance", "id", "inside")
-        dtypes = ("f2", "f2", "f2", "f4", "f4", "f4", "f1")
-        images = {
-            n: np.empty((res, res), {"f1": np.uint8, "f2": np.float16, "f4": np.float32}[d])
-            for n, d in zip(names, dtypes, strict=True)
-        }
-        gbuffer = [gl.keep(ctx.texture((res, band), 4, dtype="f4")) for _ in range(3)]
-        for unit, tex in enumerate(gbuffer):
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            tex.use(unit)
-        gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer))
-        textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
-        fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
-        ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
+        images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, _DTYPES, strict=True)}
+        gfbo, fbo = _targets(gl, res, band)
+        gl.ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
         timings["setup"] = time.perf_counter() - t1
         t_draw = t_read = 0.0
         for y0 in range(0, res, band):
@@ -250,16 +267,11 @@ def _render(
             vao.render(moderngl.TRIANGLES)
             fbo.use()
             screen.render(moderngl.TRIANGLES, vertices=3)
-            ctx.finish()
+            gl.ctx.finish()
             tb = time.perf_counter()
-            for k, (n, d) in enumerate(zip(names, dtypes, strict=True)):
-                fbo.read_into(
-                    images[n][y0 : y0 + h],
-                    viewport=(0, 0, res, h),
-                    components=1,
-                    attachment=k,
-                    dtype=d,
-                )
+            for k, (n, d) in enumerate(zip(_NAMES, _DTYPES, strict=True)):
+                fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
+                              attachment=k, dtype=d)  # fmt: skip
             t_draw += tb - ta
             t_read += time.perf_counter() - tb
         timings["render"] = t_draw
