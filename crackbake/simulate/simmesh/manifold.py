@@ -9,9 +9,12 @@ and the bake still renders every face.
 
 * :func:`duplicate_faces` flags faces whose three vertices repeat an earlier face's (in any order
   or orientation): two coincident sim triangles would be two overlapping surfaces.
-* :func:`split_nonmanifold` cuts every edge with more than two faces (each face keeps its own copy
-  of it: the edge becomes an open boundary of each patch) and then gives each fan of faces around
-  a vertex its own copy of the vertex, so each manifold patch is its own surface.
+* :func:`split_nonmanifold` joins no faces through an edge with more than two faces and gives
+  each fan of faces around a vertex (faces joined through manifold edges) its own copy of the
+  vertex, so each manifold patch is its own surface.  A sheet that runs on through such an edge
+  (a plate carrying a fin) keeps one copy of the edge's vertices, so it stays joined there and
+  only the fin comes off; where more than two faces still share an edge after that, the extra
+  faces are detached at that edge.
 """
 
 from __future__ import annotations
@@ -44,7 +47,8 @@ def duplicate_faces(faces: np.ndarray) -> np.ndarray:
 
 
 def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Cut non-manifold edges and split non-manifold vertices into one copy per face fan.
+    """Split non-manifold edges and vertices so that every edge has at most two faces and every
+    vertex one fan of faces.
 
     Parameters
     ----------
@@ -62,9 +66,47 @@ def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, n
         Original vertex of each split vertex (``V' >= n_vertices``; the first ``n_vertices``
         map to themselves).
     n_cut : int
-        Number of edges with more than two faces (cut).
+        Number of edges with more than two faces in the input.
     """
     faces = np.asarray(faces, dtype=np.int64)
+    out, origin, n_cut = _split_fans(faces, n_vertices)
+    for _ in range(3):
+        crowded = _crowded_faces(out, len(origin))
+        if not crowded.any():
+            break
+        # Detach the extra faces at the edge: their corners get vertices of their own, and
+        # the next pass splits any fan this leaves pinched.
+        corners = np.flatnonzero(crowded)
+        out = out.copy()
+        more = out.ravel()[corners]
+        out.ravel()[corners] = len(origin) + np.arange(len(corners))
+        origin = np.concatenate([origin, origin[more]])
+        out, sub, _ = _split_fans(out, len(origin))
+        origin = origin[sub]
+    return out, origin, n_cut
+
+
+def _crowded_faces(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Corners (F * 3,) bool on an edge with more than two faces, except those of the first two
+    faces of each such edge."""
+    a = faces.ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
+    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    flag = np.zeros(len(a), dtype=bool)
+    side = np.flatnonzero(count[inv] > 2)
+    if len(side) == 0:
+        return flag
+    side = side[np.argsort(inv[side], kind="stable")]
+    rank = np.arange(len(side)) - np.searchsorted(inv[side], inv[side])
+    extra = side[rank >= 2]
+    flag[extra] = True
+    flag[3 * (extra // 3) + (extra % 3 + 1) % 3] = True
+    return flag
+
+
+def _split_fans(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """One copy of each vertex per fan (faces joined through edges with exactly two faces)."""
     n_f = len(faces)
     # Sides: side k of face f runs from corner k to corner k+1.
     a = faces.ravel()
