@@ -35,9 +35,9 @@ def _write_variant(kind: str, path: Path) -> None:
     if kind == "holes":  # four round holes, one beside the impact
         centres = np.vstack([v[[100, 900, 1700]], [0.334, 0.2, 0.287]])
         keep = np.all(np.linalg.norm(centroid[:, None] - centres[None], axis=2) > 0.1, axis=1)
-        out = head + [f for f, k in zip(faces, keep) if k]
+        out = head + [f for f, k in zip(faces, keep, strict=True) if k]
     elif kind == "half":
-        out = head + [f for f, c in zip(faces, centroid) if c[0] > 0]
+        out = head + [f for f, c in zip(faces, centroid, strict=True) if c[0] > 0]
     elif kind == "duplicated":
         out = head + faces + faces[::7]
     else:  # fin: a triangle standing on the first edge of face 100
