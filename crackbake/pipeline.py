@@ -26,7 +26,7 @@ from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import RunParams
-from crackbake.simulate.setup import sidecar_params, solver_params, stress_sources
+from crackbake.simulate.setup import check_scale, sidecar_params, solver_params, stress_sources
 
 logger = logging.getLogger(__name__)
 
@@ -130,6 +130,7 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
     t = time.perf_counter()
     mesh = load_mesh(params.mesh, params.object_name)
     timings["load"] = time.perf_counter() - t
+    check_scale(mesh)  # before any work: the float32 bake cannot resolve extreme scales
 
     solver_stats: dict = {}
     solved = None

@@ -10,7 +10,7 @@ from conftest import plate_mesh
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import welded_vertex_normals
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.simulate.simmesh import SimMesh, asset_barycentric, build_simmesh, target_edge_length
@@ -299,3 +299,83 @@ def test_validation(kwargs, words):
     with pytest.raises(CrackbakeError, match=words) as info:
         build_simmesh(box(), **kwargs)
     assert "\n" not in str(info.value)
+
+
+# --- non-manifold and duplicated input ---------------------------------------------------------
+
+
+def _assert_manifold(sim: SimMesh) -> None:
+    """Every sim edge has one or two faces and every node one fan of faces."""
+    from crackbake.simulate.simmesh.manifold import split_nonmanifold
+
+    faces, origin, n_cut = split_nonmanifold(sim.faces, len(sim.vertices))
+    assert n_cut == 0 and len(origin) == len(sim.vertices)
+    assert np.array_equal(faces, sim.faces)
+
+
+def _fin_plate() -> Mesh:
+    """A 4x4 plate with a vertical triangle standing on one inner edge (three faces on it)."""
+    plate = plate_mesh(4, uv=False)
+    a, b = plate.faces[9][:2]
+    apex = 0.5 * (plate.vertices[a] + plate.vertices[b]) + [0.0, 0.0, 0.4]
+    v = np.vstack([plate.vertices, apex])
+    f = np.vstack([plate.faces, [[a, b, len(plate.vertices)]]])
+    return _mesh(v, f)
+
+
+def test_fin_is_simulated_as_its_own_patch_with_a_warning():
+    mesh = _fin_plate()
+    with pytest.warns(CrackbakeWarning, match="not manifold .*1 edge"):
+        sim = build_simmesh(mesh, target_faces=2000, seed=0)
+    _assert_manifold(sim)
+    # The plate runs on through the edge (it stays joined there); the fin comes off with its
+    # own copies of the edge's nodes, an open boundary of the fin.
+    a, b = mesh.faces[9][:2]
+    d = mesh.vertices[b] - mesh.vertices[a]
+    t = (sim.vertices - mesh.vertices[a]) @ d / (d @ d)
+    on_edge = (np.abs(np.cross(sim.vertices - mesh.vertices[a], d)).max(axis=1) < 1e-12) & (
+        t >= 0) & (t <= 1)
+    fin_nodes = np.zeros(len(sim.vertices), bool)
+    fin_nodes[sim.faces[sim.asset_face == len(mesh.faces) - 1].ravel()] = True
+    assert (on_edge & fin_nodes).sum() >= 3
+    assert (on_edge & fin_nodes).sum() == (on_edge & ~fin_nodes).sum()
+    assert sim.boundary[on_edge & fin_nodes].all()
+    assert not sim.boundary[on_edge & ~fin_nodes].any()
+    # The fin (its own asset face) still has sim faces, mapped back exactly.
+    fin = sim.asset_face == len(mesh.faces) - 1
+    assert fin.sum() > 10
+    back = np.einsum("nk,nkd->nd", sim.node_bary,
+                     mesh.vertices[mesh.faces[sim.node_face]])
+    assert np.abs(back - sim.vertices).max() < 1e-12
+
+
+def test_bow_tie_vertex_is_split():
+    # Two triangles touching at one vertex (the origin).
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]], float)
+    mesh = _mesh(v, np.array([[0, 1, 2], [0, 3, 4]]))
+    with pytest.warns(CrackbakeWarning, match="1 vertex"):
+        sim = build_simmesh(mesh, target_faces=400, seed=0)
+    _assert_manifold(sim)
+    assert np.count_nonzero(np.all(sim.vertices == 0.0, axis=1)) == 2
+
+
+def test_duplicated_faces_are_left_out_of_the_simulation_with_a_warning():
+    plate = plate_mesh(4, uv=False)
+    faces = np.vstack([plate.faces, plate.faces[[3, 7]], plate.faces[[5]][:, ::-1]])
+    mesh = _mesh(plate.vertices, faces)
+    with pytest.warns(CrackbakeWarning, match="3 duplicated face"):
+        sim = build_simmesh(mesh, detail=0.03, seed=0)
+    _assert_manifold(sim)
+    assert not np.isin(sim.asset_face, [32, 33, 34]).any()
+    clean = build_simmesh(plate, detail=0.03, seed=0)
+    assert len(clean.faces) == len(sim.faces)
+
+
+def test_clean_meshes_do_not_warn_and_stay_manifold():
+    import warnings
+
+    spot = load_mesh(Path(__file__).parent.parent / "examples" / "spot.obj")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CrackbakeWarning)
+        sim = build_simmesh(spot, target_faces=5000, seed=0)
+    _assert_manifold(sim)

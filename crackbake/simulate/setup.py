@@ -12,7 +12,7 @@ from crackbake.io.sidecar import jsonable
 from crackbake.params import IMPACT_RADIUS_REL_DEFAULT, RunParams, preset_names
 from crackbake.simulate.solver import SolverParams
 
-__all__ = ["sidecar_params", "solver_params", "stress_sources"]
+__all__ = ["check_scale", "sidecar_params", "solver_params", "stress_sources"]
 
 
 def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
@@ -124,3 +124,42 @@ def sidecar_params(effective: dict) -> dict:
         "cracks",
     }
     return jsonable({k: v for k, v in effective.items() if k not in drop})
+
+
+#: Supported size of a mesh: its bounding-box diagonal, mesh units.  The GPU bake measures
+#: distances to cracks in float32 world units and squares them; crack widths are about 1e-3 of
+#: the diagonal, so squared widths underflow float32 (1e-38) below a diagonal of about 1e-13 and
+#: squared spans overflow (3e38) above about 1e15.  The bounds keep a margin of 1000 on both.
+DIAGONAL_RANGE = (1e-10, 1e10)
+#: Largest distance of the bounding-box centre from the origin, in diagonals: float32 positions
+#: far from the origin resolve only ~6e-8 of their magnitude, which at 1e3 diagonals is ~1e-4 of
+#: the diagonal, a tenth of a default crack width.
+MAX_OFFSET_DIAGONALS = 1e3
+
+
+def check_scale(mesh: Mesh) -> None:
+    """Refuse meshes whose size or position the float32 bake cannot resolve.
+
+    Raises
+    ------
+    CrackbakeError
+        The bounding-box diagonal lies outside :data:`DIAGONAL_RANGE`, or the mesh sits more
+        than :data:`MAX_OFFSET_DIAGONALS` diagonals from the origin.
+    """
+    import numpy as np
+
+    diagonal = float(mesh.diagonal)
+    lo, hi = DIAGONAL_RANGE
+    if not lo <= diagonal <= hi:
+        raise CrackbakeError(
+            f"the mesh is {diagonal:.3g} units across; crackbake supports sizes from {lo:g} to "
+            f"{hi:g} units (the GPU bake works in 32-bit floats): rescale the mesh"
+        )
+    centre = 0.5 * (np.asarray(mesh.bbox_min) + np.asarray(mesh.bbox_max))
+    offset = float(np.linalg.norm(centre))
+    if offset > MAX_OFFSET_DIAGONALS * diagonal:
+        raise CrackbakeError(
+            f"the mesh lies {offset:.3g} units from the origin, {offset / diagonal:.3g} times its "
+            f"own size (limit {MAX_OFFSET_DIAGONALS:g}); 32-bit GPU math cannot resolve its "
+            "cracks there: move the mesh near the origin"
+        )

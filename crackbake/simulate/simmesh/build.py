@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import barycentric, face_cross, weld_by_position
 from crackbake.io.mesh import Mesh
 from crackbake.simulate.simmesh.layout import edge_point_counts, face_frames_2d, lattice_points
+from crackbake.simulate.simmesh.manifold import duplicate_faces, split_nonmanifold
 from crackbake.simulate.simmesh.triangulate import FaceSet, Refined, refine_faces
 
 #: Refuse sim meshes estimated above this many faces (memory and solver time explode).
@@ -174,13 +176,12 @@ def build_simmesh(
     rng = np.random.default_rng(seed)
 
     wv, wf_all, _ = weld_by_position(mesh.vertices, mesh.faces)
-    n_v = len(wv)
     tri_all = wv[wf_all]
     edge_len_all = np.linalg.norm(tri_all[:, [1, 2, 0]] - tri_all, axis=2)
     twice_area = np.linalg.norm(face_cross(wv, wf_all), axis=1)
     # Zero-area faces carry no material and would give Triangle a collinear boundary: drop them.
     keep = np.flatnonzero(twice_area > 1e-12 * edge_len_all.max(axis=1) ** 2)
-    wf = wf_all[keep]
+    wf, keep, wv, n_v = _manifold_copy(wv, wf_all, keep)
     face_edge, forward, ev0, ev1 = _welded_edges(wf, n_v)
     n_e = len(ev0)
     corners = face_frames_2d(wv[wf], h)
@@ -202,6 +203,37 @@ def build_simmesh(
                           | (np.bincount(l_face, minlength=len(wf)) > 0))
     ref = refine_faces(fs, pt_edge, t_edge, todo)
     return _assemble(fs, wv, ref, ev0, ev1, keep)
+
+
+def _manifold_copy(wv: np.ndarray, wf_all: np.ndarray, keep: np.ndarray):
+    """The welded faces ``keep`` selects, made a 2-manifold (:mod:`.manifold`), with a warning
+    naming what was changed.  Returns the faces (R, 3), their asset rows (R,), the vertices
+    (W', 3) and W'.  A manifold mesh without duplicates comes back unchanged."""
+    dup = duplicate_faces(wf_all[keep])
+    if dup.any():
+        keep = keep[~dup]
+        warnings.warn(
+            f"{int(dup.sum())} duplicated face(s) (same three vertices as another face) are left "
+            "out of the crack simulation and still baked; remove them to silence this",
+            CrackbakeWarning,
+            stacklevel=4,
+        )
+    wf, origin, n_cut = split_nonmanifold(wf_all[keep], len(wv))
+    n_split = len(origin) - len(wv)
+    if n_split:
+        what = []
+        if n_cut:
+            what.append(f"{n_cut} edge(s) shared by more than two faces")
+        n_vert = len(np.unique(origin[len(wv):]))
+        what.append(f"{n_vert} vertex/vertices joining separate sheets")
+        warnings.warn(
+            f"the mesh is not manifold ({' and '.join(what)}); each manifold patch is simulated "
+            "on its own and cracks end where patches meet; repair the mesh to join them",
+            CrackbakeWarning,
+            stacklevel=4,
+        )
+        wv = wv[origin]
+    return wf, keep, wv, len(wv)
 
 
 def _welded_edges(wf: np.ndarray, n_v: int):

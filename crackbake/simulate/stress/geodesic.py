@@ -3,8 +3,10 @@
 Impacts use the *geodesic* distance over the surface, not the straight-line one, so an impact on
 one wall of a thin shell or a bottle does not leak through to the opposite wall.  The distance
 comes from geometry-central's fast marching (``potpourri3d``), run only on the part of the mesh
-that can lie within the impact's reach; where that library is missing or the patch is not
-manifold, shortest edge paths (Dijkstra, a few percent longer than the true geodesic) stand in.
+that can lie within the impact's reach.  That patch is made manifold first (its rim can pinch to
+single vertices, and a user's non-manifold edges are already cut in the sim mesh), so fast
+marching runs on clean meshes and on broken ones; only where that library is missing or fails
+do shortest edge paths (Dijkstra, a few percent longer than the true geodesic) stand in.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import scipy.sparse as sp
 
 from crackbake.errors import CrackbakeWarning
 from crackbake.geometry import closest_on_triangles, edges
+from crackbake.simulate.simmesh.manifold import split_nonmanifold
 from crackbake.simulate.stress.sources import _finite_vector
 
 
@@ -107,19 +110,26 @@ def impact_distance(
     else:
         nodes = np.arange(len(vertices))
         sub_faces, sub_face, limit = faces, face, np.inf
-    sub_vertices = vertices[nodes]
+    # A patch cut out of a clean surface can have vertices where two sheets of it meet at one
+    # point (its rim zig-zags); fast marching refuses those, so each fan gets its own copy
+    # and a node takes the nearest of its copies.  The sim mesh itself is manifold.
+    split_faces, origin, _ = split_nonmanifold(sub_faces, len(nodes))
+    split_vertices = vertices[nodes[origin]]
 
     try:
-        d_sub = _fast_marching(sub_vertices, sub_faces, sub_face, bary)
+        d_split = _fast_marching(split_vertices, split_faces, sub_face, bary)
+        d_sub = np.full(len(nodes), np.inf)
+        np.minimum.at(d_sub, origin, d_split)
     except (ImportError, RuntimeError, ValueError) as exc:
-        why = "potpourri3d is not installed" if isinstance(exc, ImportError) else str(exc)
+        fix = ("install potpourri3d to avoid it" if isinstance(exc, ImportError)
+               else f"fast marching failed: {str(exc).splitlines()[0] if str(exc) else exc!r}")
         warnings.warn(
-            f"geodesic distance for the impact falls back to edge paths ({why}); distances run "
-            "a few percent long. Install potpourri3d / repair non-manifold geometry to avoid it",
+            "geodesic distance for the impact falls back to edge paths, which run a few "
+            f"percent long; {fix}",
             CrackbakeWarning,
             stacklevel=2,
         )
-        d_sub = _edge_dijkstra(sub_vertices, sub_faces, sub_face, snapped, limit)
+        d_sub = _edge_dijkstra(vertices[nodes], sub_faces, sub_face, snapped, limit)
 
     distance = np.full(len(vertices), np.inf)
     distance[nodes] = d_sub

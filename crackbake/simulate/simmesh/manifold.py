@@ -1,0 +1,149 @@
+"""Making a welded triangle soup a 2-manifold for the simulation.
+
+The crack solver, the fast-marching geodesic distance and the node -> asset map all assume that
+every edge has one or two faces and that the faces around each vertex form one fan.  Users' meshes
+break both: duplicated faces (the same triangle twice), fins (three faces on one edge), and
+vertices where two sheets touch at a point (bow ties, also what a patch cut out of a clean mesh
+has at its rim).  The functions here fix the *topology copy* only; the asset mesh is untouched
+and the bake still renders every face.
+
+* :func:`duplicate_faces` flags faces whose three vertices repeat an earlier face's (in any order
+  or orientation): two coincident sim triangles would be two overlapping surfaces.
+* :func:`split_nonmanifold` joins no faces through an edge with more than two faces and gives
+  each fan of faces around a vertex (faces joined through manifold edges) its own copy of the
+  vertex, so each manifold patch is its own surface.  A sheet that runs on through such an edge
+  (a plate carrying a fin) keeps one copy of the edge's vertices, so it stays joined there and
+  only the fin comes off; where more than two faces still share an edge after that, the extra
+  faces are detached at that edge.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+__all__ = ["duplicate_faces", "split_nonmanifold"]
+
+
+def duplicate_faces(faces: np.ndarray) -> np.ndarray:
+    """Flag faces that repeat an earlier face's vertex set, (F,) bool.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+        Triangles of a welded mesh (equal positions share one index).
+
+    Returns
+    -------
+    (F,) bool
+        True for every copy after the first (lowest index) of a vertex triple.
+    """
+    key = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    _, first = np.unique(key, axis=0, return_index=True)
+    dup = np.ones(len(faces), dtype=bool)
+    dup[first] = False
+    return dup
+
+
+def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Split non-manifold edges and vertices so that every edge has at most two faces and every
+    vertex one fan of faces.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+        Triangles indexing ``n_vertices`` vertices, without duplicates (:func:`duplicate_faces`).
+    n_vertices : int
+        Number of vertices.
+
+    Returns
+    -------
+    faces : (F, 3) int64
+        The same triangles on the split vertices.  A vertex's first fan (in face order) keeps
+        its index, so a mesh that is already manifold comes back unchanged (same array values).
+    origin : (V',) int64
+        Original vertex of each split vertex (``V' >= n_vertices``; the first ``n_vertices``
+        map to themselves).
+    n_cut : int
+        Number of edges with more than two faces in the input.
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    out, origin, n_cut = _split_fans(faces, n_vertices)
+    for _ in range(3):
+        crowded = _crowded_faces(out, len(origin))
+        if not crowded.any():
+            break
+        # Detach the extra faces at the edge: their corners get vertices of their own, and
+        # the next pass splits any fan this leaves pinched.
+        corners = np.flatnonzero(crowded)
+        out = out.copy()
+        more = out.ravel()[corners]
+        out.ravel()[corners] = len(origin) + np.arange(len(corners))
+        origin = np.concatenate([origin, origin[more]])
+        out, sub, _ = _split_fans(out, len(origin))
+        origin = origin[sub]
+    return out, origin, n_cut
+
+
+def _crowded_faces(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Corners (F * 3,) bool on an edge with more than two faces, except those of the first two
+    faces of each such edge."""
+    a = faces.ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
+    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    flag = np.zeros(len(a), dtype=bool)
+    side = np.flatnonzero(count[inv] > 2)
+    if len(side) == 0:
+        return flag
+    side = side[np.argsort(inv[side], kind="stable")]
+    rank = np.arange(len(side)) - np.searchsorted(inv[side], inv[side])
+    extra = side[rank >= 2]
+    flag[extra] = True
+    flag[3 * (extra // 3) + (extra % 3 + 1) % 3] = True
+    return flag
+
+
+def _split_fans(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """One copy of each vertex per fan (faces joined through edges with exactly two faces)."""
+    n_f = len(faces)
+    # Sides: side k of face f runs from corner k to corner k+1.
+    a = faces.ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
+    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    n_cut = int(np.count_nonzero(count > 2))
+    # Corners c = 3 f + k.  The two sides of a manifold edge join the corners holding the
+    # same vertex: corner k of one face with whichever corner of the other holds it.
+    manifold = count[inv] == 2
+    side = np.flatnonzero(manifold)
+    order = side[np.argsort(inv[side], kind="stable")]
+    s0, s1 = order[0::2], order[1::2]
+    f0, k0 = s0 // 3, s0 % 3
+    f1, k1 = s1 // 3, s1 % 3
+    c_a0, c_b0 = 3 * f0 + k0, 3 * f0 + (k0 + 1) % 3
+    same = a[s0] == a[s1]  # both sides run the same way (inconsistent orientation)
+    c_a1 = np.where(same, 3 * f1 + k1, 3 * f1 + (k1 + 1) % 3)
+    c_b1 = np.where(same, 3 * f1 + (k1 + 1) % 3, 3 * f1 + k1)
+    rows = np.concatenate([c_a0, c_b0])
+    cols = np.concatenate([c_a1, c_b1])
+    graph = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * n_f, 3 * n_f))
+    n_fan, fan = connected_components(graph, directed=False)
+    # Fans per vertex: the vertex's first fan (by its first corner) keeps the vertex's index,
+    # the others get new indices in the order of their first corners.
+    fan_vertex = np.zeros(n_fan, dtype=np.int64)
+    fan_vertex[fan] = a
+    fan_first = np.full(n_fan, 3 * n_f, dtype=np.int64)
+    np.minimum.at(fan_first, fan, np.arange(3 * n_f))
+    by_vertex = np.lexsort((fan_first, fan_vertex))
+    first = np.ones(n_fan, dtype=bool)
+    first[1:] = fan_vertex[by_vertex[1:]] != fan_vertex[by_vertex[:-1]]
+    extra = by_vertex[~first]
+    if len(extra) == 0:
+        return faces, np.arange(n_vertices, dtype=np.int64), n_cut
+    extra = extra[np.argsort(fan_first[extra], kind="stable")]
+    new_id = fan_vertex.copy()
+    new_id[extra] = n_vertices + np.arange(len(extra))
+    origin = np.concatenate([np.arange(n_vertices, dtype=np.int64), fan_vertex[extra]])
+    return new_id[fan].reshape(n_f, 3), origin, n_cut
