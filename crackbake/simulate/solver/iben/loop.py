@@ -34,6 +34,7 @@ from crackbake.simulate.solver.iben.state import (
     CRACKS,
     DEPOSITS,
     DONE,
+    DRIED,
     EVENTS,
     FACES,
     FIRST_CRACK,
@@ -54,7 +55,7 @@ from crackbake.simulate.solver.iben.state import (
     TIPS_NEAR,
     WIDEN,
 )
-from crackbake.simulate.solver.iben.update import key, push, rebuild_heap, update_state
+from crackbake.simulate.solver.iben.update import key, push
 from crackbake.simulate.solver.iben.vec import norm3
 from crackbake.simulate.solver.topology import on_boundary
 
@@ -65,9 +66,10 @@ _WIDEN = 2  # crack_event: the table needs widening
 def run(s, p, w, chunk):
     """Advance the crack loop on state ``s`` by at most ``chunk`` steps.
 
-    Returns ``MORE`` (chunk done), ``DONE`` (finished), ``FULL`` (the state arrays need more
-    room: grow them and call again) or ``WIDEN`` (the node -> face table is too narrow for
-    the next event: widen it and call again).
+    Returns ``MORE`` (chunk done), ``DONE`` (finished), ``DRIED`` (a drying step grew the
+    stress: recompute faces and nodes, re-queue them and call again), ``FULL`` (the state
+    arrays need more room: grow them and call again) or ``WIDEN`` (the node -> face table is
+    too narrow for the next event: widen it and call again).
     """
     cnt = s.cnt
     done = 0
@@ -84,10 +86,7 @@ def run(s, p, w, chunk):
         if cnt[HEAP] == 0:
             # With the crack budget spent and the field at rest, more drying would only
             # lengthen existing cracks step after step: stop.
-            if not dry(s, p):
-                return DONE
-            done += 1
-            continue
+            return DRIED if dry(s, p) else DONE
         c = pick(s, p, w)
         if c >= 0:
             event = crack_event(s, p, w, c)
@@ -137,8 +136,9 @@ def bridge_arrested(s, p, w):
 
 @njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def dry(s, p):
-    """Quasi-static shrinkage: nothing fails, so the material dries a step further; returns
-    False when the run ends instead.
+    """Quasi-static shrinkage: nothing fails, so the material dries a step further (the
+    stress grows here; the caller recomputes faces and nodes on threads and re-queues them:
+    ``DRIED``); returns False when the run ends instead.
 
     It ends without growth, with the crack budget spent, or once the material has dried longer
     without a crack event than the fresh material took to crack, plus GROWTH_REF_STEPS
@@ -151,14 +151,11 @@ def dry(s, p):
         cnt[SATURATED] = 1
         return False
     cnt[IDLE] += 1
-    nn, nf = cnt[NODES], cnt[FACES]
-    for f in range(nf):
-        s.S[f] += s.GR[f]
-    update_state(s, s.S, nn, nf, p.grain, p.seed)
-    for n in range(nn):
-        s.nver[n] += 1
-        s.nevl[n] = cnt[DEPOSITS]
-    rebuild_heap(s, p.tip_first)
+    S, GR = s.S, s.GR
+    for f in range(cnt[FACES]):
+        for i in range(3):
+            for j in range(3):
+                S[f, i, j] += GR[f, i, j]
     cnt[STEP] += 1
     cnt[GROWTH_STEPS] += 1
     return True
