@@ -55,6 +55,7 @@ from crackbake.simulate.solver.iben.state import (
     TIPS_NEAR,
     WIDEN,
 )
+from crackbake.simulate.solver.iben.structs import state_ref, work_ref
 from crackbake.simulate.solver.iben.update import key, push
 from crackbake.simulate.solver.iben.vec import norm3
 from crackbake.simulate.solver.topology import on_boundary
@@ -64,7 +65,14 @@ _WIDEN = 2  # crack_event: the table needs widening
 
 @njit(cache=True)
 def run(s, p, w, chunk):
-    """Advance the crack loop on state ``s`` by at most ``chunk`` steps.
+    """Advance the crack loop on state ``s`` (a State) with parameters ``p`` (LoopParams) and
+    scratch ``w`` (a Work) by at most ``chunk`` steps; see :func:`loop`."""
+    return loop(state_ref(s), p, work_ref(w), chunk)
+
+
+@njit(cache=True, inline="always")
+def loop(s, p, w, chunk):
+    """Advance the crack loop on state ``s`` (its struct reference) by at most ``chunk`` steps.
 
     Returns ``MORE`` (chunk done), ``DONE`` (finished), ``DRIED`` (a drying step grew the
     stress: recompute faces and nodes, re-queue them and call again), ``FULL`` (the state
@@ -121,7 +129,7 @@ def _bridge(s, p, w, n):
     return False
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def bridge_arrested(s, p, w):
     """At rest: before the material dries further (or the run ends), tips that were arrested
     short of a crack another crack has since approached may break through."""
@@ -134,7 +142,7 @@ def bridge_arrested(s, p, w):
                 push(s, n, p.tip_first)
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def dry(s, p):
     """Quasi-static shrinkage: nothing fails, so the material dries a step further (the
     stress grows here; the caller recomputes faces and nodes on threads and re-queues them:
@@ -161,7 +169,7 @@ def dry(s, p):
     return True
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def pick(s, p, w):
     """Pop the most critical node; -1 when it no longer fails or may not crack now.
 
@@ -198,7 +206,7 @@ def pick(s, p, w):
     return c
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def crack_event(s, p, w, c):
     """Cut node ``c`` and update everything around it; returns 1 when a crack event happened,
     0 when ``c`` is refused (or marked dead when it cannot be cut), ``_WIDEN`` when the node

@@ -51,7 +51,7 @@ from crackbake.simulate.solver.iben.state import (
     widen,
     work,
 )
-from crackbake.simulate.solver.iben.update import incidence, rebuild_heap, requeue_all, update_all
+from crackbake.simulate.solver.iben.update import incidence, rebuild, requeue_all, update_all
 
 logger = logging.getLogger(__name__)
 
@@ -216,7 +216,7 @@ def _loop_params(s: State, mesh: SimpleNamespace, cal: SimpleNamespace,
 def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
     """Run the compiled loop to its end in chunks of about a tenth of a second (so progress
     stays responsive without a clock inside the compiled loop); grow the state when full."""
-    rebuild_heap(s, bool(C.TIP_FIRST))
+    rebuild(s, bool(C.TIP_FIRST))
     w = work(s)
     chunk = 64
     last_msg = time.perf_counter()

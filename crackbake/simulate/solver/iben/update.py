@@ -12,6 +12,7 @@ from crackbake.simulate.solver.iben.element import face_update
 from crackbake.simulate.solver.iben.heap import heap_push
 from crackbake.simulate.solver.iben.separation import node_update
 from crackbake.simulate.solver.iben.state import DEPOSITS, HEAP, NODES
+from crackbake.simulate.solver.iben.structs import state_ref
 
 
 @njit(cache=True, nogil=True)
@@ -81,6 +82,12 @@ def key(val, taun, crack_of, n, tip_first):
 
 
 @njit(cache=True)
+def rebuild(s, tip_first):
+    """:func:`rebuild_heap` on named tuple ``s`` (a State)."""
+    rebuild_heap(state_ref(s), tip_first)
+
+
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def rebuild_heap(s, tip_first):
     """Heap of every live node that fails now."""
     val, taun, crack_of, dead, nver, cnt = s.val, s.taun, s.crack_of, s.dead, s.nver, s.cnt
@@ -105,9 +112,9 @@ def push(s, n, tip_first):
 @njit(cache=True)
 def requeue_all(s, tip_first):
     """After a drying step (every node recomputed): invalidate every node's heap entry, mark it
-    evaluated with the current shadow and rebuild the heap."""
+    evaluated with the current shadow and rebuild the heap (``s``: a State)."""
     nver, nevl, cnt = s.nver, s.nevl, s.cnt
     for n in range(cnt[NODES]):
         nver[n] += 1
         nevl[n] = cnt[DEPOSITS]
-    rebuild_heap(s, tip_first)
+    rebuild_heap(state_ref(s), tip_first)
