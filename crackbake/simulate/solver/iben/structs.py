@@ -54,7 +54,7 @@ STATE_T = StateRef(list(STATE_FIELDS))
 WORK_T = WorkRef(list(WORK_FIELDS))
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def state_ref(s):
     """The struct reference of named tuple ``s`` (a State), sharing its arrays."""
     r = structref.new(STATE_T)
@@ -102,7 +102,7 @@ def state_ref(s):
     return r
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
 def work_ref(w):
     """The struct reference of named tuple ``w`` (a Work), sharing its arrays."""
     r = structref.new(WORK_T)
