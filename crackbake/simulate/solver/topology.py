@@ -105,10 +105,15 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
                 F[f, k] = p
             if F[f, k] != a and F[f, k] != p:
                 o = F[f, k]
-        S[g] = S[f]
+        # Element by element: a slice copy compiles numba's shape checks and their messages.
+        for i in range(3):
+            for j in range(3):
+                S[g, i, j] = S[f, i, j]
         AF[g] = AF[f]
         if GR.shape[0] > 1:
-            GR[g] = GR[f]
+            for i in range(3):
+                for j in range(3):
+                    GR[g, i, j] = GR[f, i, j]
         nf_remove(NF, NFc, b, f)
         nf_add(NF, NFc, b, g)
         nf_add(NF, NFc, o, g)
@@ -140,7 +145,8 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
                 segp[t, 0] = segp[s, 0] if q == 0 else p
                 segp[t, 1] = p if q == 0 else segp[s, 1]
                 seg_alive[t] = True
-                seg_info[t] = seg_info[s]
+                for q2 in range(3):
+                    seg_info[t, q2] = seg_info[s, q2]
                 segof[segp[t, 0]] = t
                 segof[segp[t, 1]] = t
         else:
@@ -194,7 +200,8 @@ def separate(c, cut1, cut2, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of, nv
     for q in range(1, ncomp):
         c2 = cnt[1]
         cnt[1] += 1
-        X[c2] = X[c]
+        for m in range(3):
+            X[c2, m] = X[c, m]
         pid[c2] = pid[c]
         onb[c2] = onb[c]
         hn[c2] = hn[c]

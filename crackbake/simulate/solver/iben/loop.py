@@ -34,6 +34,7 @@ from crackbake.simulate.solver.iben.state import (
     CRACKS,
     DEPOSITS,
     DONE,
+    DRIED,
     EVENTS,
     FACES,
     FIRST_CRACK,
@@ -54,7 +55,8 @@ from crackbake.simulate.solver.iben.state import (
     TIPS_NEAR,
     WIDEN,
 )
-from crackbake.simulate.solver.iben.update import key, push, rebuild_heap, update_state
+from crackbake.simulate.solver.iben.structs import state_ref, work_ref
+from crackbake.simulate.solver.iben.update import key, push
 from crackbake.simulate.solver.iben.vec import norm3
 from crackbake.simulate.solver.topology import on_boundary
 
@@ -63,11 +65,19 @@ _WIDEN = 2  # crack_event: the table needs widening
 
 @njit(cache=True)
 def run(s, p, w, chunk):
-    """Advance the crack loop on state ``s`` by at most ``chunk`` steps.
+    """Advance the crack loop on state ``s`` (a State) with parameters ``p`` (LoopParams) and
+    scratch ``w`` (a Work) by at most ``chunk`` steps; see :func:`loop`."""
+    return loop(state_ref(s), p, work_ref(w), chunk)
 
-    Returns ``MORE`` (chunk done), ``DONE`` (finished), ``FULL`` (the state arrays need more
-    room: grow them and call again) or ``WIDEN`` (the node -> face table is too narrow for
-    the next event: widen it and call again).
+
+@njit(cache=True, inline="always")
+def loop(s, p, w, chunk):
+    """Advance the crack loop on state ``s`` (its struct reference) by at most ``chunk`` steps.
+
+    Returns ``MORE`` (chunk done), ``DONE`` (finished), ``DRIED`` (a drying step grew the
+    stress: recompute faces and nodes, re-queue them and call again), ``FULL`` (the state
+    arrays need more room: grow them and call again) or ``WIDEN`` (the node -> face table is
+    too narrow for the next event: widen it and call again).
     """
     cnt = s.cnt
     done = 0
@@ -84,10 +94,7 @@ def run(s, p, w, chunk):
         if cnt[HEAP] == 0:
             # With the crack budget spent and the field at rest, more drying would only
             # lengthen existing cracks step after step: stop.
-            if not dry(s, p):
-                return DONE
-            done += 1
-            continue
+            return DRIED if dry(s, p) else DONE
         c = pick(s, p, w)
         if c >= 0:
             event = crack_event(s, p, w, c)
@@ -122,7 +129,7 @@ def _bridge(s, p, w, n):
     return False
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def bridge_arrested(s, p, w):
     """At rest: before the material dries further (or the run ends), tips that were arrested
     short of a crack another crack has since approached may break through."""
@@ -135,10 +142,11 @@ def bridge_arrested(s, p, w):
                 push(s, n, p.tip_first)
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def dry(s, p):
-    """Quasi-static shrinkage: nothing fails, so the material dries a step further; returns
-    False when the run ends instead.
+    """Quasi-static shrinkage: nothing fails, so the material dries a step further (the
+    stress grows here; the caller recomputes faces and nodes on threads and re-queues them:
+    ``DRIED``); returns False when the run ends instead.
 
     It ends without growth, with the crack budget spent, or once the material has dried longer
     without a crack event than the fresh material took to crack, plus GROWTH_REF_STEPS
@@ -151,20 +159,17 @@ def dry(s, p):
         cnt[SATURATED] = 1
         return False
     cnt[IDLE] += 1
-    nn, nf = cnt[NODES], cnt[FACES]
-    for f in range(nf):
-        s.S[f] += s.GR[f]
-    update_state(s, s.S, nn, nf, p.grain, p.seed)
-    for n in range(nn):
-        s.nver[n] += 1
-        s.nevl[n] = cnt[DEPOSITS]
-    rebuild_heap(s, p.tip_first)
+    S, GR = s.S, s.GR
+    for f in range(cnt[FACES]):
+        for i in range(3):
+            for j in range(3):
+                S[f, i, j] += GR[f, i, j]
     cnt[STEP] += 1
     cnt[GROWTH_STEPS] += 1
     return True
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def pick(s, p, w):
     """Pop the most critical node; -1 when it no longer fails or may not crack now.
 
@@ -201,7 +206,7 @@ def pick(s, p, w):
     return c
 
 
-@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+@njit(cache=True, inline="always")
 def crack_event(s, p, w, c):
     """Cut node ``c`` and update everything around it; returns 1 when a crack event happened,
     0 when ``c`` is refused (or marked dead when it cannot be cut), ``_WIDEN`` when the node

@@ -26,6 +26,7 @@ from crackbake.simulate.solver.iben.state import (
     BRIDGED,
     CRACKS,
     DONE,
+    DRIED,
     EVENTS,
     FACES,
     FIRST_CRACK,
@@ -50,7 +51,7 @@ from crackbake.simulate.solver.iben.state import (
     widen,
     work,
 )
-from crackbake.simulate.solver.iben.update import incidence, rebuild_heap, update_all
+from crackbake.simulate.solver.iben.update import incidence, rebuild, requeue_all, update_all
 
 logger = logging.getLogger(__name__)
 
@@ -215,7 +216,7 @@ def _loop_params(s: State, mesh: SimpleNamespace, cal: SimpleNamespace,
 def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
     """Run the compiled loop to its end in chunks of about a tenth of a second (so progress
     stays responsive without a clock inside the compiled loop); grow the state when full."""
-    rebuild_heap(s, bool(C.TIP_FIRST))
+    rebuild(s, bool(C.TIP_FIRST))
     w = work(s)
     chunk = 64
     last_msg = time.perf_counter()
@@ -227,6 +228,12 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
             s = grow(s, has_growth) if code == FULL else widen(s, C.EXTRA_DEGREE)
             w = work(s)
             continue
+        if code == DRIED:
+            nn, nf = int(s.cnt[NODES]), int(s.cnt[FACES])
+            update_all(nn, nf, s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr, s.NF, s.NFc, s.rho,
+                       s.val, s.vec, s.crack_of, s.G, s.gp, p.grain, p.seed, s.tipn)
+            requeue_all(s, p.tip_first)
+            code = MORE
         if now - t_call < 0.05:
             chunk = min(chunk * 2, 1 << 20)
         elif now - t_call > 0.2:

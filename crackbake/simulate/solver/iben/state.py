@@ -21,8 +21,9 @@ import numpy as np
 N_COUNTERS = 20
 
 # Return codes of the loop: chunk done, finished, state full (grow and call again), node ->
-# face table too narrow for the next event (widen it and call again).
-MORE, DONE, FULL, WIDEN = 0, 1, 2, 3
+# face table too narrow for the next event (widen it and call again), a drying step grew the
+# stress (recompute and re-queue on threads, call again).
+MORE, DONE, FULL, WIDEN, DRIED = 0, 1, 2, 3, 4
 
 
 class State(NamedTuple):
