@@ -19,7 +19,7 @@ from crackbake.bake.raster import CrackMaps, bake_cracks
 from crackbake.bake.uv import UVMesh, prepare_uvs
 from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.bundle import write_outputs
-from crackbake.exchange.interrupt import RunInterrupted, interruptible
+from crackbake.exchange.interrupt import RunInterrupted, interruptible, received
 from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
@@ -118,6 +118,13 @@ def run(params: RunParams) -> RunResult:
             return _run(params, stage)
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
+        raise RunInterrupted(stage.interrupted_message(), signum) from None
+    except Exception:
+        # A signal raised inside a C extension (an import, a callback) can surface as another
+        # error (ImportError "initialization failed"): the run was interrupted all the same.
+        signum = received()
+        if signum is None:
+            raise
         raise RunInterrupted(stage.interrupted_message(), signum) from None
 
 

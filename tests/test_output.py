@@ -199,3 +199,29 @@ def test_leftovers_of_killed_runs_are_removed(tmp_path):
         stage.commit()
     assert (foreign / "keep.txt").exists()
     assert _beside(out) == [foreign.name]
+
+
+def test_a_signal_whose_exception_was_lost_still_stops_the_commit(tmp_path):
+    """SIGTERM raised inside C code can be swallowed or turned into another error (seen: an
+    ImportError from an extension's import); the stage must still refuse to commit."""
+    import signal
+
+    from crackbake.exchange.interrupt import Interrupt, interruptible, received
+
+    out = tmp_path / "rock_cracks"
+    _previous_set(out)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    with interruptible():
+        with OutputStage(out) as stage:
+            stage.path("mask.png").write_bytes(b"new mask")
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)  # a real signal, handled in this thread
+                for _ in range(1000):  # the handler runs between bytecodes
+                    pass
+            except Interrupt:
+                pass  # what a C extension might do with it
+            assert received() == signal.SIGTERM
+            with pytest.raises(Interrupt):
+                stage.commit()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert _beside(out) == []

@@ -42,12 +42,16 @@ class RunInterrupted(CrackbakeError):
 class _State(threading.local):
     depth = 0  # nesting of deferred()
     pending: int | None = None
+    # The last signal of this run, kept even when its exception was lost: raised inside a C
+    # extension's import or a callback, it can come back as another error or not at all.
+    received: int | None = None
 
 
 _state = _State()
 
 
 def _handler(signum, _frame) -> None:
+    _state.received = signum
     if _state.depth > 0:
         _state.pending = signum  # raised when the deferred block ends
         return
@@ -65,6 +69,7 @@ def interruptible() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    _state.received = None
     previous = {}
     for sig in SIGNALS:
         old = signal.getsignal(sig)
@@ -92,3 +97,15 @@ def deferred() -> Iterator[None]:
     if _state.depth == 0 and _state.pending is not None:
         signum, _state.pending = _state.pending, None
         raise Interrupt(signum)
+
+
+def received() -> int | None:
+    """The signal that arrived under :func:`interruptible` (None if none did)."""
+    return _state.received
+
+
+def raise_if_received() -> None:
+    """Raise :class:`Interrupt` if a signal arrived whose exception did not reach the run (a
+    C extension swallowed or converted it), so a run that was asked to stop never commits."""
+    if _state.received is not None:
+        raise Interrupt(_state.received)

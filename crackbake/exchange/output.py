@@ -7,11 +7,10 @@ import hashlib
 import os
 import secrets
 import shutil
-from collections.abc import Iterable
 from pathlib import Path
 
 from crackbake.errors import CrackbakeError
-from crackbake.exchange.interrupt import deferred
+from crackbake.exchange.interrupt import deferred, raise_if_received
 from crackbake.exchange.outdir import (
     MARKER,
     FolderLock,
@@ -164,11 +163,13 @@ class OutputStage:
             out.append({"name": entry.name, "bytes": int(st.st_size), "sha256": cached[1]})
         return out
 
-    def commit(self, last: Iterable[str] = ()) -> list[Path]:
+    def commit(self) -> list[Path]:
         """Swap the staged set in as ``out_dir`` with one rename; return the final file paths.
 
-        ``last`` is accepted for compatibility and ignored: every file appears at once.
+        Every file appears at once.  A run that received SIGINT/SIGTERM never commits, even if
+        the signal's exception was lost on the way (see :func:`raise_if_received`).
         """
+        raise_if_received()
         staging = self.staging_dir
         names = [e.name for e in self._staged()]
         with deferred():
