@@ -57,6 +57,8 @@ bench: setup
 	$(VPY) benchmarks/bench_bake.py
 	$(VPY) benchmarks/bench_solver.py
 	$(VPY) benchmarks/bench_pipeline.py
+	$(VPY) benchmarks/bench_scale.py
+	$(VPY) benchmarks/bench_compile.py
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info spot_cracks
