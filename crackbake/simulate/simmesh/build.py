@@ -10,12 +10,11 @@ import numpy as np
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import barycentric, face_cross, weld_by_position
 from crackbake.io.mesh import Mesh
+from crackbake.params import SIM_FACES_DEFAULT
+from crackbake.params import SIM_FACES_MAX as MAX_SIM_FACES
 from crackbake.simulate.simmesh.layout import edge_point_counts, face_frames_2d, lattice_points
 from crackbake.simulate.simmesh.manifold import duplicate_faces, split_nonmanifold
 from crackbake.simulate.simmesh.triangulate import FaceSet, Refined, refine_faces
-
-#: Refuse sim meshes estimated above this many faces (memory and solver time explode).
-MAX_SIM_FACES = 20_000_000
 
 # Area of an equilateral triangle of unit side: a triangular lattice of spacing h holds
 # two such triangles (scaled by h^2) per point.
@@ -63,7 +62,7 @@ def _total_area(mesh: Mesh) -> float:
     return 0.5 * float(np.linalg.norm(face_cross(mesh.vertices, mesh.faces), axis=1).sum())
 
 
-def target_edge_length(mesh: Mesh, target_faces: int = 100_000) -> float:
+def target_edge_length(mesh: Mesh, target_faces: int = SIM_FACES_DEFAULT) -> float:
     """Edge length giving about ``target_faces`` near-equilateral sim faces over the surface.
 
     Parameters
@@ -78,13 +77,21 @@ def target_edge_length(mesh: Mesh, target_faces: int = 100_000) -> float:
     float
         Target edge length, mesh units.
     """
+    return _edge_for(_surface_area(mesh), target_faces)
+
+
+def _surface_area(mesh: Mesh) -> float:
+    area = _total_area(mesh)
+    if not area > 0:
+        raise CrackbakeError("the mesh has zero surface area; crackbake needs a surface")
+    return area
+
+
+def _edge_for(area: float, target_faces: int) -> float:
     if target_faces < 100:
         raise CrackbakeError(
             f"--sim-faces {target_faces} is too small for a crack simulation; use at least 100"
         )
-    area = _total_area(mesh)
-    if not area > 0:
-        raise CrackbakeError("the mesh has zero surface area; crackbake needs a surface")
     return float(np.sqrt(area / (_EQUILATERAL * target_faces)))
 
 
@@ -120,14 +127,13 @@ def _check_size(mesh: Mesh, detail: float | None, target_faces: int | None, jitt
                 f"--detail {detail} must be a positive edge length in mesh units; "
                 f"try about {mesh.diagonal / 300:.4g} for this mesh"
             )
-        h = float(detail)
-    else:
-        h = target_edge_length(mesh, 100_000 if target_faces is None else int(target_faces))
     if not 0.0 <= jitter <= 0.45:
         raise CrackbakeError(f"jitter {jitter} is out of range; use a value from 0 to 0.45")
-    area = _total_area(mesh)
-    if not area > 0:
-        raise CrackbakeError("the mesh has zero surface area; crackbake needs a surface")
+    area = _surface_area(mesh)
+    if detail is not None:
+        h = float(detail)
+    else:
+        h = _edge_for(area, SIM_FACES_DEFAULT if target_faces is None else int(target_faces))
     estimate = area / (_EQUILATERAL * h * h)
     if estimate > MAX_SIM_FACES:
         suggest = np.sqrt(area / (_EQUILATERAL * MAX_SIM_FACES))
@@ -141,7 +147,7 @@ def _check_size(mesh: Mesh, detail: float | None, target_faces: int | None, jitt
 def build_simmesh(
     mesh: Mesh,
     detail: float | None = None,
-    target_faces: int | None = 100_000,
+    target_faces: int | None = SIM_FACES_DEFAULT,
     seed: int = 0,
     jitter: float = 0.15,
 ) -> SimMesh:
