@@ -13,13 +13,21 @@ import numpy as np
 from crackbake.errors import CrackbakeError
 
 
+def _shown(value) -> str:
+    """``value`` for a message: numpy scalars and arrays as plain numbers (no ``np.float64``)."""
+    try:
+        return repr(np.asarray(value).tolist())
+    except (TypeError, ValueError):
+        return repr(value)
+
+
 def _finite_vector(value, name: str) -> np.ndarray:
     try:
         v = np.asarray(value, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         v = np.array([np.nan])
     if v.shape != (3,) or not np.isfinite(v).all():
-        raise CrackbakeError(f"{name} must be three finite numbers x,y,z; got {value!r}")
+        raise CrackbakeError(f"{name} must be three finite numbers x,y,z; got {_shown(value)}")
     return v
 
 
@@ -31,7 +39,7 @@ def _finite_number(value, name: str, positive: bool = False, nonnegative: bool =
         ok = value >= 0
     if not ok:
         need = "a positive" if positive else "a non-negative" if nonnegative else "a finite"
-        raise CrackbakeError(f"{name} must be {need} number; got {value!r}")
+        raise CrackbakeError(f"{name} must be {need} number; got {_shown(value)}")
 
 
 @dataclass(frozen=True)
