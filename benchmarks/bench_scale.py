@@ -44,46 +44,20 @@ def spot_path() -> Path:
     return shared if shared.exists() else ROOT / "examples" / "spot.obj"
 
 
-def subdivide_uv(
-    vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One midpoint subdivision (each triangle into four), positions and UVs at edge midpoints.
-
-    Parameters
-    ----------
-    vertices : (V, 3) float
-    faces : (F, 3) int
-    uv : (V, 2) float
-        Per-vertex UVs (vertices split at seams, as crackbake loads them).
-
-    Returns
-    -------
-    vertices : (V + E, 3), faces : (4F, 3), uv : (V + E, 2)
-    """
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    unique, inverse = np.unique(np.sort(edges, axis=1), axis=0, return_inverse=True)
-    mid = len(vertices) + inverse.reshape(3, -1).T  # (F, 3): midpoints of edges 01, 12, 20
-    v = np.concatenate([vertices, 0.5 * (vertices[unique[:, 0]] + vertices[unique[:, 1]])])
-    t = np.concatenate([uv, 0.5 * (uv[unique[:, 0]] + uv[unique[:, 1]])])
-    a, b, c = faces.T
-    ab, bc, ca = mid.T
-    f = np.concatenate(
-        [np.stack(x, -1) for x in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
-    )
-    return v, f, t
-
-
 def subdivided_spot(levels: int, folder: Path = CACHE) -> Path:
     """Spot subdivided ``levels`` times, written (once) as an OBJ with UVs; its path."""
     path = folder / f"spot_sub{levels}.obj"
     if path.exists():
         return path
+    import trimesh
+
     from crackbake.io.mesh import load_mesh
 
     mesh = load_mesh(spot_path())
     v, f, t = mesh.vertices, mesh.faces, mesh.uv
-    for _ in range(levels):
-        v, f, t = subdivide_uv(v, f, t)
+    for _ in range(levels):  # each triangle into four at its edge midpoints, UVs interpolated
+        v, f, attr = trimesh.remesh.subdivide(v, f, vertex_attributes={"uv": t})
+        t = attr["uv"]
     folder.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     with open(tmp, "w") as fh:

@@ -299,19 +299,15 @@ def test_no_cracks_bakes_clean_maps(gl_ctx):
 
 def _subdivided_spot(path, levels: int):
     """examples/spot.obj split ``levels`` times into four (edge midpoints, UVs interpolated)."""
+    import trimesh
+
     from crackbake.io.mesh import load_mesh
 
     mesh = load_mesh(Path(__file__).resolve().parents[1] / "examples" / "spot.obj")
     v, f, t = mesh.vertices, mesh.faces, mesh.uv
     for _ in range(levels):
-        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
-        ab, bc, ca = (len(v) + inverse.reshape(3, -1)).reshape(3, -1)
-        v = np.concatenate([v, 0.5 * (v[unique[:, 0]] + v[unique[:, 1]])])
-        t = np.concatenate([t, 0.5 * (t[unique[:, 0]] + t[unique[:, 1]])])
-        a, b, c = f.T
-        f = np.concatenate([np.stack(q, -1) for q in ((a, ab, ca), (ab, b, bc), (ca, bc, c),
-                                                       (ab, bc, ca))])  # fmt: skip
+        v, f, attr = trimesh.remesh.subdivide(v, f, vertex_attributes={"uv": t})
+        t = attr["uv"]
     with open(path, "w") as fh:
         np.savetxt(fh, v, fmt="v %.7f %.7f %.7f")
         np.savetxt(fh, t, fmt="vt %.7f %.7f")
