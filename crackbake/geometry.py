@@ -156,14 +156,6 @@ def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
 def welded_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3) accumulated over positions: vertices that share
     a position (UV-seam copies) get the same normal, so shading is smooth across UV seams.
-
-    The asset mesh's normals when its file has none.  Sums per corner slot (``np.add.at``), an
-    order that differs from :func:`vertex_normals` in the last bits; the loaded meshes' normals
-    are pinned by the golden runs, so it stays.
-    """
+    The asset mesh's normals when its file has none."""
     wv, wf, inverse = weld_by_position(vertices, faces)
-    cross = face_cross(wv, wf)  # 2 A n
-    acc = np.zeros_like(wv)
-    for k in range(3):
-        np.add.at(acc, wf[:, k], cross)
-    return unit_rows(acc)[0][inverse]
+    return vertex_normals(wv, wf)[inverse]

@@ -16,14 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.geometry import face_cross, weld_by_position, welded_vertex_normals
+from crackbake.geometry import face_cross, welded_vertex_normals
 from crackbake.io import obj_checks
 
-# Still importable from here for callers outside io/ (tests/test_uv.py imports vertex_normals);
-# the implementations live in crackbake.geometry.
-vertex_normals = welded_vertex_normals
-__all__ = ["Mesh", "load_mesh", "vertex_normals", "weld_by_position", "SUPPORTED_SUFFIXES",
-           "VERTEX_COLOURS"]
+__all__ = ["Mesh", "SUPPORTED_SUFFIXES", "VERTEX_COLOURS", "load_mesh"]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 # Key of the vertex colours in :attr:`Mesh.attributes` (also how error messages list them).
