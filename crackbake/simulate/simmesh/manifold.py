@@ -91,13 +91,20 @@ def split_nonmanifold(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, n
     return out, origin, n_cut
 
 
-def _crowded_faces(faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """Corners (F * 3,) bool on an edge with more than two faces, except those of the first two
-    faces of each such edge."""
+def _sides(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Face sides (side k of face f runs from corner k to k+1, index 3 f + k): their start
+    vertex (3F,), their undirected edge (3F,) and how many sides share each edge (E,)."""
     a = faces.ravel()
     b = faces[:, [1, 2, 0]].ravel()
     key = np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
     _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    return a, inv, count
+
+
+def _crowded_faces(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Corners (F * 3,) bool on an edge with more than two faces, except those of the first two
+    faces of each such edge."""
+    a, inv, count = _sides(faces, n_vertices)
     flag = np.zeros(len(a), dtype=bool)
     side = np.flatnonzero(count[inv] > 2)
     if len(side) == 0:
@@ -113,11 +120,7 @@ def _crowded_faces(faces: np.ndarray, n_vertices: int) -> np.ndarray:
 def _split_fans(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, int]:
     """One copy of each vertex per fan (faces joined through edges with exactly two faces)."""
     n_f = len(faces)
-    # Sides: side k of face f runs from corner k to corner k+1.
-    a = faces.ravel()
-    b = faces[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b) * np.int64(n_vertices) + np.maximum(a, b)
-    _, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    a, inv, count = _sides(faces, n_vertices)
     n_cut = int(np.count_nonzero(count > 2))
     # Corners c = 3 f + k.  The two sides of a manifold edge join the corners holding the
     # same vertex: corner k of one face with whichever corner of the other holds it.
