@@ -13,6 +13,8 @@ $(STAMP): pyproject.toml
 	@test -x $(VPY) || $(PY) -m venv $(VENV)
 	$(VPY) -m pip install --quiet --upgrade pip
 	$(VPY) -m pip install --quiet -e '.[test]'
+	@# numba compiles its kernels once into the on-disk cache here, not in the first run.
+	$(VPY) -m crackbake.precompile
 	@touch $(STAMP)
 
 # glcontext dlopens libGL and libEGL; without libgl1-mesa-dri EGL fails with 0x3001.

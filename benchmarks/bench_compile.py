@@ -10,6 +10,8 @@ compilation or cache loading, and the tiny run itself).
 Parts: ``iben`` (a small plate glass solve), ``thesis`` (the same plate with the thesis
 solver), ``bake`` (the dilation kernels on a small mask), ``cli`` (the whole command on
 ``examples/spot.obj --preset glass --impact 0.334,0.044,0.287 --res 512``; needs a GPU context).
+``setup`` (``python -m crackbake.precompile``, what ``make setup`` runs, then the same CLI
+run: *cold* is the precompile, *warm* the first real run after it).
 ``--repo`` may point at an older checkout (``git worktree add /tmp/old 7916bc4``): the parts
 import from either package layout.
 """
@@ -97,7 +99,9 @@ CLI = ["examples/spot.obj", "--preset", "glass", "--impact", "0.334,0.044,0.287"
 def run_part(repo: Path, part: str, cache: str, out: str) -> float:
     """Wall seconds of one fresh process running ``part`` from ``repo`` with cache ``cache``."""
     env = dict(os.environ, PYTHONPATH=str(repo), NUMBA_CACHE_DIR=cache)
-    if part == "cli":
+    if part == "precompile":
+        cmd = [sys.executable, "-m", "crackbake.precompile"]
+    elif part == "cli":
         cmd = [sys.executable, "-c", "import sys; from crackbake.cli import main; sys.exit(main())",
                str(repo / CLI[0]), *CLI[1:], "-o", out]
     else:
@@ -114,8 +118,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repo", type=Path, action="append",
                     help="checkout(s) to measure (default: this one); repeat to compare")
-    ap.add_argument("--parts", nargs="+", default=["iben", "thesis", "bake", "cli"],
-                    choices=["iben", "thesis", "bake", "cli"])
+    ap.add_argument("--parts", nargs="+", default=["iben", "thesis", "bake", "cli", "setup"],
+                    choices=["iben", "thesis", "bake", "cli", "setup"])
     ap.add_argument("--repeat", type=int, default=1,
                     help="cold/warm pairs per part; the fastest is reported")
     args = ap.parse_args()
@@ -128,8 +132,10 @@ def main() -> None:
             for _ in range(max(1, args.repeat)):
                 with tempfile.TemporaryDirectory(prefix="crackbake-numba-") as tmp:
                     cache, out = os.path.join(tmp, "cache"), os.path.join(tmp, "out")
-                    cold.append(run_part(repo, part, cache, out))
-                    warm.append(run_part(repo, part, cache, out + "2"))
+                    cold.append(run_part(repo, "precompile" if part == "setup" else part,
+                                         cache, out))
+                    warm.append(run_part(repo, "cli" if part == "setup" else part,
+                                         cache, out + "2"))
             print(f"| {repo.name} | {part} | {min(cold):.1f} | {min(warm):.1f} |", flush=True)
 
 

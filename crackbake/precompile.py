@@ -1,0 +1,110 @@
+"""Compile the numba kernels into their on-disk cache before the first real run.
+
+numba compiles each kernel the first time it is called and caches the machine code on disk
+(``cache=True``; next to the sources, or under ``NUMBA_CACHE_DIR``).  Without this step the
+first run after an install spends about 30 s compiling on a 2-core machine.  ``make setup``
+calls ``python -m crackbake.precompile``; run it yourself after ``pip install`` (in a Docker
+image build, for example) so the first real run starts warm.
+
+The kernels are compiled by real runs of the command on a small generated plate, one per
+solver path (the I&O solver with an impact, with shrinkage, and the thesis solver), each in
+its own process so they compile side by side on several cores.  Typing is what costs (not
+LLVM), and every kernel signature a real run uses is the one these runs use, so a later run on
+any mesh loads them from the cache.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+#: One small run per solver path: name -> command-line options after the mesh.
+CASES: dict[str, list[str]] = {
+    "iben": ["--preset", "glass", "--impact", "0.5,0.5,0:0.3", "--sim-faces", "3000"],
+    "thesis": ["--preset", "mud", "--method", "thesis", "--sim-faces", "3000"],
+    "shrinkage": ["--preset", "mud", "--sim-faces", "3000"],
+}
+
+#: Cases run one after another in one lane; lanes run side by side.  The two I&O cases share
+#: most kernels, so the second waits for the first and finds them cached.
+LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage"), ("thesis",))
+
+
+def plate_obj(path: Path, n: int = 12) -> None:
+    """Write a flat unit square of ``2 n^2`` triangles as OBJ, UVs inset in the page.
+
+    The UVs leave a margin so the bake has empty texels to fill (the dilation kernels run).
+    """
+    lines = []
+    for j in range(n + 1):
+        for i in range(n + 1):
+            lines.append(f"v {i / n:.6f} {j / n:.6f} 0")
+            lines.append(f"vt {0.1 + 0.8 * i / n:.6f} {0.1 + 0.8 * j / n:.6f}")
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i + 1
+            b, c, d = a + 1, a + n + 2, a + n + 1
+            lines.append(f"f {a}/{a} {b}/{b} {c}/{c}")
+            lines.append(f"f {a}/{a} {c}/{c} {d}/{d}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _run_case(name: str, mesh: Path, folder: Path) -> float:
+    cmd = [sys.executable, "-m", "crackbake", str(mesh), *CASES[name],
+           "--res", "256", "-q", "-o", str(folder / name)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"precompile run '{name}' failed: {proc.stderr.strip()[-500:]}")
+    return time.perf_counter() - t0
+
+
+def precompile(jobs: int | None = None) -> dict[str, float]:
+    """Run the :data:`LANES` of :data:`CASES` in parallel processes; wall seconds per case.
+
+    Parameters
+    ----------
+    jobs : int, optional
+        Processes at once (default: the CPU count, at most ``len(LANES)``).
+    """
+    jobs = max(1, min(jobs or os.cpu_count() or 1, len(LANES)))
+    with tempfile.TemporaryDirectory(prefix="crackbake-precompile-") as tmp:
+        folder = Path(tmp)
+        mesh = folder / "plate.obj"
+        plate_obj(mesh)
+        with ThreadPoolExecutor(jobs) as pool:
+            futures = [pool.submit(_run_lane, lane, mesh, folder) for lane in LANES]
+            times: dict[str, float] = {}
+            for f in futures:
+                times.update(f.result())
+        return times
+
+
+def _run_lane(lane: tuple[str, ...], mesh: Path, folder: Path) -> dict[str, float]:
+    return {name: _run_case(name, mesh, folder) for name in lane}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(
+        prog="python -m crackbake.precompile", description=__doc__.splitlines()[0]
+    )
+    ap.add_argument("--jobs", type=int, default=None, help="processes at once (default: cores)")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    try:
+        times = precompile(args.jobs)
+    except RuntimeError as exc:
+        print(f"crackbake: error: {exc}", file=sys.stderr)
+        raise SystemExit(1) from None
+    parts = ", ".join(f"{k} {v:.1f} s" for k, v in times.items())
+    print(f"crackbake: kernels compiled in {time.perf_counter() - t0:.1f} s ({parts})")
+
+
+if __name__ == "__main__":
+    main()
