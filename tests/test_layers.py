@@ -186,7 +186,7 @@ def _check_blender_pass(info, layer, want):
     planes = [want[n][1].astype(np.float32) for n in layer.names]
     if layer.kind == "vector":
         assert len(got) == 3  # Blender's vector passes are 3-D; a 2-D one gets Z = 0
-        np.testing.assert_array_equal(got[len(planes):], 0)
+        np.testing.assert_array_equal(got[len(planes) :], 0)
     for g, p in zip(got, planes, strict=False):
         assert g.shape == (H, W)
         np.testing.assert_array_equal(g, p, err_msg=layer.role)

@@ -219,9 +219,7 @@ def stress_planes(fields: Mapping[str, object], units: str = "stress") -> dict:
     roles: dict[str, np.ndarray] = {}
     for field, planes in fields.items():
         if field not in STRESS_FIELDS:
-            raise CrackbakeError(
-                f"unknown stress field '{field}'; use {', '.join(STRESS_FIELDS)}"
-            )
+            raise CrackbakeError(f"unknown stress field '{field}'; use {', '.join(STRESS_FIELDS)}")
         for comp in STRESS_COMPONENTS:
             arr = planes.get(comp) if isinstance(planes, Mapping) else getattr(planes, comp, None)
             if arr is None:
