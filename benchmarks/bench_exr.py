@@ -25,8 +25,9 @@ import numpy as np
 import OpenEXR
 import OpenImageIO as oiio
 
-HALF = ("crack.mask", "crack.width", "crack.time", "normal.X", "normal.Y", "normal.Z")
-FLOAT = ("crack.depth", "crack.distance", "stress.xx", "stress.xy", "stress.yy")
+NORMAL = ("crack.normal.NX", "crack.normal.NY", "crack.normal.NZ")
+HALF = ("crack.mask.V", "crack.width.V", "crack.time.V", *NORMAL)
+FLOAT = ("crack.depth.V", "crack.distance.V", "stress.xx.V", "stress.xy.V", "stress.yy.V")
 
 COMPRESSION = {
     "none": OpenEXR.NO_COMPRESSION,
@@ -75,17 +76,17 @@ def make_channels(size: int, seed: int = 0) -> dict[str, np.ndarray]:
     r = np.min([np.hypot(x - a, y - b) for a, b in impacts], axis=0)
     stress = 1e6 / (r + 0.05)
     chans = {
-        "crack.mask": mask,
-        "crack.width": mask * np.float32(0.002),
-        "crack.time": time_,
-        "normal.X": nx,
-        "normal.Y": ny,
-        "normal.Z": nz,
-        "crack.depth": mask * np.float32(0.01) * (1 + 0.3 * np.sin(40 * x)),
-        "crack.distance": np.minimum(r, 0.3) * np.float32(2.5),
-        "stress.xx": stress * np.cos(6 * x + 1) * np.sin(5 * y),
-        "stress.xy": stress * 0.3 * np.sin(7 * x * y),
-        "stress.yy": stress * np.cos(4 * y - 2 * x),
+        "crack.mask.V": mask,
+        "crack.width.V": mask * np.float32(0.002),
+        "crack.time.V": time_,
+        "crack.normal.NX": nx,
+        "crack.normal.NY": ny,
+        "crack.normal.NZ": nz,
+        "crack.depth.V": mask * np.float32(0.01) * (1 + 0.3 * np.sin(40 * x)),
+        "crack.distance.V": np.minimum(r, 0.3) * np.float32(2.5),
+        "stress.xx.V": stress * np.cos(6 * x + 1) * np.sin(5 * y),
+        "stress.xy.V": stress * 0.3 * np.sin(7 * x * y),
+        "stress.yy.V": stress * np.cos(4 * y - 2 * x),
     }
     return {
         k: np.ascontiguousarray(v, np.float16 if k in HALF else np.float32)
@@ -157,9 +158,9 @@ def bench_png(size: int, repeat: int, tmp: Path) -> None:
     from PIL import Image
 
     chans = make_channels(size)
-    rgb = np.stack([chans["normal.X"], chans["normal.Y"], chans["normal.Z"]], -1)
+    rgb = np.stack([chans[n] for n in NORMAL], -1)
     rgb = rgb.astype(np.float32) * 0.5 + 0.5
-    mask = chans["crack.mask"].astype(np.float32)
+    mask = chans["crack.mask.V"].astype(np.float32)
     print(f"\nPNG at {size}², zlib level 6 unless noted, best of {repeat} (quantise + write)")
     print(f"{'writer':<30}{'image':<8}{'s':>7}{'MiB':>8}")
 

@@ -61,6 +61,13 @@ class _Command(click.Command):
     """
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        argv = sys.argv[1:] if args is None else list(args)
+        if argv[:1] == ["inspect"] and self.name != "inspect":
+            # `crackbake inspect FILE.exr`: the one subcommand; `crackbake MESH ...` is unchanged.
+            from crackbake.inspect_cli import inspect
+
+            name = f"{prog_name or 'crackbake'} inspect"
+            return inspect.main(argv[1:], name, complete_var, standalone_mode, **extra)
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:

@@ -33,12 +33,12 @@ def _channels() -> dict[str, np.ndarray]:
     stress = (rng.standard_normal((H, W)) * 1e7).astype(np.float32)
     stress.flat[0] = np.float32(1e-40)  # subnormal float survives too
     return {
-        "crack.mask": mask,
-        "crack.width": _half_values(rng, (H, W)),
-        "normal.X": rng.uniform(-1, 1, (H, W)).astype(np.float16),
-        "stress.xx": stress,
-        "crack.depth": rng.uniform(0, 1e-2, (H, W)).astype(np.float32),
-        "crack.id": rng.integers(0, 2**32, (H, W), dtype=np.uint32),
+        "crack.mask.V": mask,
+        "crack.width.V": _half_values(rng, (H, W)),
+        "crack.normal.NX": rng.uniform(-1, 1, (H, W)).astype(np.float16),
+        "stress.xx.V": stress,
+        "crack.depth.V": rng.uniform(0, 1e-2, (H, W)).astype(np.float32),
+        "crack.id.V": rng.integers(0, 2**32, (H, W), dtype=np.uint32),
     }
 
 
@@ -95,7 +95,7 @@ def test_exr_round_trip_read_by_openimageio(tmp_path):
 
 def test_exr_row_zero_is_top(tmp_path):
     path = tmp_path / "marker.exr"
-    write_exr(path, {"crack.mask": _channels()["crack.mask"]})
+    write_exr(path, {"crack.mask.V": _channels()["crack.mask.V"]})
     buf = oiio.ImageBuf(str(path))
     # OIIO's y axis points down from the first scanline; the marker must be where we put it.
     assert buf.getpixel(MARK_COL, MARK_ROW)[0] == 1.0

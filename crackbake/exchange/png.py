@@ -1,8 +1,14 @@
-"""Linear (never sRGB) 8- and 16-bit PNGs.
+"""8- and 16-bit PNGs: data maps untagged and linear, colour images tagged sRGB.
 
 Images are ``(H, W)`` or ``(H, W, C)`` with row 0 the top of the image (UV ``v = 1``), written
-as they are.  8-bit PNGs are quantised in numpy and encoded by Pillow (faster than OIIO), 16-bit
-PNGs by OpenImageIO (Pillow cannot write 16-bit RGB).
+as they are (never transformed).  8-bit PNGs are quantised in numpy and encoded by Pillow (faster
+than OIIO), 16-bit PNGs by OpenImageIO (Pillow cannot write 16-bit RGB).
+
+What the file *says* about its values is explicit (``color``): a data map (mask, depth, normal,
+occlusion, packed data) carries no colour chunk at all (no sRGB, gAMA, cHRM or iCCP), so engines
+and viewers read the numbers as they are; a colour image (base colour, preview) carries sRGB +
+gAMA + cHRM.  OpenImageIO tags every 16-bit PNG sRGB unless its colour space is ``Raw``
+(measured with OIIO 3.2), and Pillow never tags unless asked.
 """
 
 from __future__ import annotations
@@ -18,6 +24,23 @@ from crackbake.errors import CrackbakeError, CrackbakeWarning
 PathLike = str | os.PathLike
 
 _OUT_OF_RANGE_TOLERANCE = 1e-3
+
+#: What ``write_png(..., color=...)`` accepts: ``"data"`` untagged/linear, ``"srgb"`` tagged.
+PNG_COLORS = ("data", "srgb")
+
+# The chunks an sRGB PNG carries (PNG spec 11.3.3.5: sRGB writers should add the gAMA and cHRM
+# that match it for decoders without sRGB support).  Rendering intent 0 = perceptual.
+_SRGB_CHUNKS = (
+    (b"sRGB", bytes([0])),
+    (b"gAMA", (45455).to_bytes(4, "big")),
+    (
+        b"cHRM",
+        b"".join(
+            v.to_bytes(4, "big")
+            for v in (31270, 32900, 64000, 33000, 30000, 60000, 15000, 6000)
+        ),
+    ),
+)
 
 
 def _checked_float(image: np.ndarray, bits: int, path: PathLike) -> np.ndarray:
@@ -55,9 +78,13 @@ def _to_uint8(image: np.ndarray, path: PathLike) -> np.ndarray:
 
 
 def write_png(
-    path: PathLike, image: np.ndarray, bits: int = 8, compression_level: int | None = None
+    path: PathLike,
+    image: np.ndarray,
+    bits: int = 8,
+    compression_level: int | None = None,
+    color: str = "data",
 ) -> None:
-    """Write a linear (no sRGB transform) 8- or 16-bit PNG.
+    """Write an 8- or 16-bit PNG, values as given (no transform), tagged as ``color`` says.
 
     Parameters
     ----------
@@ -74,7 +101,13 @@ def write_png(
         written by OpenImageIO (Pillow cannot write 16-bit RGB).
     compression_level : int, optional
         zlib level 0..9; 6 when ``None``.  Level 1 is ~1.3x faster for a larger file.
+    color : {"data", "srgb"}
+        ``"data"`` (default: masks, depth, normals, occlusion, packed maps) writes no colour
+        chunk, so readers take the values as linear data; ``"srgb"`` (base colour, previews,
+        values already sRGB-encoded) writes sRGB + gAMA + cHRM.
     """
+    if color not in PNG_COLORS:
+        raise CrackbakeError(f"PNG colour '{color}' is unknown; use 'data' or 'srgb'")
     if bits not in (8, 16):
         raise CrackbakeError(f"PNG bit depth {bits} is not supported; use 8 or 16")
     image = np.asarray(image)
@@ -88,21 +121,28 @@ def write_png(
         raise CrackbakeError(f"PNG compression level {compression_level} is invalid; use 0..9")
     target = os.fspath(path)
     if bits == 8:
-        _write_png8_pillow(target, _to_uint8(image, path), compression_level)
+        _write_png8_pillow(target, _to_uint8(image, path), compression_level, color)
     else:
         if image.dtype != np.uint16:
             image = _checked_float(image, 16, path)
-        _write_png16_oiio(target, image, compression_level)
+        _write_png16_oiio(target, image, compression_level, color)
 
 
-def _write_png8_pillow(target: str, pixels: np.ndarray, level: int | None) -> None:
-    from PIL import Image
+def _write_png8_pillow(target: str, pixels: np.ndarray, level: int | None, color: str) -> None:
+    from PIL import Image, PngImagePlugin
 
     nchan = 1 if pixels.ndim == 2 else pixels.shape[2]
     mode = {1: "L", 2: "LA", 3: "RGB", 4: "RGBA"}[nchan]
+    info = PngImagePlugin.PngInfo()
+    if color == "srgb":
+        for cid, data in _SRGB_CHUNKS:
+            info.add(cid, data)
     try:
         Image.fromarray(np.ascontiguousarray(pixels), mode).save(
-            target, format="PNG", compress_level=6 if level is None else int(level)
+            target,
+            format="PNG",
+            compress_level=6 if level is None else int(level),
+            pnginfo=info,
         )
     except OSError as exc:
         raise CrackbakeError(
@@ -111,7 +151,7 @@ def _write_png8_pillow(target: str, pixels: np.ndarray, level: int | None) -> No
         ) from exc
 
 
-def _write_png16_oiio(target: str, pixels: np.ndarray, level: int | None) -> None:
+def _write_png16_oiio(target: str, pixels: np.ndarray, level: int | None, color: str) -> None:
     import OpenImageIO as oiio
 
     if pixels.ndim == 2:
@@ -120,6 +160,8 @@ def _write_png16_oiio(target: str, pixels: np.ndarray, level: int | None) -> Non
     pixels = np.ascontiguousarray(pixels)
     h, w, nchan = pixels.shape
     spec = oiio.ImageSpec(w, h, nchan, "uint16")
+    # OIIO writes sRGB + gAMA + cHRM for an unset colour space, none at all for "Raw".
+    spec.attribute("oiio:ColorSpace", "sRGB" if color == "srgb" else "Raw")
     if level is not None:
         spec.attribute("png:compressionLevel", int(level))
     out = oiio.ImageOutput.create(target)

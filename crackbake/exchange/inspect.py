@@ -1,0 +1,300 @@
+"""``crackbake inspect``: what an EXR holds, as a table, as JSON, and as false-colour pictures.
+
+Works on any EXR the OpenEXR library reads (its first part): every channel gets its pixel type
+and statistics; files written by crackbake also get each channel's units and role from the
+``crackbake:channels`` header table, and pictures made for what each map is (normals as colours,
+ids as distinct colours, signed stress on a diverging map, the principal directions as short
+strokes over p1, the crack mask overlaid).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from crackbake.exchange.exr import read_exr
+from crackbake.exchange.layers import layer_of
+from crackbake.exchange.png import write_png
+
+_TYPES = {np.dtype(np.float16): "half", np.dtype(np.float32): "float", np.dtype(np.uint32): "uint"}
+
+
+@dataclass
+class ChannelStats:
+    """One channel's row of the table.  Statistics skip NaN and +-inf (counted apart)."""
+
+    name: str
+    layer: str
+    channel: str
+    type: str
+    min: float | None
+    max: float | None
+    mean: float | None
+    nonzero: float
+    nonfinite: int
+    units: str | None
+    role: str | None
+
+
+@dataclass
+class Inspection:
+    path: str
+    width: int
+    height: int
+    compression: str
+    attributes: dict[str, str]
+    channels: list[ChannelStats]
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2)
+
+
+def _stats(name: str, arr: np.ndarray, meta: dict) -> ChannelStats:
+    finite = np.isfinite(arr) if arr.dtype.kind == "f" else np.ones(arr.shape, bool)
+    good = arr[finite]
+    nonfinite = int(arr.size - good.size)
+    if good.size:
+        lo, hi = float(good.min()), float(good.max())
+        mean = float(good.mean(dtype=np.float64))
+    else:
+        lo = hi = mean = None
+    nonzero = float(np.count_nonzero(arr)) / arr.size if arr.size else 0.0
+    return ChannelStats(
+        name, layer_of(name), name.rpartition(".")[2], _TYPES.get(arr.dtype, str(arr.dtype)),
+        lo, hi, mean, nonzero, nonfinite, meta.get("units"), meta.get("role"),
+    )  # fmt: skip
+
+
+def _attribute_text(value) -> str:
+    return value if isinstance(value, str) else repr(value)
+
+
+def inspect_exr(path: str | os.PathLike) -> tuple[Inspection, dict[str, np.ndarray]]:
+    """Read ``path`` and describe every channel.
+
+    Returns
+    -------
+    inspection : Inspection
+        Size, compression, the header's attributes as text, one :class:`ChannelStats` per
+        channel (sorted by name, as files store them).
+    channels : dict of str to (H, W) ndarray
+        The pixels, for :func:`write_pictures`.
+
+    Raises
+    ------
+    CrackbakeError
+        When the file cannot be read as an EXR.
+    """
+    channels, header = read_exr(path)
+    table: dict = {}
+    if isinstance(header.get("crackbake:channels"), str):
+        try:
+            table = json.loads(header["crackbake:channels"])
+        except ValueError:  # a foreign or damaged table: the channels still get a row
+            table = {}
+    skip = {"channels", "compression"}
+    attributes = {k: _attribute_text(v) for k, v in sorted(header.items()) if k not in skip}
+    rows = [_stats(n, channels[n], table.get(n, {})) for n in sorted(channels)]
+    h, w = next(iter(channels.values())).shape if channels else (0, 0)
+    info = Inspection(
+        os.fspath(path), int(w), int(h), str(header.get("compression", "")), attributes, rows
+    )
+    return info, channels
+
+
+def _num(v: float | None) -> str:
+    return "-" if v is None else f"{v:.6g}"
+
+
+def format_table(info: Inspection) -> str:
+    """The channel table as fixed-width text (one line per channel)."""
+    head = (
+        f"{info.path}: {info.width}x{info.height}, {len(info.channels)} channels, "
+        f"{info.compression or 'unknown'} compression"
+    )
+    cols = ("layer", "channel", "type", "min", "max", "mean", "non-zero", "units")
+    rows = [
+        (
+            c.layer or "-", c.channel, c.type, _num(c.min), _num(c.max), _num(c.mean),
+            f"{100 * c.nonzero:.1f}%" + (f" ({c.nonfinite} nan/inf)" if c.nonfinite else ""),
+            c.units or "-",
+        )
+        for c in info.channels
+    ]  # fmt: skip
+    widths = [max(len(r[i]) for r in [cols, *rows]) for i in range(len(cols))]
+    lines = [head, "  ".join(t.ljust(wd) for t, wd in zip(cols, widths, strict=True)).rstrip()]
+    lines += [
+        "  ".join(t.ljust(wd) for t, wd in zip(r, widths, strict=True)).rstrip() for r in rows
+    ]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------- pictures
+
+# Colour maps as a few anchors, interpolated linearly (no plotting library needed).
+_SEQUENTIAL = np.array(  # viridis at 0, 1/6, ..., 1
+    [[68, 1, 84], [68, 58, 131], [49, 104, 142], [33, 145, 140],
+     [53, 183, 121], [144, 215, 67], [253, 231, 37]], np.float32,
+) / 255  # fmt: skip
+_DIVERGING = np.array(  # blue (negative) - white (0) - red (positive)
+    [[5, 48, 97], [67, 147, 195], [247, 247, 247], [214, 96, 77], [103, 0, 31]], np.float32
+) / 255  # fmt: skip
+
+#: Longest picture edge: bigger maps are subsampled (pictures only; the table uses every texel).
+PICTURE_MAX = 2048
+#: Smallest picture edge: small maps are enlarged so strokes and texels can be seen.
+PICTURE_MIN = 512
+STROKE_SPACING = 16  # picture pixels between direction strokes
+
+
+def _colormap(t: np.ndarray, anchors: np.ndarray) -> np.ndarray:
+    t = np.clip(np.nan_to_num(t, nan=0.0), 0.0, 1.0) * (len(anchors) - 1)
+    i = np.minimum(t.astype(np.int32), len(anchors) - 2)
+    f = (t - i)[..., None]
+    return anchors[i] * (1 - f) + anchors[i + 1] * f
+
+
+#: Roles always drawn on the diverging map (0 white), even where a picture holds one sign only.
+_SIGNED_ROLES = frozenset({"xx", "yy", "xy", "p1", "p2"})
+
+
+def _false_colour(v: np.ndarray, signed: bool = False) -> np.ndarray:
+    """Signed data on the diverging map (0 white, symmetric), else the sequential map."""
+    v = v.astype(np.float32)
+    good = v[np.isfinite(v)]
+    if good.size == 0:
+        return np.zeros((*v.shape, 3), np.float32)
+    lo, hi = float(good.min()), float(good.max())
+    if lo < 0 or signed:
+        # The 99.5th percentile of |v| keeps one hot texel from washing the picture out.
+        lim = float(np.percentile(np.abs(good), 99.5)) or max(-lo, hi) or 1.0
+        return _colormap(0.5 + 0.5 * v / lim, _DIVERGING)
+    return _colormap((v - lo) / (hi - lo) if hi > lo else v * 0, _SEQUENTIAL)
+
+
+def _id_colours(v: np.ndarray) -> np.ndarray:
+    ids = np.nan_to_num(v.astype(np.float64), nan=-1).astype(np.int64)
+    h = (ids * 2654435761) & 0xFFFFFF  # Knuth's hash: neighbouring ids get unlike colours
+    rgb = np.stack([(h >> 16) & 255, (h >> 8) & 255, h & 255], axis=-1) / 255.0
+    rgb = 0.25 + 0.75 * rgb
+    rgb[ids < 0] = 0.0
+    return rgb.astype(np.float32)
+
+
+def _resample(img: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Nearest-neighbour resize (pictures of data: never blend texels)."""
+    rows = (np.arange(shape[0]) * img.shape[0] // shape[0]).astype(np.intp)
+    cols = (np.arange(shape[1]) * img.shape[1] // shape[1]).astype(np.intp)
+    return img[rows][:, cols]
+
+
+def _picture_shape(h: int, w: int) -> tuple[int, int]:
+    edge = max(h, w)
+    scale = PICTURE_MAX / edge if edge > PICTURE_MAX else max(1, PICTURE_MIN // edge)
+    return max(1, round(h * scale)), max(1, round(w * scale))
+
+
+def _strokes(rgb: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """Draw short strokes along (dx, dy) (T, B components; B is up) on a grid."""
+    h, w = rgb.shape[:2]
+    s = STROKE_SPACING
+    cy, cx = np.mgrid[s // 2 : h : s, s // 2 : w : s]
+    ux, uy = dx[cy, cx], dy[cy, cx]
+    ok = np.isfinite(ux) & np.isfinite(uy) & ((ux != 0) | (uy != 0))
+    cy, cx, ux, uy = cy[ok], cx[ok], ux[ok], uy[ok]
+    norm = np.hypot(ux, uy)
+    ux, uy = ux / norm, uy / norm
+    t = np.linspace(-0.4 * s, 0.4 * s, 2 * s)[:, None]
+    # Image rows grow downwards while B points up the image: flip the second component.
+    px = np.rint(cx + t * ux).astype(np.intp).clip(0, w - 1)
+    py = np.rint(cy - t * uy).astype(np.intp).clip(0, h - 1)
+    # Black strokes on light colours, white on dark ones (deep red/blue of strong stress).
+    lum = rgb[cy, cx] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    ink = np.where(lum < 0.35, 1.0, 0.0).astype(np.float32)
+    out = rgb.copy()
+    out[py, px] = np.broadcast_to(ink, py.shape)[..., None]
+    return out
+
+
+def _overlay(rgb: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    if mask is None:
+        return rgb
+    m = np.clip(np.nan_to_num(mask.astype(np.float32)), 0, 1)[..., None]
+    return rgb * (1 - m)  # cracks drawn black
+
+
+def _sibling_mask(path: Path) -> np.ndarray | None:
+    """The crack mask of ``<stem>_cracks.exr`` beside ``<stem>_stress.exr``, if there is one."""
+    if not path.stem.endswith("_stress"):
+        return None
+    other = path.with_name(path.stem.removesuffix("_stress") + "_cracks.exr")
+    if not other.is_file():
+        return None
+    try:
+        chans, _ = read_exr(other)
+    except Exception:  # a broken sibling only costs the overlay
+        return None
+    return chans.get("crack.mask.V")
+
+
+def write_pictures(
+    info: Inspection, channels: dict[str, np.ndarray], out_dir: str | os.PathLike
+) -> list[Path]:
+    """False-colour PNGs of every layer into ``out_dir`` (created); the files written.
+
+    One picture per layer ``<layer>.png`` (dots as ``_``): 3-channel vectors as colours
+    (``n * 0.5 + 0.5``), ids as distinct colours, other channels one picture each on the
+    diverging map when signed, the sequential map otherwise.  For every ``<field>.p1`` with a
+    ``<field>.dir`` beside it, ``<field>_p1_dir.png`` adds the principal directions as strokes.
+    The crack mask (``crack.mask.V`` of this file or of ``<stem>_cracks.exr`` beside a
+    ``<stem>_stress.exr``) is drawn in black over the pictures of every layer outside
+    ``crack.*`` (the crack maps themselves stay readable).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if not channels:
+        return []
+    h, w = next(iter(channels.values())).shape
+    shape = _picture_shape(h, w)
+    small = {n: _resample(a, shape) for n, a in channels.items()}
+    mask = small.get("crack.mask.V")
+    if mask is None:
+        sib = _sibling_mask(Path(info.path))
+        mask = _resample(sib, shape) if sib is not None and sib.shape == (h, w) else None
+    roles = {c.name: (c.role or "").rpartition(".")[2] for c in info.channels}
+    layers: dict[str, list[str]] = {}
+    for name in sorted(channels):
+        layers.setdefault(layer_of(name) or name, []).append(name)
+
+    written = []
+
+    def save(stem: str, rgb: np.ndarray, overlay: bool = True) -> None:
+        path = out / (stem.replace(".", "_") + ".png")
+        write_png(path, _overlay(rgb, mask if overlay else None), bits=8, color="srgb")
+        written.append(path)
+
+    for layer, names in layers.items():
+        if len(names) == 3 and all(n.rpartition(".")[2][-1:].upper() in "XYZ" for n in names):
+            rgb = np.stack([small[n].astype(np.float32) for n in names], axis=-1) * 0.5 + 0.5
+            save(layer, rgb, overlay=not layer.startswith("crack."))
+        elif len(names) == 2 and layer.endswith(".dir"):
+            field = layer.rpartition(".")[0]
+            p1 = small.get(f"{field}.p1.V")
+            if p1 is not None:
+                base = _overlay(_false_colour(p1, signed=True), mask)
+                dx, dy = (small[n].astype(np.float32) for n in names)
+                save(f"{field}_p1_dir", _strokes(base, dx, dy), overlay=False)
+        else:
+            for n in names:
+                role = roles.get(n, "")
+                rgb = (
+                    _id_colours(small[n])
+                    if role == "id"
+                    else _false_colour(small[n], signed=role in _SIGNED_ROLES)
+                )
+                save(n if len(names) > 1 else layer, rgb, overlay=not n.startswith("crack."))
+    return written

@@ -1,0 +1,208 @@
+"""``crackbake inspect``: run as a real process on real EXR files (ours, foreign, broken)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from crackbake.exchange.exr import write_exr
+from crackbake.exchange.inspect import STROKE_SPACING, inspect_exr
+from crackbake.exchange.layers import (
+    crack_attributes,
+    crack_planes,
+    stress_attributes,
+    stress_planes,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+H, W = 96, 160  # pictures of maps under 512 px are enlarged by an integer factor: 3 here
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.run(
+        [sys.executable, "-m", "crackbake", "inspect", *args],
+        capture_output=True, text=True, env=env, timeout=120,
+    )  # fmt: skip
+
+
+def _uniform_field(p1: float, p2: float, angle: float) -> dict[str, np.ndarray]:
+    """A constant tensor with principal values p1 >= p2 and p1 along ``angle`` (radians, T to B)."""
+    c, s = np.cos(angle), np.sin(angle)
+    xx, yy, xy = p1 * c * c + p2 * s * s, p1 * s * s + p2 * c * c, (p1 - p2) * c * s
+    full = lambda v: np.full((H, W), v, np.float32)  # noqa: E731
+    return {
+        "xx": full(xx), "yy": full(yy), "xy": full(xy), "p1": full(p1), "p2": full(p2),
+        "dir": np.dstack([full(c), full(s)]), "sep": full(max(p1, 0.0)),
+    }  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def run_files(tmp_path_factory):
+    """A crack master and a stress file beside it, as one run writes them."""
+    d = tmp_path_factory.mktemp("run")
+    mask = np.zeros((H, W), np.float16)
+    mask[40:44, :] = 1  # a horizontal crack, rows 40..43
+    rng = np.random.default_rng(2)
+    width = np.where(mask > 0, rng.uniform(1e-3, 2e-3, (H, W)), 0).astype(np.float16)
+    ids = np.where(mask > 0, 7, -1).astype(np.float32)
+    roles = {"mask": mask, "width": width, "id": ids, "depth": width.astype(np.float32)}
+    planes = crack_planes(roles)
+    write_exr(d / "a_cracks.exr", planes, crack_attributes("t", 0.1, 1.0, channels=planes))
+    fields = {
+        "stress0": _uniform_field(3e5, -1e5, np.pi / 6),
+        "stress": _uniform_field(-2e5, -4e5, 0),
+    }
+    write_exr(d / "a_stress.exr", stress_planes(fields), stress_attributes("t", units="Pa"))
+    return d, roles, fields
+
+
+def test_json_table_matches_the_pixels(run_files):
+    d, roles, _ = run_files
+    proc = cli(str(d / "a_cracks.exr"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout)
+    assert (got["width"], got["height"], got["compression"]) == (W, H, "zip")
+    rows = {c["name"]: c for c in got["channels"]}
+    assert sorted(rows) == ["crack.depth.V", "crack.id.V", "crack.mask.V", "crack.width.V"]
+    w = rows["crack.width.V"]
+    ref = roles["width"].astype(np.float64)
+    assert (w["layer"], w["channel"], w["type"], w["units"]) == (
+        "crack.width",
+        "V",
+        "half",
+        "mesh units",
+    )
+    assert w["min"] == 0 and w["max"] == pytest.approx(ref.max(), rel=0, abs=0)
+    assert w["mean"] == pytest.approx(ref.mean(), rel=1e-9)
+    assert w["nonzero"] == pytest.approx(4 / H)
+    ids = rows["crack.id.V"]
+    assert (ids["min"], ids["max"], ids["type"], ids["role"]) == (-1, 7, "float", "id")
+    assert rows["crack.mask.V"]["nonzero"] == pytest.approx(4 / H)
+    assert got["attributes"]["crackbake:version"] == "t"
+
+
+def test_text_table(run_files):
+    d, _, _ = run_files
+    proc = cli(str(d / "a_stress.exr"))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith(str(d / "a_stress.exr")) and "16 channels" in lines[0]
+    assert lines[1].split() == [
+        "layer",
+        "channel",
+        "type",
+        "min",
+        "max",
+        "mean",
+        "non-zero",
+        "units",
+    ]
+    p1 = next(ln.split() for ln in lines if ln.startswith("stress0.p1 "))
+    assert p1 == ["stress0.p1", "V", "float", "300000", "300000", "300000", "100.0%", "Pa"]
+
+
+def _rgb(path: Path) -> np.ndarray:
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB")).astype(np.int32)
+
+
+def test_pictures_show_signs_directions_and_the_mask(run_files, tmp_path):
+    d, _, _ = run_files
+    out = tmp_path / "pics"
+    proc = cli(str(d / "a_stress.exr"), "--png", str(out))
+    assert proc.returncode == 0, proc.stderr
+    names = sorted(p.name for p in out.iterdir())
+    assert "stress0_p1_dir.png" in names and "stress_p2.png" in names and len(names) == 14
+    scale = 3
+    # Diverging map: tension red, compression blue (the final field is all compression).
+    p1 = _rgb(out / "stress0_p1.png")
+    assert p1.shape == (H * scale, W * scale, 3)
+    r, g, b = p1[5, 5]
+    assert r > b + 50
+    r, g, b = _rgb(out / "stress_p1.png")[5, 5]
+    assert b > r + 50
+    # The crack mask from a_cracks.exr beside the file: rows 40..43 drawn black.
+    assert np.all(p1[40 * scale : 44 * scale, :] == 0)
+    assert not np.any(np.all(p1[: 40 * scale] == 0, axis=2)[:, ::7][::7])
+    # Strokes along p1 at 30 degrees above the T axis: the stroke pixels around each grid
+    # centre lie on that line (up in the image = +B = minus rows).
+    strokes = _rgb(out / "stress0_p1_dir.png")
+    assert np.all(strokes[strokes != p1] == 255)  # white ink on the deep red
+    s = STROKE_SPACING
+    cy, cx = s // 2, s // 2 + 2 * s
+    box = np.s_[cy - s // 2 : cy + s // 2, cx - s // 2 : cx + s // 2]
+    patch = np.any(strokes[box] != p1[box], axis=2)
+    ys, xs = np.nonzero(patch)
+    assert len(ys) >= s // 2
+    dx, dy = xs - s // 2, -(ys - s // 2)
+    # Distance of each stroke pixel from the line through the centre at 30 degrees.
+    dist = np.abs(dx * np.sin(np.pi / 6) - dy * np.cos(np.pi / 6))
+    assert dist.max() <= 1.0
+    assert np.ptp(dx) >= 0.7 * 0.8 * s * np.cos(np.pi / 6)
+
+
+def test_crack_pictures(run_files, tmp_path):
+    d, _, _ = run_files
+    out = tmp_path / "pics"
+    assert cli(str(d / "a_cracks.exr"), "--png", str(out)).returncode == 0
+    ids = _rgb(out / "crack_id.png")
+    assert np.all(ids[5 * 3, 5 * 3] == 0)  # id -1: black
+    assert ids[41 * 3, 5 * 3].min() >= 255 * 0.25 - 1  # id 7: a bright colour
+    mask = _rgb(out / "crack_mask.png")
+    assert mask[41 * 3, 10, 0] > mask[5, 10, 0]  # sequential: the crack is the bright end
+
+
+def test_foreign_file_gets_the_table(tmp_path):
+    path = tmp_path / "render.exr"
+    ramp = np.linspace(-1, 1, H * W, dtype=np.float32).reshape(H, W)
+    write_exr(
+        path,
+        {
+            "R": ramp,
+            "G": ramp * 0,
+            "B": ramp.astype(np.float16),
+            "objectId": np.arange(H * W, dtype=np.uint32).reshape(H, W),
+        },
+    )
+    proc = cli(str(path), "--json", "--png", str(tmp_path / "pics"))
+    assert proc.returncode == 0, proc.stderr
+    rows = {c["name"]: c for c in json.loads(proc.stdout)["channels"]}
+    assert rows["G"]["nonzero"] == 0 and rows["G"]["units"] is None
+    assert (rows["R"]["min"], rows["R"]["max"], rows["B"]["type"]) == (-1, 1, "half")
+    assert rows["objectId"]["type"] == "uint" and rows["objectId"]["max"] == H * W - 1
+    assert len(list((tmp_path / "pics").iterdir())) == 4
+
+
+def test_nan_and_inf_are_counted_not_averaged(tmp_path):
+    path = tmp_path / "nan.exr"
+    v = np.ones((H, W), np.float32)
+    v[0, :3] = [np.nan, np.inf, -np.inf]
+    write_exr(path, {"data.v.V": v})
+    info, _ = inspect_exr(path)
+    (row,) = info.channels
+    assert (row.min, row.max, row.mean, row.nonfinite) == (1, 1, 1, 3)
+
+
+@pytest.mark.parametrize("content", [b"", b"not an exr at all" * 10, b"v/1\x01" + b"\0" * 300])
+def test_bad_files_give_one_line_and_exit_2(tmp_path, content):
+    path = tmp_path / "broken.exr"
+    path.write_bytes(content)
+    proc = cli(str(path))
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: cannot read EXR"), proc.stderr
+
+
+def test_missing_file_is_a_usage_error(tmp_path):
+    proc = cli(str(tmp_path / "nope.exr"))
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1 and "does not exist" in proc.stderr
