@@ -65,6 +65,8 @@ def corner_tangents(
         increasing ``v``.
     """
     p, n, t, faces = _checked(vertices, faces, uv, normals)
+    if not len(faces):
+        return np.zeros((0, 3, 4))
     weld = _weld(p, n, t)[faces]
     pc, nc, tc = p[faces], n[faces], t[faces]
     nondeg = ~(
@@ -225,6 +227,9 @@ def _match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
     a = weld.reshape(-1)
     b = weld[:, _NEXT].reshape(-1)
     edges = np.flatnonzero(np.repeat(nondeg, 3))
+    partner = np.full(len(a), -1, dtype=np.int64)
+    if not len(edges):
+        return partner
     lo = np.minimum(a[edges], b[edges])
     hi = np.maximum(a[edges], b[edges])
     key = lo * np.int64(weld.max(initial=0) + 1) + hi
@@ -233,13 +238,12 @@ def _match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
     s_key, s_back, s_edge = key[order], backwards[order], edges[order]
     starts = np.flatnonzero(np.r_[True, s_key[1:] != s_key[:-1]])
     sizes = np.diff(np.r_[starts, len(s_key)])
-    n_fwd = np.add.reduceat(1 - s_back, starts) if len(starts) else starts
+    n_fwd = np.add.reduceat(1 - s_back, starts)
     block_start = np.repeat(starts, sizes)
     block_fwd = np.repeat(n_fwd, sizes)
     pos = np.arange(len(s_key))
     rank = pos - block_start - block_fwd  # rank among the backward edges of the block
     ok = (s_back == 1) & (rank < block_fwd)
-    partner = np.full(len(a), -1, dtype=np.int64)
     mate = s_edge[(block_start + rank)[ok]]
     partner[s_edge[ok]] = mate
     partner[mate] = s_edge[ok]
@@ -311,6 +315,7 @@ def _corner_contributions(pc, nc, tangent) -> np.ndarray:
 def _fallback(n: np.ndarray) -> np.ndarray:
     """(N, 3) MikkTSpace's default tangent +X made orthogonal to ``n`` (+Y where n is +-X)."""
     n = np.asarray(n, dtype=np.float64)
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
     t = np.zeros_like(n)
     t[:, 0] = 1.0
     t -= n * n[:, :1]
