@@ -161,6 +161,27 @@ def test_degenerate_triangles_get_valid_frames():
     assert np.allclose(tan[-1], [[1.0, 0.0, 0.0, -1.0]] * 3)
 
 
+@pytest.mark.parametrize("a_first", [True, False])
+def test_zero_uv_face_takes_orientation_of_first_group(a_first):
+    # A fan around the origin (flat, normal +z), UVs mirrored at x = 0 (u = 0.5 + 0.3 |x|):
+    # A on the left (mirrored, T = -x, w = -1), B on the right (T = +x, w = +1), and between
+    # them g = (0, P2, P1) whose P1, P2 are mirror images, so g has zero UV area.  MikkTSpace
+    # gives g the orientation of the first group reaching it (groups start in face order):
+    # g then shares that side's frames, and its corner on the other side, which no group of
+    # its orientation reaches, gets the default frame (1, 0, 0), w = -1.
+    v = np.array([[0, 0, 0], [-1, -0.2, 0], [-0.5, 1, 0], [0.5, 1, 0], [1, -0.2, 0]], float)
+    uv = np.column_stack([0.5 + 0.3 * np.abs(v[:, 0]), 0.3 + 0.3 * v[:, 1]])
+    a, b, g = [0, 2, 1], [0, 4, 3], [0, 3, 2]
+    f = np.array([a, b, g] if a_first else [b, a, g])
+    tan = corner_tangents(v, f, uv, np.tile([0.0, 0.0, 1.0], (5, 1)))
+    default = [1.0, 0.0, 0.0, -1.0]
+    if a_first:  # g's corners at 0, P2 (right), P1 (left)
+        want = [[-1.0, 0, 0, -1], default, [-1.0, 0, 0, -1]]
+    else:
+        want = [[1.0, 0, 0, 1], [1.0, 0, 0, 1], default]
+    assert np.allclose(tan[2], want, atol=1e-6)  # float32 inputs
+
+
 def test_default_frame_is_orthogonal_to_tilted_normal():
     v = np.array([[0, 0, 0], [1, 0, 1], [0, 1, 0]], float)
     n = np.tile(unit(np.cross(v[1], v[2])), (3, 1))
@@ -267,6 +288,33 @@ def test_blender_agrees_on_spot(tmp_path):
     assert res["all"]["max_angle_deg"] < 0.5, res
     # What is left is Blender's custom-normal storage (about 0.1 deg): on Blender's own input
     # the two implementations agree to float32 precision.
+    assert res["same_input"]["sign_agreement"] == 1.0
+    assert res["same_input"]["max_angle_deg"] < 0.01, res
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_blender_agrees_on_zero_uv_faces_at_a_mirror_seam(tmp_path, seed):
+    # Faces in random order and zero-UV-area faces along a welded mirror seam: MikkTSpace's
+    # one order dependence (which group such a face joins) decides the frames here.
+    rng = np.random.default_rng(seed)
+    n = 24
+    s, t = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
+    vertices = np.stack([s, t, 0.2 * np.sin(3 * s) * np.cos(4 * t)], -1).reshape(-1, 3)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    faces = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]).reshape(-1, 3)
+    faces = faces[rng.permutation(len(faces))]
+    uv = np.column_stack([np.abs(s.ravel() - 0.5) + 0.1, t.ravel() * 0.8])
+    at_seam = np.flatnonzero(np.isclose(vertices[faces, 0], 0.5).any(axis=1))
+    for k in rng.choice(at_seam, 12, replace=False):
+        corner = rng.integers(3)
+        uv[faces[k, corner]] = uv[faces[k, (corner + 1) % 3]]
+    res = blender_compare(tmp_path, uvmesh(vertices, faces, uv, vertex_normals(vertices, faces)))
+    assert res["faces_matched"] == res["faces"] == len(faces)
+    # Blender's importer changes the normals at some zero-UV-area corners (explained); the
+    # rest agree, and on Blender's own input everything does.
+    assert res["unexplained"]["sign_agreement"] == 1.0
+    assert res["unexplained"]["max_angle_deg"] < 0.5, res
     assert res["same_input"]["sign_agreement"] == 1.0
     assert res["same_input"]["max_angle_deg"] < 0.01, res
 

@@ -16,7 +16,10 @@ ships it), written for whole arrays instead of one triangle at a time:
 3. **Groups.**  Around each welded vertex, triangles connected through shared edges and of equal
    orientation form one group; its tangent is the sum of the member tangents, each projected
    onto the vertex normal and weighted by the corner angle (also measured in the tangent
-   plane), normalised.  Every corner of the group gets it.
+   plane), normalised.  Every corner of the group gets it.  Groups are formed in face order, so
+   which group a zero-UV-area triangle joins (and which groups it then links) depends on the
+   face order exactly as in MikkTSpace: that part is replayed step by step, over only the groups
+   touching such triangles.
 4. **Leftovers.**  Corners of degenerate triangles copy the frame of the first corner (in face
    order) with the same welded vertex; corners no group reached get MikkTSpace's default
    ``(1, 0, 0), w = -1``, here made orthogonal to the normal (the nearest valid frame).
@@ -76,8 +79,8 @@ def corner_tangents(
     tangent, orient, good = _triangle_frames(pc, tc)
     good &= nondeg
     partner = _match_edges(weld, nondeg)
-    orient = _adopt_orientation(orient, good, nondeg, partner)
-    label, n_groups = _corner_groups(partner, orient)
+    label, group_orient = _corner_groups(partner, orient, good, nondeg)
+    n_groups = len(group_orient)
 
     contrib = _corner_contributions(pc, nc, tangent) * good[:, None, None]
     flat = contrib.reshape(-1, 3)
@@ -93,7 +96,7 @@ def corner_tangents(
     # A group whose contributions cancel (Blender: a zero tangent) keeps the fallback.
     full = take & (length[label] > 0)
     out[full, :3] = group_t[label[full]]
-    out[take, 3] = np.where(np.repeat(orient, 3)[take], 1.0, -1.0)
+    out[take, 3] = np.where(group_orient[label[take]], 1.0, -1.0)
     _copy_to_degenerate(out, weld.reshape(-1), np.repeat(nondeg, 3))
     return out.reshape(-1, 3, 4)
 
@@ -250,50 +253,88 @@ def _match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
     return partner
 
 
-def _adopt_orientation(orient, good, nondeg, partner, rounds: int = 64) -> np.ndarray:
-    """Orientation of every triangle once group-with-any triangles adopted a neighbour's.
+def _corner_groups(partner, orient, good, nondeg) -> tuple[np.ndarray, np.ndarray]:
+    """(3F,) group label of each corner and (labels,) each group's orientation.
 
-    MikkTSpace gives such a triangle the orientation of the first group reaching it; here that
-    is the lowest-numbered neighbour across an edge whose orientation is settled (repeated so
-    chains of zero-UV-area triangles inherit it too).
-    """
-    orient = orient.copy()
-    known = good.copy()
-    pending = np.flatnonzero(nondeg & ~good)
-    nb = partner.reshape(-1, 3)[pending] // 3
-    nb = np.where(partner.reshape(-1, 3)[pending] >= 0, nb, -1)
-    big = np.iinfo(np.int64).max
-    for _ in range(rounds):
-        if not len(pending):
-            break
-        cand = np.where((nb >= 0) & known[np.maximum(nb, 0)], nb, big).min(axis=1)
-        settle = cand < big
-        if not settle.any():
-            break
-        orient[pending[settle]] = orient[cand[settle]]
-        known[pending[settle]] = True
-        pending, nb = pending[~settle], nb[~settle]
-    return orient
-
-
-def _corner_groups(partner: np.ndarray, orient: np.ndarray) -> tuple[np.ndarray, int]:
-    """(3F,) group label of each corner and the number of labels.
-
-    Edge ``(f, c)`` paired with ``(g, d)`` joins corner ``c`` of f with corner ``d + 1`` of g
-    and corner ``c + 1`` of f with corner ``d`` of g (the same welded vertices), when both
-    faces have the same orientation.
+    Edge ``(f, c)`` paired with ``(g, d)`` links corner ``c`` of f with corner ``d + 1`` of g
+    and corner ``c + 1`` of f with corner ``d`` of g (the same welded vertex).  Links between
+    good faces of equal orientation give the groups directly (connected components).  Faces
+    with zero UV area then join groups as MikkTSpace's sequential pass would have it
+    (:func:`_join_group_with_any`); only the groups touching such faces take part in that.
     """
     e = np.flatnonzero(partner > np.arange(len(partner)))
     m = partner[e]
-    same = orient[e // 3] == orient[m // 3]
-    e, m = e[same], m[same]
     nxt = lambda x: x - x % 3 + _NEXT[x % 3]  # noqa: E731 - the corner after corner x
-    src = np.concatenate([e, nxt(e)])
-    dst = np.concatenate([nxt(m), m])
+    src, dst = np.concatenate([e, nxt(e)]), np.concatenate([nxt(m), m])
+    good_c, orient_c = np.repeat(good, 3), np.repeat(orient, 3)
+    plain = good_c[src] & good_c[dst] & (orient_c[src] == orient_c[dst])
     n = len(partner)
-    graph = coo_matrix((np.ones(len(src), dtype=np.int8), (src, dst)), shape=(n, n)).tocsr()
-    n_groups, label = connected_components(graph, directed=False)
-    return label.astype(np.int64), int(n_groups)
+    graph = coo_matrix(
+        (np.ones(np.count_nonzero(plain), dtype=np.int8), (src[plain], dst[plain])), shape=(n, n)
+    ).tocsr()
+    n_comp, label = connected_components(graph, directed=False)
+    label = label.astype(np.int64)
+    # Each component's orientation and first corner (where MikkTSpace starts its group).
+    comp_orient = np.zeros(n_comp, dtype=bool)
+    comp_orient[label] = orient_c
+    start = np.full(n_comp, n, dtype=np.int64)
+    np.minimum.at(start, label[good_c], np.flatnonzero(good_c))
+    gwa_c = np.repeat(nondeg & ~good, 3)
+    mixed = ~plain & (gwa_c[src] | gwa_c[dst])
+    if mixed.any():
+        root = _join_group_with_any(
+            label[src[mixed]], label[dst[mixed]], n_comp, start, comp_orient, gwa_c, label
+        )
+        label = root[label]
+    return label, comp_orient
+
+
+def _join_group_with_any(a, b, n_comp, start, comp_orient, gwa_c, label) -> np.ndarray:
+    """(components,) the group each component ends in once zero-UV-area corners are joined.
+
+    ``a``-``b`` are links between components where at least one side is a zero-UV-area corner
+    (each such corner is a component of its own).  MikkTSpace creates groups in corner order;
+    each floods its vertex fan, and a zero-UV-area face takes the orientation of the first group
+    reaching it, which decides which later groups it can connect.  That order dependence is
+    replayed here, one step per component touching such a corner (a Python loop, but only over
+    those few components and corners).
+    """
+    graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n_comp, n_comp))
+    graph = (graph + graph.T).tocsr()
+    indptr, indices = graph.indptr.tolist(), graph.indices.tolist()
+    is_gwa = np.zeros(n_comp, dtype=bool)
+    is_gwa[label[gwa_c]] = True
+    tri_of = np.full(n_comp, -1, dtype=np.int64)
+    tri_of[label[gwa_c]] = np.flatnonzero(gwa_c) // 3
+    touched = np.unique(np.concatenate([a, b]))
+    seeds = touched[~is_gwa[touched]]
+    seeds = seeds[np.argsort(start[seeds], kind="stable")].tolist()
+    is_gwa_l, tri_l, orient_l = is_gwa.tolist(), tri_of.tolist(), comp_orient.tolist()
+    assigned = np.zeros(n_comp, dtype=bool)
+    root = np.arange(n_comp)
+    state: dict[int, bool] = {}  # zero-UV-area face -> orientation once a group reached it
+    for seed in seeds:
+        if assigned[seed]:
+            continue
+        assigned[seed] = True
+        o = orient_l[seed]
+        stack = [seed]
+        while stack:
+            x = stack.pop()
+            for y in indices[indptr[x]:indptr[x + 1]]:
+                if assigned[y]:
+                    continue
+                if is_gwa_l[y]:
+                    if state.setdefault(tri_l[y], o) != o:
+                        continue
+                elif orient_l[y] != o:
+                    continue
+                assigned[y] = True
+                root[y] = seed
+                stack.append(y)
+    for y in np.flatnonzero(assigned & is_gwa).tolist():
+        comp_orient[y] = comp_orient[root[y]]
+    return root
 
 
 def _project(n: np.ndarray, v: np.ndarray) -> np.ndarray:
