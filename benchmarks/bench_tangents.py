@@ -1,12 +1,12 @@
 """Time MikkTSpace tangents (:mod:`crackbake.bake.tangents`) on a large mesh.
 
 Builds a wavy sheet of ``2 n^2`` triangles (n = 708 gives about 1M) whose UVs are cut into
-islands, half of them mirrored, with a few zero-UV-area and zero-area triangles, then times
+islands, half of them mirrored, with a few zero-UV-area triangles, then times
 :func:`corner_tangents` and :func:`with_tangents`.
 
 Usage::
 
-    python benchmarks/bench_tangents.py [--n 708] [--repeat 3]
+    python benchmarks/bench_tangents.py [--n 708] [--repeat 3] [--zero-uv-every 997]
 """
 
 from __future__ import annotations
@@ -21,9 +21,10 @@ from crackbake.bake.uv.uvmesh import UVMesh
 from crackbake.geometry import vertex_normals
 
 
-def sheet(n: int, islands: int = 8, seed: int = 0) -> UVMesh:
+def sheet(n: int, islands: int = 8, seed: int = 0, zero_every: int = 997) -> UVMesh:
     """A wavy (n+1)^2-vertex sheet; UVs split into ``islands`` x ``islands`` islands (vertices
-    duplicated along the island borders), odd columns of islands mirrored in u."""
+    duplicated along the island borders), odd columns of islands mirrored in u; every
+    ``zero_every``-th face gets zero UV area."""
     rng = np.random.default_rng(seed)
     s, t = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
     s = s + rng.uniform(-0.2, 0.2, s.shape) / n * ((s > 0) & (s < 1))
@@ -44,7 +45,8 @@ def sheet(n: int, islands: int = 8, seed: int = 0) -> UVMesh:
     mirrored = (isl // islands) % 2 == 1
     u = np.where(mirrored, 1.0 - u, u)
     uv = np.column_stack([((isl // islands) + u * 0.9) / islands, v])
-    uv[inverse.reshape(-1, 3)[::997, 2]] = uv[inverse.reshape(-1, 3)[::997, 1]]  # zero UV area
+    f = inverse.reshape(-1, 3)[::zero_every]
+    uv[f[:, 2]] = uv[f[:, 1]]  # zero UV area
     return UVMesh(pos[vmap], inverse.reshape(-1, 3).astype(np.int64), uv, normals[vmap],
                   vmap, "kept", 0.0, 0)
 
@@ -53,8 +55,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=708)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--zero-uv-every", type=int, default=997,
+                    help="every k-th face gets zero UV area (the slower, order-dependent path)")
     args = ap.parse_args()
-    mesh = sheet(args.n)
+    mesh = sheet(args.n, zero_every=args.zero_uv_every)
     print(f"{len(mesh.faces):,} faces, {len(mesh.vertices):,} vertices")
     for name, fn in (
         ("corner_tangents", lambda: corner_tangents(mesh.vertices, mesh.faces, mesh.uv,
