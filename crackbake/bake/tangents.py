@@ -12,7 +12,7 @@ ships it), written for whole arrays instead of one triangle at a time:
    takes no part.  Every other triangle has a tangent ``dP/du`` (normalised) and an orientation
    (UV area > 0 is orientation preserving, w = +1; mirrored UVs give w = -1).  A triangle with
    zero UV area (or zero ``dP/du`` / ``dP/dv``) is *group-with-any*: it contributes nothing and
-   adopts the orientation of the first neighbouring group reaching it.
+   adopts the orientation of the first group reaching it.
 3. **Groups.**  Around each welded vertex, triangles connected through shared edges and of equal
    orientation form one group; its tangent is the sum of the member tangents, each projected
    onto the vertex normal and weighted by the corner angle (also measured in the tangent
