@@ -38,6 +38,11 @@ class UVMesh:
         because no OpenGL context was available).
     padding_px : int
         Chart gutter in texels at the resolution unwrapped for (0 when kept).
+    tangents : (V', 4) float64 or None
+        MikkTSpace tangent frames (:func:`crackbake.bake.tangents.with_tangents` sets them and
+        splits vertices whose corners disagree): ``xyz`` unit, along +u and orthogonal to the
+        normal; ``w`` = +1 or -1, the bitangent sign, so ``B = w * cross(N, T)`` points
+        towards +v (up in the image).  None until computed.
     """
 
     vertices: np.ndarray
@@ -48,6 +53,7 @@ class UVMesh:
     method: str
     overlap_fraction: float
     padding_px: int
+    tangents: np.ndarray | None = None
 
 
 def default_padding(res: int) -> int:
