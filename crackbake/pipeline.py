@@ -16,6 +16,7 @@ from pathlib import Path
 
 from crackbake.bake.context import create_context, renderer_info
 from crackbake.bake.raster import CrackMaps, bake_cracks
+from crackbake.bake.tangents import with_tangents
 from crackbake.bake.uv import UVMesh, prepare_uvs
 from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.bundle import write_outputs
@@ -203,6 +204,10 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
         ctx=ctx,
     )
     timings["unwrap"] = time.perf_counter() - t
+    t = time.perf_counter()
+    # Before the bake: the normal map is encoded in exactly the frames the GLB carries.
+    uvmesh = with_tangents(uvmesh)
+    timings["tangents"] = time.perf_counter() - t
     return uvmesh
 
 
