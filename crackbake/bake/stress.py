@@ -1,0 +1,390 @@
+"""GPU bake of the solver's stress fields into UV-space maps, in each texel's tangent frame.
+
+The simulation triangles are drawn in UV space (DESIGN.md §2: every sim triangle lies inside one
+asset face, so each of its corners has that face's UV at its barycentric coordinates; a node on
+a UV seam gets one UV per island).  The stress travels as a world-space tensor per simulation
+node (the area-weighted mean of its faces' tensors: nodes the solver split along a crack keep
+each side's own value, so the maps stay discontinuous exactly across cracks) and is linearly
+interpolated per texel, then expressed in the texel's tangent frame::
+
+    N  = normalize(interpolated shading normal)
+    e1 = normalize(T - N (N . T))       tangent, along +u
+    e2 = w * cross(N, e1)               bitangent, along +v (w = the tangent's bitangent sign)
+
+i.e. the frame engines decode tangent-space normal maps in (MikkTSpace ``T``, ``B = w N x T``),
+orthonormalised.  Components: ``xx = e1.S.e1``, ``yy = e2.S.e2``, ``xy = e1.S.e2``; principal
+values ``p1 >= p2`` and the unit direction of ``p1`` as ``(cos a, sin a)`` in ``(e1, e2)``,
+``a`` in (-90, 90] degrees (a direction is only defined up to sign; isotropic texels get (1, 0)).
+
+Units: the solver's stress units, i.e. the stress sources' *strength* (every source is linear in
+its strength, which is the principal stress it adds; crackbake/simulate/stress/sources.py).
+They are relative, not pascals: a directional source of strength 1 gives 1.  Tension positive.
+The separation ``sep`` is dimensionless, relative to the toughness: >= 1 is where the material
+fails.  Rows: row 0 = top of the image (v = 1).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit, prange
+
+from crackbake.bake.context import GLScope, shader_source
+from crackbake.bake.dilation import dilate
+from crackbake.errors import CrackbakeError
+from crackbake.geometry import barycentric
+from crackbake.params import TILE_DEFAULT
+from crackbake.simulate.solver.fem import (
+    corner_incidence,
+    face_frames,
+    face_geometry,
+    node_forces,
+    separation_tensors,
+    split_tension,
+)
+
+__all__ = ["FIELDS", "FRAME", "STRESS_UNITS", "StressMaps", "TensorMaps", "bake_stress",
+           "initial_separation"]
+
+#: The two fields, in output order: the solver's initial and final (effective) stress.
+FIELDS = ("stress0", "stress")
+#: Units of xx, yy, xy, p1, p2 (recorded in the EXR header).
+STRESS_UNITS = "solver stress units (stress-source strength, relative; tension positive)"
+#: The tangent frame, for headers.
+FRAME = ("tangent: e1 = normalize(T - N(N.T)) (+u), e2 = w cross(N, e1) (+v); "
+         "components xx, yy, xy; dir = (cos, sin) of p1 in (e1, e2)")
+# Barycentric slack before a sim corner counts as outside its asset face (relative).
+_BARY_TOL = 1e-4
+
+
+@dataclass(eq=False)
+class TensorMaps:
+    """One stress field in the tangent frame, each plane (res, res) float32, row 0 = top.
+
+    Attributes
+    ----------
+    xx, yy, xy : float32
+        Tensor components in ``(e1, e2)``, solver stress units.
+    p1, p2 : float32
+        Principal values, ``p1 >= p2``.
+    dir : (res, res, 2) float32
+        Unit direction of ``p1`` in ``(e1, e2)``, first component >= 0.
+    sep : float32
+        Separation relative to the toughness (>= 1 failed), dimensionless.
+    """
+
+    xx: np.ndarray
+    yy: np.ndarray
+    xy: np.ndarray
+    p1: np.ndarray
+    p2: np.ndarray
+    dir: np.ndarray
+    sep: np.ndarray
+
+
+@dataclass(eq=False)
+class StressMaps:
+    """The baked stress fields (see the module docstring for frame and units).
+
+    Attributes
+    ----------
+    res : int
+    stress0 : TensorMaps
+        The initial field (before any crack).
+    stress : TensorMaps
+        The final field (what the cracks left: iben's effective stress).
+    inside : (res, res) bool
+        Texels whose centre lies on a simulation triangle (before dilation).
+    units, frame : str
+        :data:`STRESS_UNITS`, :data:`FRAME`.
+    """
+
+    res: int
+    stress0: TensorMaps
+    stress: TensorMaps
+    inside: np.ndarray
+    units: str = STRESS_UNITS
+    frame: str = FRAME
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def fields(self) -> dict[str, TensorMaps]:
+        """``{"stress0": ..., "stress": ...}``."""
+        return {"stress0": self.stress0, "stress": self.stress}
+
+    def planes(self) -> dict[str, np.ndarray]:
+        """Every plane by role name ``<field>.<xx|yy|xy|p1|p2|dir_x|dir_y|sep>``, (res, res)."""
+        out: dict[str, np.ndarray] = {}
+        for name, f in self.fields().items():
+            for comp in ("xx", "yy", "xy", "p1", "p2"):
+                out[f"{name}.{comp}"] = getattr(f, comp)
+            out[f"{name}.dir_x"] = f.dir[..., 0]
+            out[f"{name}.dir_y"] = f.dir[..., 1]
+            out[f"{name}.sep"] = f.sep
+        return out
+
+
+def initial_separation(vertices: np.ndarray, faces: np.ndarray, stress: np.ndarray,
+                       stats: dict) -> np.ndarray:
+    """The separation of the initial field per node, relative to the toughness, (N,).
+
+    The largest eigenvalue ``v+`` of the paper's separation tensor (Iben & O'Brien; forces
+    ``-A S+- g`` from the tensile / compressive parts, :mod:`crackbake.simulate.solver.fem`),
+    scaled as each solver's failure test scales it: thesis ``v+ / tau``; iben ``v+ / (tau h_n)``
+    with ``h_n`` the node's mean edge length.  ``tau`` is ``stats["tau"]``.  For thesis this is
+    exactly the solver's ``separation`` (its field never changes); for iben it leaves out the
+    solver's direction averaging, seeded flaws (+-FLAW) and footprint factor, so it is the
+    nominal load of the fresh material: about 1 where it starts to fail.
+    """
+    tau = float(stats.get("tau", 0.0) or 0.0)
+    n = len(vertices)
+    if not (tau > 0 and np.isfinite(tau)) or len(faces) == 0:
+        return np.zeros(n)
+    area, normal, grad = face_geometry(vertices, faces)
+    plus, minus, _, _ = split_tension(stress, face_frames(normal, vertices, faces))
+    sep = separation_tensors(faces, node_forces(area, grad, plus), node_forces(area, grad, minus),
+                             n)
+    value = np.linalg.eigvalsh(sep)[:, -1]
+    if stats.get("method") == "thesis":
+        return value / tau
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    length = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+    h = np.bincount(e.ravel(), np.repeat(length, 2), n) / np.maximum(np.bincount(e.ravel(),
+                                                                                 minlength=n), 1)
+    return np.where(h > 0, value / (tau * np.where(h > 0, h, 1.0)), 0.0)
+
+
+def _nodal(vertices: np.ndarray, faces: np.ndarray, stress: np.ndarray, sep: np.ndarray):
+    """Per node: area-weighted mean world tensor (xx, yy, zz, xy, xz, yz) and sep, (N, 7)."""
+    area = face_geometry(vertices, faces)[0]
+    six = stress[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]] * area[:, None]
+    gather = corner_incidence(faces, len(vertices))
+    sums = gather @ np.repeat(np.column_stack([six, area]), 3, axis=0)
+    out = np.empty((len(vertices), 7))
+    out[:, :6] = sums[:, :6] / np.where(sums[:, 6:] > 0, sums[:, 6:], 1.0)
+    out[:, 6] = np.maximum(sep, 0.0)
+    return out
+
+
+def _draw_data(uvmesh, tangents: np.ndarray, vertices, faces, asset_face, nodal):
+    """Vertex buffer (K, 16) float32 and index buffer (M, 3) uint32 of sim triangles in UV space.
+
+    One vertex per (sim node, asset face) pair: a node on an asset edge gets each face's own
+    UV there (different islands on a seam) and the same world values.
+    """
+    uv_faces = np.asarray(uvmesh.faces, np.int64)
+    n_asset = len(uv_faces)
+    asset_face = np.asarray(asset_face, np.int64)
+    if len(asset_face) != len(faces) or (len(faces) and (asset_face.min() < 0 or
+                                                         asset_face.max() >= n_asset)):
+        raise CrackbakeError(
+            "the simulation mesh's asset faces do not index the output mesh; bake stress with "
+            "the UV mesh of the asset the simulation was built from")
+    key = faces * n_asset + asset_face[:, None]
+    pairs, inverse = np.unique(key.ravel(), return_inverse=True)
+    node, face = pairs // n_asset, pairs % n_asset
+    corners = uv_faces[face]
+    tri = np.asarray(uvmesh.vertices, np.float64)[corners]
+    bary = barycentric(tri, vertices[node])
+    _check_inside(bary, tri, vertices[node])
+    bary = np.clip(bary, 0.0, 1.0)
+    bary /= bary.sum(axis=1, keepdims=True)
+    data = np.empty((len(pairs), 16), np.float32)
+    data[:, 0:2] = np.einsum("kc,kca->ka", bary, np.asarray(uvmesh.uv)[corners])
+    data[:, 2:5] = np.einsum("kc,kca->ka", bary, tangents[corners, :3])
+    data[:, 5] = np.einsum("kc,kc->k", bary, tangents[corners, 3])
+    data[:, 6:9] = np.einsum("kc,kca->ka", bary, np.asarray(uvmesh.normals)[corners])
+    data[:, 9:16] = nodal[node]
+    return data, inverse.reshape(-1, 3).astype(np.uint32)
+
+
+def _check_inside(bary: np.ndarray, tri: np.ndarray, points: np.ndarray) -> None:
+    """Refuse sim corners that do not lie in their asset face (a mesh from another asset)."""
+    if not len(bary):
+        return
+    size = np.linalg.norm(tri.max(axis=1) - tri.min(axis=1), axis=1)
+    back = np.einsum("kc,kca->ka", bary, tri)
+    off = np.linalg.norm(back - points, axis=1) > _BARY_TOL * np.maximum(size, 1e-300)
+    bad = (bary.min(axis=1) < -_BARY_TOL) | off
+    if bad.any():
+        raise CrackbakeError(
+            f"{int(bad.sum())} simulation nodes lie outside the asset face their triangle "
+            "belongs to; bake stress with the simulation mesh built from this asset")
+
+
+def _tangents(uvmesh, tangents) -> np.ndarray:
+    t = getattr(uvmesh, "tangents", None) if tangents is None else tangents
+    if t is None:
+        raise CrackbakeError(
+            "stress maps need tangents; pass tangents= or bake with "
+            "crackbake.bake.tangents.with_tangents(uvmesh)")
+    t = np.asarray(t, np.float64)
+    if t.shape != (len(uvmesh.vertices), 4):
+        raise CrackbakeError(
+            f"tangents have shape {t.shape}; they must be (V, 4) for the {len(uvmesh.vertices)} "
+            "UV-mesh vertices (compute them on the same UV mesh)")
+    return t
+
+
+def _initial_mesh(result, initial):
+    """Vertices, faces, asset faces of the mesh ``stress_initial`` lives on."""
+    if initial is None:
+        if len(result.stress_initial) != len(result.faces):
+            raise CrackbakeError(
+                "the solver split faces, so the initial stress needs the initial simulation "
+                "mesh: pass initial=Solved.sim")
+        initial = result
+    verts = np.asarray(initial.vertices, np.float64)
+    faces = np.asarray(initial.faces, np.int64)
+    if len(faces) != len(result.stress_initial):
+        raise CrackbakeError(
+            f"the initial mesh has {len(faces)} faces but the initial stress "
+            f"{len(result.stress_initial)}; pass the simulation mesh the solver started from")
+    return verts, faces, np.asarray(initial.asset_face, np.int64)
+
+
+def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, initial=None,
+                dilate_px: int | None = None, tile: int = TILE_DEFAULT, ctx=None) -> StressMaps:
+    """Bake the solver's initial and final stress into tangent-frame maps.
+
+    Parameters
+    ----------
+    uvmesh : UVMesh
+        The output mesh (``vertices``, ``faces`` in asset order, ``uv`` v up, ``normals``).
+    result : SolverResult
+        ``vertices``/``faces``/``asset_face`` (final sim mesh), ``stress_final`` (per final
+        face), ``separation`` (per final node), ``stress_initial``, ``stats["tau"]``.
+    res : int
+        Output edge in texels.
+    tangents : (V, 4) float, optional
+        Per UV-mesh vertex: unit T and bitangent sign w (``B = w N x T`` points to +v);
+        default ``uvmesh.tangents``.
+    initial : SimMesh, optional
+        The mesh ``stress_initial`` lives on (``Solved.sim``); needed once iben split faces.
+    dilate_px : int, optional
+        Gutter fill limit in texels (``None``: fill every empty texel).
+    tile : int
+        Largest framebuffer edge: images are drawn in full-width bands of <= tile**2 texels.
+    ctx : moderngl.Context, optional
+        The run's context; a temporary one when not given.
+    """
+    if res < 1:
+        raise ValueError(f"res must be a positive texel count, got {res}")
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    tan = _tangents(uvmesh, tangents)
+    v0, f0, a0 = _initial_mesh(result, initial)
+    s0 = np.asarray(result.stress_initial, np.float64)
+    sep0 = initial_separation(v0, f0, s0, result.stats)
+    v1 = np.asarray(result.vertices, np.float64)
+    f1 = np.asarray(result.faces, np.int64)
+    meshes = [
+        _draw_data(uvmesh, tan, v0, f0, a0, _nodal(v0, f0, s0, sep0)),
+        _draw_data(uvmesh, tan, v1, f1, result.asset_face,
+                   _nodal(v1, f1, np.asarray(result.stress_final, np.float64),
+                          np.asarray(result.separation, np.float64))),
+    ]
+    timings["prepare"] = time.perf_counter() - t0
+    planes = _render(ctx, meshes, res, tile, timings)
+    t1 = time.perf_counter()
+    inside = planes.pop("inside") > 0
+    base = [planes[f"{f}.{c}"] for f in FIELDS for c in ("xx", "yy", "xy", "sep")]
+    dilate(base, inside, limit=dilate_px)
+    timings["dilate"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    maps = {f: _principal_maps(planes, f, res) for f in FIELDS}
+    timings["principal"] = time.perf_counter() - t2
+    return StressMaps(res=res, stress0=maps["stress0"], stress=maps["stress"], inside=inside,
+                      timings=timings)
+
+
+_OUT = ("xx", "yy", "xy", "sep")
+
+
+def _render(ctx, meshes, res: int, tile: int, timings: dict[str, float]) -> dict[str, np.ndarray]:
+    """Draw both fields band by band; planar images ``<field>.<xx|yy|xy|sep>`` and ``inside``."""
+    import moderngl
+
+    with GLScope(ctx) as gl:
+        t = time.perf_counter()
+        prog = gl.keep(gl.ctx.program(vertex_shader=shader_source("stress_bake.vert"),
+                                      fragment_shader=shader_source("stress_bake.frag")))
+        prog["u_res"].value = float(res)
+        vaos = []
+        for data, index in meshes:
+            vbo = gl.keep(gl.ctx.buffer(data))
+            ibo = gl.keep(gl.ctx.buffer(index))
+            vaos.append(gl.keep(gl.ctx.vertex_array(
+                prog, [(vbo, "2f 3f 1f 3f 3f 3f 1f", "in_uv", "in_t", "in_w", "in_n", "in_sd",
+                        "in_so", "in_sep")], index_buffer=ibo, index_element_size=4)))
+        band = max(1, min(res, (tile * tile) // res))
+        names = [f"{f}.{c}" for f in FIELDS for c in _OUT] + ["inside"]
+        images = {n: np.empty((res, res), np.uint8 if n == "inside" else np.float32)
+                  for n in names}
+        tex = [gl.keep(gl.ctx.texture((res, band), 1, dtype="f1" if n == "inside" else "f4"))
+               for n in names]
+        fbos = [gl.keep(gl.ctx.framebuffer(color_attachments=tex[0:4])),
+                gl.keep(gl.ctx.framebuffer(color_attachments=tex[4:9]))]
+        gl.ctx.enable_only(moderngl.NOTHING)
+        timings["setup"] = time.perf_counter() - t
+        t_draw = t_read = 0.0
+        for y0 in range(0, res, band):
+            h = min(band, res - y0)
+            ta = time.perf_counter()
+            prog["u_tile"].value = (0.0, float(y0), float(res), float(band))
+            for fbo, vao in zip(fbos, vaos, strict=True):
+                fbo.use()
+                fbo.clear(0.0, 0.0, 0.0, 0.0)
+                vao.render(moderngl.TRIANGLES)
+            gl.ctx.finish()
+            tb = time.perf_counter()
+            for k, n in enumerate(names):
+                fbo, att = (fbos[0], k) if k < 4 else (fbos[1], k - 4)
+                fbo.read_into(images[n][y0:y0 + h], viewport=(0, 0, res, h), components=1,
+                              attachment=att, dtype="f1" if n == "inside" else "f4")
+            t_draw += tb - ta
+            t_read += time.perf_counter() - tb
+        timings["render"] = t_draw
+        timings["readback"] = t_read
+    return images
+
+
+@njit(parallel=True, cache=True)
+def _principal(xx, yy, xy, p1, p2, direction):
+    """Principal values and the unit p1 direction (cos a, sin a), a in (-90, 90] degrees."""
+    for i in prange(xx.shape[0]):
+        a = np.float64(xx[i])
+        c = np.float64(yy[i])
+        b = np.float64(xy[i])
+        mean = 0.5 * (a + c)
+        half = 0.5 * (a - c)
+        r = math.sqrt(half * half + b * b)
+        p1[i] = mean + r
+        p2[i] = mean - r
+        if r > 0.0:
+            # Half-angle formulas: cos 2a = half / r, sin 2a = b / r; no trigonometry.
+            c2 = half / r
+            cx = math.sqrt(max(0.5 * (1.0 + c2), 0.0))
+            sy = math.sqrt(max(0.5 * (1.0 - c2), 0.0))
+            if b < 0.0:
+                sy = -sy
+            norm = math.sqrt(cx * cx + sy * sy)
+            direction[i, 0] = cx / norm
+            direction[i, 1] = sy / norm
+        else:
+            direction[i, 0] = 1.0
+            direction[i, 1] = 0.0
+
+
+def _principal_maps(planes: dict[str, np.ndarray], name: str, res: int) -> TensorMaps:
+    xx, yy, xy = planes[f"{name}.xx"], planes[f"{name}.yy"], planes[f"{name}.xy"]
+    p1 = np.empty_like(xx)
+    p2 = np.empty_like(xx)
+    direction = np.empty((res, res, 2), np.float32)
+    _principal(xx.reshape(-1), yy.reshape(-1), xy.reshape(-1), p1.reshape(-1), p2.reshape(-1),
+               direction.reshape(-1, 2))
+    return TensorMaps(xx=xx, yy=yy, xy=xy, p1=p1, p2=p2, dir=direction,
+                      sep=planes[f"{name}.sep"])
