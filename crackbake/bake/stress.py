@@ -33,9 +33,9 @@ import numpy as np
 from numba import njit, prange
 
 from crackbake.bake.context import GLScope, shader_source
-from crackbake.bake.dilation import dilate
+from crackbake.bake.dilation import nearest_island
 from crackbake.errors import CrackbakeError
-from crackbake.geometry import barycentric
+from crackbake.geometry import barycentric, edges
 from crackbake.params import TILE_DEFAULT
 from crackbake.simulate.solver.fem import (
     corner_incidence,
@@ -149,8 +149,7 @@ def initial_separation(vertices: np.ndarray, faces: np.ndarray, stress: np.ndarr
     value = np.linalg.eigvalsh(sep)[:, -1]
     if stats.get("method") == "thesis":
         return value / tau
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
+    e = edges(faces, n)[0]
     length = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
     h = np.bincount(e.ravel(), np.repeat(length, 2), n) / np.maximum(np.bincount(e.ravel(),
                                                                                  minlength=n), 1)
@@ -291,11 +290,10 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     planes = _render(ctx, meshes, res, tile, timings)
     t1 = time.perf_counter()
     inside = planes.pop("inside") > 0
-    base = [planes[f"{f}.{c}"] for f in FIELDS for c in ("xx", "yy", "xy", "sep")]
-    dilate(base, inside, limit=dilate_px)
-    timings["dilate"] = time.perf_counter() - t1
+    source = _sources(inside, dilate_px)
+    timings["nearest"] = time.perf_counter() - t1
     t2 = time.perf_counter()
-    maps = {f: _principal_maps(planes, f, res) for f in FIELDS}
+    maps = {f: _principal_maps(planes, f, res, source) for f in FIELDS}
     timings["principal"] = time.perf_counter() - t2
     return StressMaps(res=res, stress0=maps["stress0"], stress=maps["stress"], inside=inside,
                       timings=timings)
@@ -352,39 +350,70 @@ def _render(ctx, meshes, res: int, tile: int, timings: dict[str, float]) -> dict
     return images
 
 
-@njit(parallel=True, cache=True)
-def _principal(xx, yy, xy, p1, p2, direction):
-    """Principal values and the unit p1 direction (cos a, sin a), a in (-90, 90] degrees."""
+def _sources(inside: np.ndarray, limit: int | None) -> np.ndarray:
+    """Flat index of the texel each texel takes its values from (itself inside an island, the
+    nearest island texel in the gutter, -1 beyond ``limit`` texels or with no island)."""
+    source, dist2 = nearest_island(inside)
+    if limit is not None:
+        source[dist2 > int(limit) ** 2] = -1
+    return source
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def _fill_principal(source, xx, yy, xy, sep, p1, p2, dx, dy):
+    """Gutter fill (copy from ``source``, zeros where it is -1) fused with the principal values
+    and the unit p1 direction (cos a, sin a), a in (-90, 90] degrees.
+
+    One pass per field instead of a dilation pass per plane plus a principal pass; island
+    texels are their own source and are never written, so the parallel reads are safe.
+    Half-angle formulas (cos 2a = h / r, sin 2a = xy / r) need no trigonometry; isotropic
+    texels (r = 0) get (1, 0).
+    """
+    one = np.float32(1.0)
+    half_ = np.float32(0.5)
+    zero = np.float32(0.0)
     for i in prange(xx.shape[0]):
-        a = np.float64(xx[i])
-        c = np.float64(yy[i])
-        b = np.float64(xy[i])
-        mean = 0.5 * (a + c)
-        half = 0.5 * (a - c)
-        r = math.sqrt(half * half + b * b)
+        j = source[i]
+        if j == i:
+            a = xx[i]
+            c = yy[i]
+            b = xy[i]
+        elif j >= 0:
+            a = xx[j]
+            c = yy[j]
+            b = xy[j]
+            xx[i] = a
+            yy[i] = c
+            xy[i] = b
+            sep[i] = sep[j]
+        else:
+            a = zero
+            c = zero
+            b = zero
+            xx[i] = zero
+            yy[i] = zero
+            xy[i] = zero
+            sep[i] = zero
+        mean = half_ * (a + c)
+        h = half_ * (a - c)
+        r = np.sqrt(h * h + b * b)
         p1[i] = mean + r
         p2[i] = mean - r
-        if r > 0.0:
-            # Half-angle formulas: cos 2a = half / r, sin 2a = b / r; no trigonometry.
-            c2 = half / r
-            cx = math.sqrt(max(0.5 * (1.0 + c2), 0.0))
-            sy = math.sqrt(max(0.5 * (1.0 - c2), 0.0))
-            if b < 0.0:
-                sy = -sy
-            norm = math.sqrt(cx * cx + sy * sy)
-            direction[i, 0] = cx / norm
-            direction[i, 1] = sy / norm
-        else:
-            direction[i, 0] = 1.0
-            direction[i, 1] = 0.0
+        c2 = h / r if r > 0 else one
+        cx = np.sqrt(max(half_ * (one + c2), zero))
+        sy = np.sqrt(max(half_ * (one - c2), zero))
+        dx[i] = cx
+        dy[i] = sy if b >= 0 else -sy
 
 
-def _principal_maps(planes: dict[str, np.ndarray], name: str, res: int) -> TensorMaps:
+def _principal_maps(planes: dict[str, np.ndarray], name: str, res: int,
+                    source: np.ndarray) -> TensorMaps:
     xx, yy, xy = planes[f"{name}.xx"], planes[f"{name}.yy"], planes[f"{name}.xy"]
+    sep = planes[f"{name}.sep"]
     p1 = np.empty_like(xx)
     p2 = np.empty_like(xx)
     direction = np.empty((res, res, 2), np.float32)
-    _principal(xx.reshape(-1), yy.reshape(-1), xy.reshape(-1), p1.reshape(-1), p2.reshape(-1),
-               direction.reshape(-1, 2))
-    return TensorMaps(xx=xx, yy=yy, xy=xy, p1=p1, p2=p2, dir=direction,
-                      sep=planes[f"{name}.sep"])
+    flat = direction.reshape(-1, 2)
+    _fill_principal(source, xx.reshape(-1), yy.reshape(-1), xy.reshape(-1), sep.reshape(-1),
+                    p1.reshape(-1), p2.reshape(-1), flat[:, 0], flat[:, 1])
+    return TensorMaps(xx=xx, yy=yy, xy=xy, p1=p1, p2=p2, dir=direction, sep=sep)
