@@ -18,8 +18,7 @@ in float v_sep;
 layout(location = 0) out float o_xx;
 layout(location = 1) out float o_yy;
 layout(location = 2) out float o_xy;
-layout(location = 3) out float o_sep;
-layout(location = 4) out float o_inside;   // R8; only the final-field framebuffer has it
+layout(location = 3) out float o_sep;      // >= 0; targets are cleared to -1 (= not drawn)
 
 void main() {
     vec3 n = normalize(v_n);
@@ -40,5 +39,4 @@ void main() {
     o_yy = dot(e2, s * e2);
     o_xy = dot(e2, s1);
     o_sep = v_sep;
-    o_inside = 1.0;
 }
