@@ -33,17 +33,14 @@ from numba import njit, prange
 
 from crackbake.bake.context import GLScope, shader_source
 from crackbake.bake.dilation import nearest_island
-from crackbake.errors import CrackbakeError
-from crackbake.geometry import barycentric, edges, face_areas
-from crackbake.params import TILE_DEFAULT
-from crackbake.simulate.solver.fem import (
-    corner_incidence,
-    face_frames,
-    face_geometry,
-    node_forces,
-    separation_tensors,
-    split_tension,
+from crackbake.bake.stress_fields import (
+    draw_data,
+    initial_separation,
+    nodal_values,
+    on_final_mesh,
 )
+from crackbake.errors import CrackbakeError
+from crackbake.params import TILE_DEFAULT
 
 __all__ = ["FIELDS", "FRAME", "STRESS_UNITS", "StressMaps", "TensorMaps", "bake_stress",
            "initial_separation"]
@@ -55,8 +52,6 @@ STRESS_UNITS = "solver stress units (stress-source strength, relative; tension p
 #: The tangent frame, for headers.
 FRAME = ("tangent: e1 = normalize(T - N(N.T)) (+u), e2 = w cross(N, e1) (+v); "
          "components xx, yy, xy; dir = (cos, sin) of p1 in (e1, e2)")
-# Barycentric slack before a sim corner counts as outside its asset face (relative).
-_BARY_TOL = 1e-4
 
 
 @dataclass(eq=False)
@@ -125,94 +120,6 @@ class StressMaps:
         return out
 
 
-def initial_separation(vertices: np.ndarray, faces: np.ndarray, stress: np.ndarray,
-                       stats: dict) -> np.ndarray:
-    """The separation of the initial field per node, relative to the toughness, (N,).
-
-    The largest eigenvalue ``v+`` of the paper's separation tensor (Iben & O'Brien; forces
-    ``-A S+- g`` from the tensile / compressive parts, :mod:`crackbake.simulate.solver.fem`),
-    scaled as each solver's failure test scales it: thesis ``v+ / tau``; iben ``v+ / (tau h_n)``
-    with ``h_n`` the node's mean edge length.  ``tau`` is ``stats["tau"]``.  For thesis this is
-    exactly the solver's ``separation`` (its field never changes); for iben it leaves out the
-    solver's direction averaging, seeded flaws (+-FLAW) and footprint factor, so it is the
-    nominal load of the fresh material: about 1 where it starts to fail.
-    """
-    tau = float(stats.get("tau", 0.0) or 0.0)
-    n = len(vertices)
-    if not (tau > 0 and np.isfinite(tau)) or len(faces) == 0:
-        return np.zeros(n)
-    area, normal, grad = face_geometry(vertices, faces)
-    plus, minus, _, _ = split_tension(stress, face_frames(normal, vertices, faces))
-    sep = separation_tensors(faces, node_forces(area, grad, plus), node_forces(area, grad, minus),
-                             n)
-    value = np.linalg.eigvalsh(sep)[:, -1]
-    if stats.get("method") == "thesis":
-        return value / tau
-    e = edges(faces, n)[0]
-    length = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
-    h = np.bincount(e.ravel(), np.repeat(length, 2), n) / np.maximum(np.bincount(e.ravel(),
-                                                                                 minlength=n), 1)
-    return np.where(h > 0, value / (tau * np.where(h > 0, h, 1.0)), 0.0)
-
-
-def _nodal(vertices: np.ndarray, faces: np.ndarray, stress: np.ndarray, sep: np.ndarray):
-    """Per node: area-weighted mean world tensor (xx, yy, zz, xy, xz, yz) and sep, (N, 7)."""
-    area = face_areas(vertices, faces)
-    six = stress[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]] * area[:, None]
-    gather = corner_incidence(faces, len(vertices))
-    sums = gather @ np.repeat(np.column_stack([six, area]), 3, axis=0)
-    out = np.empty((len(vertices), 7))
-    out[:, :6] = sums[:, :6] / np.where(sums[:, 6:] > 0, sums[:, 6:], 1.0)
-    out[:, 6] = np.maximum(np.nan_to_num(sep), 0.0)  # >= 0 marks drawn texels (_render)
-    return out
-
-
-def _draw_data(uvmesh, tangents: np.ndarray, vertices, faces, asset_face, nodal):
-    """Vertex buffer (K, 16) float32 and index buffer (M, 3) uint32 of sim triangles in UV space.
-
-    One vertex per (sim node, asset face) pair: a node on an asset edge gets each face's own
-    UV there (different islands on a seam) and the same world values.
-    """
-    uv_faces = np.asarray(uvmesh.faces, np.int64)
-    n_asset = len(uv_faces)
-    asset_face = np.asarray(asset_face, np.int64)
-    if len(asset_face) != len(faces) or (len(faces) and (asset_face.min() < 0 or
-                                                         asset_face.max() >= n_asset)):
-        raise CrackbakeError(
-            "the simulation mesh's asset faces do not index the output mesh; bake stress with "
-            "the UV mesh of the asset the simulation was built from")
-    key = faces * n_asset + asset_face[:, None]
-    pairs, inverse = np.unique(key.ravel(), return_inverse=True)
-    node, face = pairs // n_asset, pairs % n_asset
-    corners = uv_faces[face]
-    tri = np.asarray(uvmesh.vertices, np.float64)[corners]
-    bary = barycentric(tri, vertices[node])
-    _check_inside(bary, tri, vertices[node])
-    bary = np.clip(bary, 0.0, 1.0)
-    bary /= bary.sum(axis=1, keepdims=True)
-    data = np.empty((len(pairs), 16), np.float32)
-    data[:, 0:2] = np.einsum("kc,kca->ka", bary, np.asarray(uvmesh.uv)[corners])
-    data[:, 2:5] = np.einsum("kc,kca->ka", bary, tangents[corners, :3])
-    data[:, 5] = np.einsum("kc,kc->k", bary, tangents[corners, 3])
-    data[:, 6:9] = np.einsum("kc,kca->ka", bary, np.asarray(uvmesh.normals)[corners])
-    data[:, 9:16] = nodal[node]
-    return data, inverse.reshape(-1, 3).astype(np.uint32)
-
-
-def _check_inside(bary: np.ndarray, tri: np.ndarray, points: np.ndarray) -> None:
-    """Refuse sim corners that do not lie in their asset face (a mesh from another asset)."""
-    if not len(bary):
-        return
-    size = np.linalg.norm(tri.max(axis=1) - tri.min(axis=1), axis=1)
-    back = np.einsum("kc,kca->ka", bary, tri)
-    off = np.linalg.norm(back - points, axis=1) > _BARY_TOL * np.maximum(size, 1e-300)
-    bad = (bary.min(axis=1) < -_BARY_TOL) | off
-    if bad.any():
-        raise CrackbakeError(
-            f"{int(bad.sum())} simulation nodes lie outside the asset face their triangle "
-            "belongs to; bake stress with the simulation mesh built from this asset")
-
-
 def _tangents(uvmesh, tangents) -> np.ndarray:
     t = getattr(uvmesh, "tangents", None) if tangents is None else tangents
     if t is None:
@@ -228,7 +135,7 @@ def _tangents(uvmesh, tangents) -> np.ndarray:
 
 
 def _initial_mesh(result, initial):
-    """Vertices, faces, asset faces of the mesh ``stress_initial`` lives on."""
+    """Vertices and faces of the mesh ``stress_initial`` lives on."""
     if initial is None:
         if len(result.stress_initial) != len(result.faces):
             raise CrackbakeError(
@@ -241,7 +148,7 @@ def _initial_mesh(result, initial):
         raise CrackbakeError(
             f"the initial mesh has {len(faces)} faces but the initial stress "
             f"{len(result.stress_initial)}; pass the simulation mesh the solver started from")
-    return verts, faces, np.asarray(initial.asset_face, np.int64)
+    return verts, faces
 
 
 def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, initial=None,
@@ -274,19 +181,18 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     tan = _tangents(uvmesh, tangents)
-    v0, f0, a0 = _initial_mesh(result, initial)
+    v0, f0 = _initial_mesh(result, initial)
     s0 = np.asarray(result.stress_initial, np.float64)
     sep0 = initial_separation(v0, f0, s0, result.stats)
     v1 = np.asarray(result.vertices, np.float64)
     f1 = np.asarray(result.faces, np.int64)
-    meshes = [
-        _draw_data(uvmesh, tan, v0, f0, a0, _nodal(v0, f0, s0, sep0)),
-        _draw_data(uvmesh, tan, v1, f1, result.asset_face,
-                   _nodal(v1, f1, np.asarray(result.stress_final, np.float64),
-                          np.asarray(result.separation, np.float64))),
-    ]
+    final = nodal_values(v1, f1, np.asarray(result.stress_final, np.float64),
+                         np.asarray(result.separation, np.float64))
+    first = on_final_mesh(v0, f0, nodal_values(v0, f0, s0, sep0), v1)
+    data, index = draw_data(uvmesh, tan, v1, f1, result.asset_face,
+                            np.concatenate([first, final], axis=1))
     timings["prepare"] = time.perf_counter() - t0
-    planes = _render(ctx, meshes, res, tile, timings)
+    planes = _render(ctx, data, index, res, tile, timings)
     t1 = time.perf_counter()
     inside = planes.pop("inside")
     source = _sources(inside, dilate_px)
@@ -305,11 +211,13 @@ _OUT = ("xx", "yy", "xy", "sep")
 _BAND_TEXELS = 1 << 20
 
 
-def _render(ctx, meshes, res: int, tile: int, timings: dict[str, float]) -> dict[str, np.ndarray]:
-    """Draw both fields band by band; planar images ``<field>.<xx|yy|xy|sep>`` and ``inside``.
+def _render(ctx, data: np.ndarray, index: np.ndarray, res: int, tile: int,
+            timings: dict[str, float]) -> dict[str, np.ndarray]:
+    """Draw both fields in one pass, band by band; planar images
+    ``<field>.<xx|yy|xy|sep>`` and ``inside``.
 
-    Targets are cleared to -1, so ``inside`` is where both fields' ``sep`` (>= 0 on every drawn
-    texel) were written: a ninth target would exceed llvmpipe's eight draw buffers.
+    The eight targets are cleared to -1, so ``inside`` is where ``sep`` (>= 0 on every drawn
+    texel) was written: a ninth target would exceed llvmpipe's eight draw buffers.
     """
     import moderngl
 
@@ -318,19 +226,17 @@ def _render(ctx, meshes, res: int, tile: int, timings: dict[str, float]) -> dict
         prog = gl.keep(gl.ctx.program(vertex_shader=shader_source("stress_bake.vert"),
                                       fragment_shader=shader_source("stress_bake.frag")))
         prog["u_res"].value = float(res)
-        vaos = []
-        for data, index in meshes:
-            vbo = gl.keep(gl.ctx.buffer(data))
-            ibo = gl.keep(gl.ctx.buffer(index))
-            vaos.append(gl.keep(gl.ctx.vertex_array(
-                prog, [(vbo, "2f 3f 1f 3f 3f 3f 1f", "in_uv", "in_t", "in_w", "in_n", "in_sd",
-                        "in_so", "in_sep")], index_buffer=ibo, index_element_size=4)))
+        vbo = gl.keep(gl.ctx.buffer(data))
+        ibo = gl.keep(gl.ctx.buffer(index))
+        vao = gl.keep(gl.ctx.vertex_array(
+            prog, [(vbo, "2f 3f 1f 3f 3f 3f 1f 3f 3f 1f", "in_uv", "in_t", "in_w", "in_n",
+                    "in_sd0", "in_so0", "in_sep0", "in_sd", "in_so", "in_sep")],
+            index_buffer=ibo, index_element_size=4))
         band = max(1, min(res, min(tile * tile, _BAND_TEXELS) // res))
         names = [f"{f}.{c}" for f in FIELDS for c in _OUT]
         images = {n: np.empty((res, res), np.float32) for n in names}
         tex = [gl.keep(gl.ctx.texture((res, band), 1, dtype="f4")) for _ in names]
-        fbos = [gl.keep(gl.ctx.framebuffer(color_attachments=tex[0:4])),
-                gl.keep(gl.ctx.framebuffer(color_attachments=tex[4:8]))]
+        fbo = gl.keep(gl.ctx.framebuffer(color_attachments=tex))
         gl.ctx.enable_only(moderngl.NOTHING)
         timings["setup"] = time.perf_counter() - t
         t_draw = t_read = 0.0
@@ -338,22 +244,19 @@ def _render(ctx, meshes, res: int, tile: int, timings: dict[str, float]) -> dict
             h = min(band, res - y0)
             ta = time.perf_counter()
             prog["u_tile"].value = (0.0, float(y0), float(res), float(band))
-            for fbo, vao in zip(fbos, vaos, strict=True):
-                fbo.use()
-                fbo.clear(-1.0, -1.0, -1.0, -1.0)
-                vao.render(moderngl.TRIANGLES)
+            fbo.use()
+            fbo.clear(-1.0, -1.0, -1.0, -1.0)
+            vao.render(moderngl.TRIANGLES)
             gl.ctx.finish()
             tb = time.perf_counter()
             for k, n in enumerate(names):
-                fbos[k // 4].read_into(images[n][y0:y0 + h], viewport=(0, 0, res, h),
-                                       components=1, attachment=k % 4, dtype="f4")
+                fbo.read_into(images[n][y0:y0 + h], viewport=(0, 0, res, h), components=1,
+                              attachment=k, dtype="f4")
             t_draw += tb - ta
             t_read += time.perf_counter() - tb
         timings["render"] = t_draw
         timings["readback"] = t_read
-    # Both meshes cover the same surface; a texel centre on an edge that rounding left to
-    # neither triangle in one of them is filled like a gutter texel.
-    images["inside"] = (images["stress.sep"] >= 0.0) & (images["stress0.sep"] >= 0.0)
+    images["inside"] = images["stress.sep"] >= 0.0
     return images
 
 
