@@ -5,7 +5,10 @@ asset face, so each of its corners has that face's UV at its barycentric coordin
 a UV seam gets one UV per island).  The stress travels as a world-space tensor per simulation
 node (the area-weighted mean of its faces' tensors: nodes the solver split along a crack keep
 each side's own value, so the maps stay discontinuous exactly across cracks) and is linearly
-interpolated per texel, then expressed in the texel's tangent frame::
+interpolated per texel.  Both fields go through one draw of the final (split) sim mesh: the
+initial field's node values are carried onto it (:func:`crackbake.bake.stress_fields.on_final_mesh`,
+exact because the split mesh refines the initial one).  Per texel the tensors are expressed in
+the texel's tangent frame::
 
     N  = normalize(interpolated shading normal)
     e1 = normalize(T - N (N . T))       tangent, along +u
@@ -161,7 +164,9 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
         The output mesh (``vertices``, ``faces`` in asset order, ``uv`` v up, ``normals``).
     result : SolverResult
         ``vertices``/``faces``/``asset_face`` (final sim mesh), ``stress_final`` (per final
-        face), ``separation`` (per final node), ``stress_initial``, ``stats["tau"]``.
+        face), ``separation`` (per final node), ``stress_initial``, ``stats["tau"]``; an
+        optional ``separation_initial`` (per initial node, relative to the toughness) replaces
+        the derived initial separation.
     res : int
         Output edge in texels.
     tangents : (V, 4) float, optional
@@ -183,7 +188,11 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     tan = _tangents(uvmesh, tangents)
     v0, f0 = _initial_mesh(result, initial)
     s0 = np.asarray(result.stress_initial, np.float64)
-    sep0 = initial_separation(v0, f0, s0, result.stats)
+    # A solver that reports the separation it started from (per initial node) is used as is;
+    # otherwise it is derived from the initial stress (initial_separation).
+    sep0 = getattr(result, "separation_initial", None)
+    if sep0 is None or len(sep0) != len(v0):
+        sep0 = initial_separation(v0, f0, s0, result.stats)
     v1 = np.asarray(result.vertices, np.float64)
     f1 = np.asarray(result.faces, np.int64)
     final = nodal_values(v1, f1, np.asarray(result.stress_final, np.float64),
