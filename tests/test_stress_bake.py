@@ -264,3 +264,23 @@ def test_initial_field_carried_onto_the_split_mesh_exactly(gl_ctx):
                                    atol=1e-4 * scale, err_msg=name)
     # ... while the final field differs where the cracks released it.
     assert np.abs(split.stress.p1 - whole.stress0.p1).max() > 0.1 * scale
+
+
+def test_reported_initial_separation_and_gutter_limit(gl_ctx, islands):
+    _, uvmesh, tangents, sim = islands
+    m, n = len(sim.faces), len(sim.vertices)
+    s = np.broadcast_to(_directional([0.0, 1.0, 0.0], 1.0), (m, 3, 3)).copy()
+    res = _result(sim, s, s, np.zeros(n))
+    res.separation_initial = 0.25 + sim.vertices[:, 1]  # a solver that reports it: used as is
+    maps = bake_stress(uvmesh, res, 128, tangents=tangents, dilate_px=2, ctx=gl_ctx)
+    p, inner = _texel_world(128)[0]
+    sel = inner & maps.inside
+    np.testing.assert_allclose(maps.stress0.sep[sel], 0.25 + p[..., 1][sel], atol=2e-4)
+    # Gutter texels farther than 2 texels from an island keep the zero background.
+    from scipy.ndimage import distance_transform_edt
+
+    far = distance_transform_edt(~maps.inside) > 2.5
+    assert far.any()
+    assert (maps.stress0.p1[far] == 0).all() and (maps.stress0.sep[far] == 0).all()
+    near = ~maps.inside & (distance_transform_edt(~maps.inside) <= 2.0)
+    assert np.allclose(maps.stress0.p1[near], 1.0, atol=1e-5)
