@@ -283,36 +283,27 @@ def _fill_principal(source, xx, yy, xy, sep, p1, p2, dx, dy):
     """Gutter fill (copy from ``source``, zeros where it is -1) fused with the principal values
     and the unit p1 direction (cos a, sin a), a in (-90, 90] degrees.
 
-    One pass per field instead of a dilation pass per plane plus a principal pass; island
-    texels are their own source and are never written, so the parallel reads are safe.
-    Half-angle formulas (cos 2a = h / r, sin 2a = xy / r) need no trigonometry; isotropic
-    texels (r = 0) get (1, 0).
+    One pass per field instead of a dilation pass per plane plus a principal pass.  Branch-free
+    so that it vectorises (3x faster than with branches): every texel is written, island texels
+    with their own value (their source is themselves), so concurrent reads of them see the same
+    bits.  Half-angle formulas (cos 2a = h / r, sin 2a = xy / r) need no trigonometry;
+    isotropic texels (r = 0) get (1, 0).
     """
     one = np.float32(1.0)
     half_ = np.float32(0.5)
     zero = np.float32(0.0)
     for i in prange(xx.shape[0]):
         j = source[i]
-        if j == i:
-            a = xx[i]
-            c = yy[i]
-            b = xy[i]
-        elif j >= 0:
-            a = xx[j]
-            c = yy[j]
-            b = xy[j]
-            xx[i] = a
-            yy[i] = c
-            xy[i] = b
-            sep[i] = sep[j]
-        else:
-            a = zero
-            c = zero
-            b = zero
-            xx[i] = zero
-            yy[i] = zero
-            xy[i] = zero
-            sep[i] = zero
+        ok = j >= 0
+        k = max(np.int64(j), np.int64(0))  # any valid index where there is no source
+        a = xx[k] if ok else zero
+        c = yy[k] if ok else zero
+        b = xy[k] if ok else zero
+        s = sep[k] if ok else zero
+        xx[i] = a
+        yy[i] = c
+        xy[i] = b
+        sep[i] = s
         mean = half_ * (a + c)
         h = half_ * (a - c)
         r = np.sqrt(h * h + b * b)
