@@ -1,0 +1,158 @@
+"""Per-node stress data for the stress bake (:mod:`crackbake.bake.stress`).
+
+* :func:`initial_separation`: the initial field's separation, scaled as the solvers scale it.
+* :func:`nodal_values`: per node, the area-weighted world tensor and the separation.
+* :func:`on_final_mesh`: the initial field's node values carried onto the final (split) mesh,
+  so one draw bakes both fields.
+* :func:`draw_data`: the vertex and index buffers of sim triangles in UV space.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from crackbake.errors import CrackbakeError
+from crackbake.geometry import barycentric, edges, face_areas
+from crackbake.simulate.solver.fem import (
+    corner_incidence,
+    face_frames,
+    face_geometry,
+    node_forces,
+    separation_tensors,
+    split_tension,
+)
+
+# Barycentric slack before a sim corner counts as outside its asset face (relative).
+_BARY_TOL = 1e-4
+# Initial faces tried per point when carrying the initial field onto new nodes.
+_CANDIDATES = 8
+
+
+def initial_separation(vertices: np.ndarray, faces: np.ndarray, stress: np.ndarray,
+                       stats: dict) -> np.ndarray:
+    """The separation of the initial field per node, relative to the toughness, (N,).
+
+    The largest eigenvalue ``v+`` of the paper's separation tensor (Iben & O'Brien; forces
+    ``-A S+- g`` from the tensile / compressive parts, :mod:`crackbake.simulate.solver.fem`),
+    scaled as each solver's failure test scales it: thesis ``v+ / tau``; iben ``v+ / (tau h_n)``
+    with ``h_n`` the node's mean edge length.  ``tau`` is ``stats["tau"]``.  For thesis this is
+    exactly the solver's ``separation`` (its field never changes); for iben it leaves out the
+    solver's direction averaging, seeded flaws (+-FLAW) and footprint factor, so it is the
+    nominal load of the fresh material: about 1 where it starts to fail.
+    """
+    tau = float(stats.get("tau", 0.0) or 0.0)
+    n = len(vertices)
+    if not (tau > 0 and np.isfinite(tau)) or len(faces) == 0:
+        return np.zeros(n)
+    area, normal, grad = face_geometry(vertices, faces)
+    plus, minus, _, _ = split_tension(stress, face_frames(normal, vertices, faces))
+    sep = separation_tensors(faces, node_forces(area, grad, plus), node_forces(area, grad, minus),
+                             n)
+    value = np.linalg.eigvalsh(sep)[:, -1]
+    if stats.get("method") == "thesis":
+        return value / tau
+    e = edges(faces, n)[0]
+    length = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+    h = np.bincount(e.ravel(), np.repeat(length, 2), n) / np.maximum(np.bincount(e.ravel(),
+                                                                                 minlength=n), 1)
+    return np.where(h > 0, value / (tau * np.where(h > 0, h, 1.0)), 0.0)
+
+
+def nodal_values(vertices: np.ndarray, faces: np.ndarray, stress: np.ndarray, sep: np.ndarray):
+    """Per node: area-weighted mean world tensor (xx, yy, zz, xy, xz, yz) of its faces and
+    ``sep`` (clamped to >= 0: the bake marks drawn texels by it), (N, 7)."""
+    area = face_areas(vertices, faces)
+    six = stress[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]] * area[:, None]
+    gather = corner_incidence(faces, len(vertices))
+    sums = gather @ np.repeat(np.column_stack([six, area]), 3, axis=0)
+    out = np.empty((len(vertices), 7))
+    out[:, :6] = sums[:, :6] / np.where(sums[:, 6:] > 0, sums[:, 6:], 1.0)
+    out[:, 6] = np.maximum(np.nan_to_num(sep), 0.0)  # >= 0 marks drawn texels (_render)
+    return out
+
+
+def draw_data(uvmesh, tangents: np.ndarray, vertices, faces, asset_face, nodal):
+    """Vertex buffer (K, 9 + C) float32 and index buffer (M, 3) uint32 of sim triangles in UV
+    space: uv, T, w, N interpolated from the asset face, then the node's ``nodal`` (N, C) row.
+
+    One vertex per (sim node, asset face) pair: a node on an asset edge gets each face's own
+    UV there (different islands on a seam) and the same world values.
+    """
+    uv_faces = np.asarray(uvmesh.faces, np.int64)
+    n_asset = len(uv_faces)
+    asset_face = np.asarray(asset_face, np.int64)
+    if len(asset_face) != len(faces) or (len(faces) and (asset_face.min() < 0 or
+                                                         asset_face.max() >= n_asset)):
+        raise CrackbakeError(
+            "the simulation mesh's asset faces do not index the output mesh; bake stress with "
+            "the UV mesh of the asset the simulation was built from")
+    key = faces * n_asset + asset_face[:, None]
+    pairs, inverse = np.unique(key.ravel(), return_inverse=True)
+    node, face = pairs // n_asset, pairs % n_asset
+    corners = uv_faces[face]
+    tri = np.asarray(uvmesh.vertices, np.float64)[corners]
+    bary = barycentric(tri, vertices[node])
+    _check_inside(bary, tri, vertices[node])
+    bary = np.clip(bary, 0.0, 1.0)
+    bary /= bary.sum(axis=1, keepdims=True)
+    data = np.empty((len(pairs), 9 + nodal.shape[1]), np.float32)
+    data[:, 0:2] = np.einsum("kc,kca->ka", bary, np.asarray(uvmesh.uv)[corners])
+    data[:, 2:5] = np.einsum("kc,kca->ka", bary, tangents[corners, :3])
+    data[:, 5] = np.einsum("kc,kc->k", bary, tangents[corners, 3])
+    data[:, 6:9] = np.einsum("kc,kca->ka", bary, np.asarray(uvmesh.normals)[corners])
+    data[:, 9:] = nodal[node]
+    return data, inverse.reshape(-1, 3).astype(np.uint32)
+
+
+def _check_inside(bary: np.ndarray, tri: np.ndarray, points: np.ndarray) -> None:
+    """Refuse sim corners that do not lie in their asset face (a mesh from another asset)."""
+    if not len(bary):
+        return
+    size = np.linalg.norm(tri.max(axis=1) - tri.min(axis=1), axis=1)
+    back = np.einsum("kc,kca->ka", bary, tri)
+    off = np.linalg.norm(back - points, axis=1) > _BARY_TOL * np.maximum(size, 1e-300)
+    bad = (bary.min(axis=1) < -_BARY_TOL) | off
+    if bad.any():
+        raise CrackbakeError(
+            f"{int(bad.sum())} simulation nodes lie outside the asset face their triangle "
+            "belongs to; bake stress with the simulation mesh built from this asset")
+
+
+def on_final_mesh(v0: np.ndarray, f0: np.ndarray, values0: np.ndarray,
+                  v1: np.ndarray) -> np.ndarray:
+    """The initial field's node values (N0, C) at the final mesh's nodes (N1, C).
+
+    The solvers only refine: iben keeps every initial node (same index, same position) and
+    appends the nodes its edge and node splits make, each inside an initial face.  Those are
+    located with a KD-tree over the initial face centroids (the nearest few faces, the one that
+    contains the point and lies closest to it) and interpolated there; a node split's copies sit
+    where the node was, so they get its value.  Interpolating the piecewise-linear initial field
+    at the final nodes reproduces it exactly on every final triangle (each lies inside one
+    initial triangle), so one draw of the final mesh carries both fields.
+    """
+    n0 = len(v0)
+    keep = len(v1) >= n0 and np.array_equal(v1[:n0], v0)
+    start = n0 if keep else 0
+    out = np.empty((len(v1), values0.shape[1]))
+    if keep:
+        out[:n0] = values0
+    points = v1[start:]
+    if len(points) == 0:
+        return out
+    k = min(_CANDIDATES, len(f0))
+    tree = cKDTree(v0[f0].mean(axis=1))
+    cand = tree.query(points, k=k)[1].reshape(len(points), k)
+    tri = v0[f0[cand]]  # (P, k, 3, 3)
+    bary = barycentric(tri.reshape(-1, 3, 3), np.repeat(points, k, axis=0)).reshape(-1, k, 3)
+    size = np.linalg.norm(tri[:, :, 1] - tri[:, :, 0], axis=-1)
+    back = np.einsum("pkc,pkca->pka", bary, tri)
+    # Outside distance (approximate) plus the gap to the face's plane: 0 for the holding face.
+    miss = (np.maximum(-bary.min(axis=-1), 0.0) * size
+            + np.linalg.norm(back - points[:, None], axis=-1))
+    best = miss.argmin(axis=1)
+    rows = np.arange(len(points))
+    b = np.clip(bary[rows, best], 0.0, 1.0)
+    b /= b.sum(axis=1, keepdims=True)
+    out[start:] = np.einsum("pc,pcx->px", b, values0[f0[cand[rows, best]]])
+    return out
