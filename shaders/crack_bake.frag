@@ -3,6 +3,9 @@
 // point (recorded by crack_surface.frag) to the crack segments listed for its face's bin
 // (crackbake/bake/grid.py), and turns it into the crack channels.  Working in world space makes
 // the width independent of UV stretch and continuous across UV seams.
+// Compiled with CRACK_NORMALS defined it also writes the depth-normal and occlusion map (see
+// depth_gradient and groove_visibility below, and crackbake/bake/normal_map.py); the code the
+// other channels run is the same in both variants, so they come out bit-identical.
 
 struct Segment {
     vec4 a;      // xyz start, w = width at start
@@ -23,6 +26,13 @@ uniform float u_shape;          // depth profile exponent: 1 = V, < 1 fuller (U-
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
 layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y
+#ifdef CRACK_NORMALS
+layout(binding = 3) uniform sampler2D u_normal;  // xyz interpolated vertex normal
+layout(binding = 4) uniform sampler2D u_tangent; // xyz interpolated tangent, w bitangent sign
+// Max draw buffers is 8: the normal and the occlusion share one RGBA32F target.
+layout(location = 7) out vec4 o_normal;     // xyz tangent-space unit normal, w occlusion
+// @crack_normal.glsl (inserted here by crackbake/bake/raster.py)
+#endif
 
 // One single-channel target per map, so each reads back straight into its own image.
 layout(location = 0) out float o_mask;      // R16F
@@ -41,6 +51,9 @@ void main() {
         // No face here: the background the gutter fill replaces.
         o_mask = 0.0; o_width = 0.0; o_time = 0.0; o_depth = 0.0;
         o_distance = 0.0; o_id = 0.0; o_inside = 0.0;
+#ifdef CRACK_NORMALS
+        o_normal = vec4(0.0, 0.0, 1.0, 1.0);
+#endif
         return;
     }
     uint bin = uint(point.w);
@@ -61,6 +74,9 @@ void main() {
     // plus one footprint, and the footprint along any direction is at most |(|dpx|, |dpy|)|.
     float cover_reach = u_half_width + length(vec2(length(dpx), length(dpy)));
     int best_seg = -1;
+#ifdef CRACK_NORMALS
+    int deepest_seg = -1;  // the segment whose depth term wins (the normal's profile)
+#endif
     for (uint k = bin_start[bin]; k < bin_start[bin + 1u]; ++k) {
         // Segments come nearest-bound first: the rest cannot be nearer or add coverage.
         if (cand_bound[k] > max(best_d, cover_reach)) break;
@@ -98,6 +114,9 @@ void main() {
             dd = depth_here * c / (u_shape + 1.0);
         }
         coverage = max(coverage, c);
+#ifdef CRACK_NORMALS
+        if (dd > depth) deepest_seg = int(si);
+#endif
         depth = max(depth, dd);
         // Ties go to the lowest index, so the result does not depend on the list order.
         if (d < best_d || (d == best_d && best_seg >= 0 && int(si) < best_seg)) {
@@ -115,4 +134,8 @@ void main() {
     o_distance = best_d;
     o_id = best_id;
     o_inside = 1.0;
+#ifdef CRACK_NORMALS
+    o_normal = deepest_seg < 0 ? vec4(0.0, 0.0, 1.0, 1.0)
+                               : crack_normal(seg[deepest_seg], p, dpx, dpy, texel_iso, texel);
+#endif
 }

@@ -1,0 +1,107 @@
+"""Depth-normal and occlusion maps of the crack bake: inputs, shader variant, conventions.
+
+The normal map is computed analytically per texel in ``shaders/crack_normal.glsl`` (the second
+bake pass): the crack's own depth profile, height ``h = -depth``, is differentiated in world space
+at the texel's surface point, so the result is exact at the texel centre whatever the UV stretch
+and continuous across UV seams (no image-space filter).  Steps per texel:
+
+1. The winning depth term (the segment whose depth is the texel's depth) is
+   ``D(t) (1 - d / hw(t)) ** shape`` with ``d`` the world distance to the segment, ``t`` the
+   closest point's parameter, ``hw`` the half width.  Its gradient is
+   ``d(depth)/dd * g/|g| + d(depth)/dt * grad t`` (``g`` from the closest point to the texel;
+   ``grad t = ab / |ab|^2`` inside the segment, 0 past its ends).
+2. Sub-texel cracks (width below the texel footprint ``fw`` across the crack) are baked as their
+   area average, a tent ``D w / ((shape + 1) fw) * (1 - d / fw)``; their normal is the slope of
+   that filtered height field, i.e. of the profile averaged over the texel footprint (a thin crack
+   fades out of the normal map as it fades out of the mask, instead of aliasing).
+3. ``n' = normalize(N + P(grad depth))``, ``N`` the interpolated vertex normal, ``P`` the
+   projection onto the plane normal to ``N`` (a height field over the shading normal).
+4. Tangent space exactly as engines decode (MikkTSpace): ``n = normalize(x T + y B + z N)`` with
+   ``T``, ``N`` interpolated and not renormalised, ``B = sign * cross(N, T)``; the bake solves
+   ``[T B N] (x, y, z) = n'`` and normalises.  OpenGL convention (+Y along B = +v), flat
+   ``(0, 0, 1)``.
+
+Occlusion is the sky visibility (cosine-weighted view factor to the open sky) of the texel's point
+in an infinitely long groove of the crack's cross-section, relative to the perturbed normal:
+``(sin b - sin a) / 2`` for the horizons at angles ``a``, ``b`` from the normal (the 2D view
+factor of a long groove).  For a V of slope angle ``alpha`` it rises from ``cos(alpha)^2`` at the
+axis to ``(1 + cos(alpha)) / 2`` at the rim; 1 on open ground.  Sub-texel cracks get
+``1 - coverage * (1 - mean wall visibility)``, the mean being ``2 hw / wall length`` by
+reciprocity (``cos(alpha)`` for a V).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from crackbake.bake.context import shader_source
+from crackbake.errors import CrackbakeError
+from crackbake.geometry import welded_vertex_normals
+
+#: GLSL symbol that switches the normal/occlusion outputs on in the bake shaders.
+DEFINE = "CRACK_NORMALS"
+_INCLUDE = "// @crack_normal.glsl"
+
+
+def shader_variant(name: str, normals: bool) -> str:
+    """Source of ``shaders/<name>``, with the normal-map code compiled in when ``normals``.
+
+    Without normals the text is the plain file (its ``#ifdef`` blocks drop out), so the other
+    channels run exactly the code they always ran.
+    """
+    src = shader_source(name)
+    lines = src.split("\n")
+    out = []
+    for line in lines:
+        if line.startswith(_INCLUDE):
+            out.append(shader_source("crack_normal.glsl") if normals else "")
+        else:
+            out.append(line)
+        if normals and line.startswith("#version"):
+            out.append(f"#define {DEFINE} 1")
+    return "\n".join(out)
+
+
+def frame_attributes(
+    vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None, tangents: np.ndarray
+) -> np.ndarray:
+    """Per-vertex normal and tangent, (V, 7) float32, for the surface pass.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        Positions of the baked mesh.
+    faces : (F, 3) int
+        Its triangles.
+    normals : (V, 3) float or None
+        Shading normals the tangents were computed with; ``None`` takes area-weighted normals
+        welded across UV seams (the asset's normals when its file has none).
+    tangents : (V, 4) float
+        xyz tangent, w = +1/-1 bitangent sign (``B = w * cross(N, T)`` points towards +v).
+
+    Returns
+    -------
+    (V, 7) float32
+        Columns: normal xyz, tangent xyzw.
+    """
+    n_vertices = len(vertices)
+    tangents = np.asarray(tangents, np.float64)
+    if tangents.shape != (n_vertices, 4):
+        raise CrackbakeError(
+            f"tangents have shape {tangents.shape}, expected ({n_vertices}, 4) (xyz, sign) for "
+            "the baked vertices; compute them with crackbake.bake.tangents on the same mesh"
+        )
+    if normals is None:
+        normals = welded_vertex_normals(vertices, faces)
+    normals = np.asarray(normals, np.float64)
+    if normals.shape != (n_vertices, 3):
+        raise CrackbakeError(
+            f"normals have shape {normals.shape}, expected ({n_vertices}, 3); pass the normals "
+            "of the baked vertices (UVMesh.normals)"
+        )
+    if not (np.isfinite(tangents).all() and np.isfinite(normals).all()):
+        raise CrackbakeError("tangents or normals contain NaN/inf; recompute them on the mesh")
+    out = np.empty((n_vertices, 7), np.float32)
+    out[:, :3] = normals
+    out[:, 3:] = tangents
+    return out
