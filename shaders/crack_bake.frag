@@ -27,8 +27,14 @@ layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
 layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y
 #ifdef CRACK_NORMALS
-layout(binding = 3) uniform sampler2D u_normal;  // xyz interpolated vertex normal
-layout(binding = 4) uniform sampler2D u_tangent; // xyz interpolated tangent, w bitangent sign
+// The baked mesh's triangles and per-vertex frames, to interpolate N and T at a texel's point.
+struct Frame {
+    vec4 pos;      // xyz world position
+    vec4 normal;   // xyz vertex normal
+    vec4 tangent;  // xyz tangent, w bitangent sign (B = w cross(N, T) points to +v)
+};
+layout(std430, binding = 5) readonly buffer Faces { uint face_vertex[]; };  // 3 per face
+layout(std430, binding = 6) readonly buffer Frames { Frame frame[]; };
 // Max draw buffers is 8: the normal and the occlusion share one RGBA32F target.
 layout(location = 7) out vec4 o_normal;     // xyz tangent-space unit normal, w occlusion
 // @crack_normal.glsl (inserted here by crackbake/bake/raster.py)
@@ -136,6 +142,7 @@ void main() {
     o_inside = 1.0;
 #ifdef CRACK_NORMALS
     o_normal = deepest_seg < 0 ? vec4(0.0, 0.0, 1.0, 1.0)
-                               : crack_normal(seg[deepest_seg], p, dpx, dpy, texel_iso, texel);
+                               : crack_normal(seg[deepest_seg], p, dpx, dpy, texel_iso,
+                                              uint(texelFetch(u_dpy, texel, 0).w));
 #endif
 }

@@ -109,11 +109,27 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
 // normal, grad_s the gradient projected into the plane normal to N) is expressed in the
 // interpolated frame an engine decodes with, n = normalize(x T + y B + z N), B = w cross(N, T),
 // by solving [T B N] (x, y, z) = n' and normalising.
-vec4 crack_normal(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, ivec2 texel) {
+vec4 crack_normal(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, uint face) {
     float occ;
     vec3 grad = depth_gradient(s, p, dpx, dpy, texel_iso, occ);
-    vec3 N = texelFetch(u_normal, texel, 0).xyz;
-    vec4 T4 = texelFetch(u_tangent, texel, 0);
+    // Barycentrics of p in its face (world positions are affine in UV inside a face, so these
+    // are the rasteriser's), then N and T interpolated as the engine's rasteriser does.
+    Frame f0 = frame[face_vertex[3u * face]];
+    Frame f1 = frame[face_vertex[3u * face + 1u]];
+    Frame f2 = frame[face_vertex[3u * face + 2u]];
+    vec3 e1 = f1.pos.xyz - f0.pos.xyz;
+    vec3 e2 = f2.pos.xyz - f0.pos.xyz;
+    vec3 q = p - f0.pos.xyz;
+    float d00 = dot(e1, e1), d01 = dot(e1, e2), d11 = dot(e2, e2);
+    float denom = d00 * d11 - d01 * d01;
+    vec3 bary = vec3(1.0 / 3.0);  // a face of no world area: its mean frame
+    if (denom > 1e-12 * d00 * d11) {
+        float b1 = (d11 * dot(q, e1) - d01 * dot(q, e2)) / denom;
+        float b2 = (d00 * dot(q, e2) - d01 * dot(q, e1)) / denom;
+        bary = vec3(1.0 - b1 - b2, b1, b2);
+    }
+    vec3 N = bary.x * f0.normal.xyz + bary.y * f1.normal.xyz + bary.z * f2.normal.xyz;
+    vec4 T4 = bary.x * f0.tangent + bary.y * f1.tangent + bary.z * f2.tangent;
     vec3 T = T4.xyz;
     vec3 B = (T4.w < 0.0 ? -1.0 : 1.0) * cross(N, T);
     vec3 c0 = cross(B, N);

@@ -237,6 +237,64 @@ def test_v_groove_normals_through_png_match_the_analytic_surface(gl_ctx, tmp_pat
     assert (maps.normal[flat] == [0, 0, 1]).all()
 
 
+def grid_barycentrics(xy: np.ndarray, cells: int):
+    """Corner vertex indices (..., 3) and barycentrics (..., 3) of plane points in the one-island
+    grid of :func:`scene` (vertex ``i * (cells + 1) + j`` at (i, j) / cells)."""
+    g = np.clip(xy * cells, 0, cells - 1e-9)
+    i, j = np.floor(g[..., 0]).astype(int), np.floor(g[..., 1]).astype(int)
+    fx, fy = g[..., 0] - i, g[..., 1] - j
+    a = i * (cells + 1) + j
+    b, c, d = a + cells + 1, a + cells + 2, a + 1
+    lower = fy <= fx  # triangle (a, b, c); else (a, c, d)
+    idx = np.where(lower[..., None], np.stack([a, b, c], -1), np.stack([a, c, d], -1))
+    bary = np.where(lower[..., None], np.stack([1 - fx, fx - fy, fy], -1),
+                    np.stack([1 - fy, fx, fy - fx], -1))  # fmt: skip
+    return idx, bary
+
+
+def test_varying_vertex_frames_decode_as_the_engine_interpolates_them(gl_ctx):
+    """Smooth-shaded normals and tangents that vary per vertex (not orthogonal to each other):
+    the engine's per-pixel interpolation of N and T, not the face plane, decodes the map."""
+    cells = 6
+    v, f, uv, _, _ = scene([MIRRORED], cells)
+    rng = np.random.default_rng(7)
+    normals = N0 + 0.25 * rng.normal(size=(len(v), 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    tangents = np.tile(np.r_[MIRRORED.t, MIRRORED.w], (len(v), 1))
+    tangents[:, :3] += 0.2 * rng.normal(size=(len(v), 3))
+    tangents[:, :3] /= np.linalg.norm(tangents[:, :3], axis=1, keepdims=True)
+    segs = make_segments([world(A_XY)], [world(B_XY)], width=WIDTH, depth=DEPTH)
+    maps = bake_cracks(v, f, uv, segs, RES, max_distance=0.15, normals=normals,
+                       tangents=tangents, ctx=gl_ctx)  # fmt: skip
+    _, xy, which = texel_points([MIRRORED])
+    sel = (which == 0) & maps.inside
+    idx, bary = grid_barycentrics(xy, cells)
+    n_px = (bary[..., None] * normals[idx]).sum(-2)
+    t_px = (bary[..., None] * tangents[idx, :3]).sum(-2)
+    b_px = MIRRORED.w * np.cross(n_px, t_px)
+    m = maps.normal.astype(np.float64)
+    decoded = m[..., :1] * t_px + m[..., 1:2] * b_px + m[..., 2:3] * n_px
+    decoded /= np.linalg.norm(decoded, axis=-1, keepdims=True)
+    # Expected: the groove's height field over the interpolated shading normal.
+    d, _, _ = groove(xy)
+    texel = np.linalg.norm(np.linalg.inv(MIRRORED.m), 2) / RES
+    nn = n_px / np.linalg.norm(n_px, axis=-1, keepdims=True)
+    ab = B_XY - A_XY
+    t = np.clip(((xy - A_XY) @ ab) / (ab @ ab), 0, 1)
+    g2 = xy - (A_XY + t[..., None] * ab)
+    g = g2[..., :1] * E1 + g2[..., 1:2] * E2
+    grad = -SLOPE * g / np.maximum(d, 1e-300)[..., None]  # gradient of the depth
+    grad -= (grad * nn).sum(-1, keepdims=True) * nn
+    expected = np.where((d < HW)[..., None], nn + grad, nn)
+    expected /= np.linalg.norm(expected, axis=-1, keepdims=True)
+    checked = sel & (d > 1e-3 * texel) & (np.abs(d - HW) > 1e-3 * texel)
+    err = angle_deg(decoded, expected)
+    assert (checked & (d < HW)).sum() > 500
+    assert float(err[checked].max()) < 0.1
+    # The frames really vary: the face plane's normal would be off by degrees.
+    assert float(angle_deg(nn[sel], N0).max()) > 5
+
+
 def test_uv_seam_gives_the_same_world_normal_on_both_islands(gl_ctx):
     # The plane cut at x = 0.5 into two islands with different rotations (one mirrored).
     left = Island(0.0, 0.5, rotation(-20.0) @ np.diag([0.5, 0.38]), (0.02, 0.48))

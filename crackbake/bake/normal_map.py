@@ -65,7 +65,10 @@ def shader_variant(name: str, normals: bool) -> str:
 def frame_attributes(
     vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None, tangents: np.ndarray
 ) -> np.ndarray:
-    """Per-vertex normal and tangent, (V, 7) float32, for the surface pass.
+    """Per-vertex position, normal and tangent, (V, 12) float32, for the crack pass.
+
+    The crack pass interpolates normal and tangent at a texel's point from its face's corners
+    (only at crack texels: no per-texel frame targets).
 
     Parameters
     ----------
@@ -81,8 +84,8 @@ def frame_attributes(
 
     Returns
     -------
-    (V, 7) float32
-        Columns: normal xyz, tangent xyzw.
+    (V, 12) float32
+        Columns: position xyz, 0, normal xyz, 0, tangent xyzw (std430 ``vec4`` triples).
     """
     n_vertices = len(vertices)
     tangents = np.asarray(tangents, np.float64)
@@ -101,7 +104,8 @@ def frame_attributes(
         )
     if not (np.isfinite(tangents).all() and np.isfinite(normals).all()):
         raise CrackbakeError("tangents or normals contain NaN/inf; recompute them on the mesh")
-    out = np.empty((n_vertices, 7), np.float32)
-    out[:, :3] = normals
-    out[:, 3:] = tangents
+    out = np.zeros((n_vertices, 12), np.float32)
+    out[:, 0:3] = vertices
+    out[:, 4:7] = normals
+    out[:, 8:12] = tangents
     return out

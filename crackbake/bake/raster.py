@@ -198,17 +198,13 @@ _NORMAL_NAMES = ("normal_x", "normal_y", "normal_z")
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
               max_distance: float, profile_shape: float, frames: np.ndarray | None):
     """The surface pass (faces in UV space -> world position, footprint, bin per texel; with
-    ``frames``, normal and tangent too) and the crack pass (one full-screen triangle measuring
-    the cracks per texel), with their buffers."""
+    ``frames``, the face too) and the crack pass (one full-screen triangle measuring the cracks
+    per texel; with ``frames``, reading the faces' vertex frames), with their buffers."""
     ctx = gl.ctx
     with_normals = frames is not None
-    vertex = np.empty((len(vertices), 5 + (7 if with_normals else 0)), np.float32)
+    vertex = np.empty((len(vertices), 5), np.float32)
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
-    layout, names = "2f 3f", ["in_uv", "in_pos"]
-    if with_normals:
-        vertex[:, 5:] = frames
-        layout, names = "2f 3f 3f 4f", [*names, "in_normal", "in_tangent"]
     surface = gl.keep(
         ctx.program(
             vertex_shader=shader_variant("crack_bake.vert", with_normals),
@@ -224,8 +220,12 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     vbo = gl.keep(ctx.buffer(vertex))
     ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
     vao = gl.keep(
-        ctx.vertex_array(surface, [(vbo, layout, *names)], index_buffer=ibo, index_element_size=4)
-    )
+        ctx.vertex_array(surface, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
+                         index_element_size=4)
+    )  # fmt: skip
+    if with_normals:
+        ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
+        gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
     screen = gl.keep(ctx.vertex_array(prog, []))
     buffers = (
         _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
@@ -240,14 +240,13 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
 
 
 def _targets(gl: GLScope, res: int, band: int, with_normals: bool):
-    """Framebuffers of one band: the surface pass's float targets (three, five with normals;
-    bound as textures for the crack pass) and the crack pass's one target per channel (plus one
-    RGBA normal + occlusion target)."""
+    """Framebuffers of one band: the surface pass's three float targets (bound as textures for
+    the crack pass) and the crack pass's one target per channel (plus one RGBA normal +
+    occlusion target)."""
     import moderngl
 
     ctx = gl.ctx
-    n_gbuffer = 5 if with_normals else 3
-    gbuffer = [gl.keep(ctx.texture((res, band), 4, dtype="f4")) for _ in range(n_gbuffer)]
+    gbuffer = [gl.keep(ctx.texture((res, band), 4, dtype="f4")) for _ in range(3)]
     for unit, tex in enumerate(gbuffer):
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.use(unit)
@@ -283,11 +282,11 @@ def _render(
                                          max_distance, profile_shape, frames)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (67 bytes a texel: 48 for the surface pass, 19 for the maps; with the normal map
-        # 115: 32 more for normal and tangent, 16 for normal + occlusion, so bands shrink).
+        # (67 bytes a texel: 48 for the surface pass, 19 for the maps; with the normal map 83:
+        # 16 for normal + occlusion, so bands shrink).
         band = max(1, min(res, (tile * tile) // res))
         if with_normals:
-            band = max(1, min(res, (tile * tile * 67 // 115) // res))
+            band = max(1, min(res, (tile * tile * 67 // 83) // res))
         images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, _DTYPES, strict=True)}
         if with_normals:
             images.update({n: np.empty((res, res), np.float32) for n in _NORMAL_NAMES})
