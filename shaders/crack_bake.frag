@@ -3,8 +3,9 @@
 // point (recorded by crack_surface.frag) to the crack segments listed for its face's bin
 // (crackbake/bake/grid.py), and turns it into the crack channels.  Working in world space makes
 // the width independent of UV stretch and continuous across UV seams.
-// Compiled with CRACK_NORMALS defined it also writes the depth-normal and occlusion map (see
-// depth_gradient and groove_visibility below, and crackbake/bake/normal_map.py); the code the
+// Compiled with CRACK_NORMALS defined it also records which segment's depth term wins each
+// texel, for crack_normal.comp to compute the depth-normal and occlusion at the crack texels
+// only (llvmpipe runs both sides of a branch, so doing it here cost every texel); the code the
 // other channels run is the same in both variants, so they come out bit-identical.
 
 struct Segment {
@@ -26,19 +27,6 @@ uniform float u_shape;          // depth profile exponent: 1 = V, < 1 fuller (U-
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
 layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y
-#ifdef CRACK_NORMALS
-// The baked mesh's triangles and per-vertex frames, to interpolate N and T at a texel's point.
-struct Frame {
-    vec4 pos;      // xyz world position
-    vec4 normal;   // xyz vertex normal
-    vec4 tangent;  // xyz tangent, w bitangent sign (B = w cross(N, T) points to +v)
-};
-layout(std430, binding = 5) readonly buffer Faces { uint face_vertex[]; };  // 3 per face
-layout(std430, binding = 6) readonly buffer Frames { Frame frame[]; };
-// Max draw buffers is 8: the normal and the occlusion share one RGBA32F target.
-layout(location = 7) out vec4 o_normal;     // xyz tangent-space unit normal, w occlusion
-// @crack_normal.glsl (inserted here by crackbake/bake/raster.py)
-#endif
 
 // One single-channel target per map, so each reads back straight into its own image.
 layout(location = 0) out float o_mask;      // R16F
@@ -47,7 +35,7 @@ layout(location = 2) out float o_time;      // R16F
 layout(location = 3) out float o_depth;     // R32F
 layout(location = 4) out float o_distance;  // R32F
 layout(location = 5) out float o_id;        // R32F
-layout(location = 6) out float o_inside;    // R8
+layout(location = 6) out float o_inside;    // R8; with CRACK_NORMALS R32F: 2 + deepest segment
 
 void main() {
     ivec2 texel = ivec2(gl_FragCoord.xy);
@@ -57,9 +45,6 @@ void main() {
         // No face here: the background the gutter fill replaces.
         o_mask = 0.0; o_width = 0.0; o_time = 0.0; o_depth = 0.0;
         o_distance = 0.0; o_id = 0.0; o_inside = 0.0;
-#ifdef CRACK_NORMALS
-        o_normal = vec4(0.0, 0.0, 1.0, 1.0);
-#endif
         return;
     }
     uint bin = uint(point.w);
@@ -139,10 +124,10 @@ void main() {
     o_depth = depth;
     o_distance = best_d;
     o_id = best_id;
-    o_inside = 1.0;
 #ifdef CRACK_NORMALS
-    o_normal = deepest_seg < 0 ? vec4(0.0, 0.0, 1.0, 1.0)
-                               : crack_normal(seg[deepest_seg], p, dpx, dpy, texel_iso,
-                                              uint(texelFetch(u_dpy, texel, 0).w));
+    // 1 on a face with no crack depth, 2 + the segment whose depth term wins (exact < 2^24).
+    o_inside = float(deepest_seg + 2);
+#else
+    o_inside = 1.0;
 #endif
 }

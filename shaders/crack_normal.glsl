@@ -1,5 +1,5 @@
-// Depth-normal and occlusion of one crack segment at a texel (inserted into crack_bake.frag when
-// the normal map is baked).  Everything is analytic in world space: the depth term that wins the
+// Depth-normal and occlusion of one crack segment at a texel (inserted into crack_normal.comp,
+// which runs it at the crack texels only).  Everything is analytic in world space: the depth term that wins the
 // texel is differentiated in closed form, so the normal is exact at the texel centre whatever the
 // UV stretch, and continuous across UV seams (no image-space filter).
 //

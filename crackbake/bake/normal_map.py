@@ -109,3 +109,66 @@ def frame_attributes(
     out[:, 4:7] = normals
     out[:, 8:12] = tangents
     return out
+
+
+#: Texels per compute dispatch: GL guarantees 65535 work groups of 64 invocations.
+_DISPATCH = 65535 * 64
+
+
+class NormalPass:
+    """The compute pass (``shaders/crack_normal.comp``) that fills the normal and occlusion at
+    the crack texels of each band, reading the band's surface-pass targets (texture units 0-2)
+    and the segment, face and frame buffers (storage bindings 0, 5, 6) the crack pass set up.
+
+    Parameters
+    ----------
+    gl : GLScope
+        The bake's scope (objects kept there are released with it).
+    profile_shape : float
+        Depth profile exponent.
+    """
+
+    def __init__(self, gl, profile_shape: float) -> None:
+        self.gl = gl
+        self.prog = gl.keep(gl.ctx.compute_shader(shader_variant("crack_normal.comp", True)))
+        self.prog["u_shape"].value = float(profile_shape)
+
+    def run(self, code: np.ndarray, planes: list[np.ndarray], y0: int) -> None:
+        """Compute the crack texels of one band into ``planes`` (normal x, y, z, occlusion).
+
+        Parameters
+        ----------
+        code : (h, res) float32
+            The crack pass's inside target of the band: 0 off the faces, 1 on a face with no
+            crack depth, ``2 + segment`` where that segment's depth term wins.
+        planes : list of four (res, res) arrays
+            Written at rows ``y0 + row`` of the crack texels (others keep their flat value).
+        y0 : int
+            First image row of the band.
+        """
+        rows, cols = np.nonzero(code >= 2)
+        if len(rows) == 0:
+            return
+        ctx = self.gl.ctx
+        job = np.zeros((len(rows), 4), np.int32)
+        job[:, 0], job[:, 1] = cols, rows
+        job[:, 2] = code[rows, cols].astype(np.int64) - 2
+        out = np.empty((len(rows), 4), np.float32)
+        for start in range(0, len(rows), _DISPATCH):
+            part = job[start : start + _DISPATCH]
+            jobs = ctx.buffer(part)
+            result = ctx.buffer(reserve=part.nbytes)
+            try:
+                jobs.bind_to_storage_buffer(7)
+                result.bind_to_storage_buffer(8)
+                self.prog["u_count"].value = len(part)
+                self.prog.run(group_x=(len(part) + 63) // 64)
+                ctx.memory_barrier()
+                out[start : start + len(part)] = np.frombuffer(result.read(), np.float32).reshape(
+                    -1, 4
+                )
+            finally:
+                jobs.release()
+                result.release()
+        for k, plane in enumerate(planes):
+            plane[y0 + rows, cols] = out[:, k]

@@ -24,7 +24,7 @@ import numpy as np
 from crackbake.bake.context import GLScope
 from crackbake.bake.dilation import dilate
 from crackbake.bake.grid import FaceBins, face_bins
-from crackbake.bake.normal_map import frame_attributes, shader_variant
+from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import TILE_DEFAULT
@@ -239,10 +239,9 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     return surface, vao, screen
 
 
-def _targets(gl: GLScope, res: int, band: int, with_normals: bool):
+def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     """Framebuffers of one band: the surface pass's three float targets (bound as textures for
-    the crack pass) and the crack pass's one target per channel (plus one RGBA normal +
-    occlusion target)."""
+    the crack pass) and the crack pass's one target per channel."""
     import moderngl
 
     ctx = gl.ctx
@@ -251,9 +250,7 @@ def _targets(gl: GLScope, res: int, band: int, with_normals: bool):
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.use(unit)
     gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer))
-    textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in _DTYPES]
-    if with_normals:
-        textures.append(gl.keep(ctx.texture((res, band), 4, dtype="f4")))
+    textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
     fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
     return gfbo, fbo
 
@@ -282,20 +279,23 @@ def _render(
                                          max_distance, profile_shape, frames)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (67 bytes a texel: 48 for the surface pass, 19 for the maps; with the normal map 83:
-        # 16 for normal + occlusion, so bands shrink).
+        # (67 bytes a texel: 48 for the surface pass, 19 for the maps; 70 with the normal map,
+        # whose inside target holds the winning segment as R32F).
         band = max(1, min(res, (tile * tile) // res))
+        # With the normal map the inside target also says which segment's depth wins (R32F).
+        dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
+        images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
         if with_normals:
-            band = max(1, min(res, (tile * tile * 67 // 83) // res))
-        images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, _DTYPES, strict=True)}
-        if with_normals:
-            images.update({n: np.empty((res, res), np.float32) for n in _NORMAL_NAMES})
-            images["occlusion"] = np.empty((res, res), np.float16)
-            rgba = np.empty((band, res, 4), np.float32)
-        gfbo, fbo = _targets(gl, res, band, with_normals)
+            normal_pass = NormalPass(gl, profile_shape)
+            # Flat and open wherever no crack's depth reaches.
+            flat = (0.0, 0.0, 1.0, 1.0)
+            images.update({n: np.full((res, res), v, np.float32)
+                           for n, v in zip(_NORMAL_NAMES, flat, strict=False)})  # fmt: skip
+            images["occlusion"] = np.ones((res, res), np.float16)
+        gfbo, fbo = _targets(gl, res, band, dtypes)
         gl.ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
         timings["setup"] = time.perf_counter() - t1
-        t_draw = t_read = 0.0
+        t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
@@ -307,19 +307,21 @@ def _render(
             screen.render(moderngl.TRIANGLES, vertices=3)
             gl.ctx.finish()
             tb = time.perf_counter()
-            for k, (n, d) in enumerate(zip(_NAMES, _DTYPES, strict=True)):
+            for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
                               attachment=k, dtype=d)  # fmt: skip
+            tc = time.perf_counter()
             if with_normals:
-                # One RGBA target (GL_MAX_DRAW_BUFFERS is 8), split into planes for dilation.
-                fbo.read_into(rgba[:h], viewport=(0, 0, res, h), components=4,
-                              attachment=len(_NAMES), dtype="f4")  # fmt: skip
-                for k, n in enumerate((*_NORMAL_NAMES, "occlusion")):
-                    images[n][y0 : y0 + h] = rgba[:h, :, k]
+                # Only the crack texels, while this band's surface targets are still bound.
+                planes = [images[n] for n in (*_NORMAL_NAMES, "occlusion")]
+                normal_pass.run(images["inside"][y0 : y0 + h], planes, y0)
             t_draw += tb - ta
-            t_read += time.perf_counter() - tb
+            t_read += tc - tb
+            t_normals += time.perf_counter() - tc
         timings["render"] = t_draw
         timings["readback"] = t_read
+        if with_normals:
+            timings["normals"] = t_normals
     return images
 
 
