@@ -191,10 +191,11 @@ def child(mesh_name: str, res: int) -> dict:
     t = time.perf_counter()
     nmaps = bake_cracks(v, f, uv, segs, res, normals=n, tangents=tangents)
     row["bake_normals"] = time.perf_counter() - t
-    for k in ("render", "readback", "dilate"):
+    for k in ("setup", "render", "readback", "dilate"):
         row[f"{k}_normals"] = nmaps.timings.get(k, 0.0)
+    row["normals"] = nmaps.timings["normals"]  # the compute pass over the crack texels
     row["render+read+dilate_normals"] = sum(nmaps.timings[k] for k in ("render", "readback",
-                                                                         "dilate"))
+                                                                         "dilate", "normals"))
     row["normal_vs_plain"] = row["render+read+dilate_normals"] / row["render+read+dilate"]
     del nmaps
     with tempfile.TemporaryDirectory() as tmp:

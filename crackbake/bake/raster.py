@@ -69,6 +69,7 @@ class CrackMaps:
         Unit tangent-space normal of the crack's depth profile, OpenGL convention (X along T,
         Y along B = +v, Z along N; flat = (0, 0, 1)), for decoding as
         ``normalize(x T + y B + z N)`` with the tangents baked with; ``None`` without tangents.
+        A view of planar storage: each ``normal[..., k]`` is C-contiguous.
     occlusion : (res, res) float16 or None
         Sky visibility 0..1 (1 = open, crack interiors dark); ``None`` without tangents.
     """
@@ -192,7 +193,6 @@ def bake_cracks(
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 _DTYPES = ("f2", "f2", "f2", "f4", "f4", "f4", "f1")
 _NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
-_NORMAL_NAMES = ("normal_x", "normal_y", "normal_z")
 
 
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
@@ -287,10 +287,10 @@ def _render(
         images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
         if with_normals:
             normal_pass = NormalPass(gl, profile_shape)
-            # Flat and open wherever no crack's depth reaches.
-            flat = (0.0, 0.0, 1.0, 1.0)
-            images.update({n: np.full((res, res), v, np.float32)
-                           for n, v in zip(_NORMAL_NAMES, flat, strict=False)})  # fmt: skip
+            # Flat and open wherever no crack's depth reaches.  Planar storage: each component
+            # dilates as its own image and EXR writers take the planes without a copy.
+            images["normal"] = np.zeros((3, res, res), np.float32)
+            images["normal"][2] = 1.0
             images["occlusion"] = np.ones((res, res), np.float16)
         gfbo, fbo = _targets(gl, res, band, dtypes)
         gl.ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
@@ -313,7 +313,7 @@ def _render(
             tc = time.perf_counter()
             if with_normals:
                 # Only the crack texels, while this band's surface targets are still bound.
-                planes = [images[n] for n in (*_NORMAL_NAMES, "occlusion")]
+                planes = [*images["normal"], images["occlusion"]]
                 normal_pass.run(images["inside"][y0 : y0 + h], planes, y0)
             t_draw += tb - ta
             t_read += tc - tb
@@ -362,12 +362,13 @@ def _dilated_maps(
     background = [0.0, 0.0, 0.0, 0.0, max_distance, -1.0]
     with_normals = "occlusion" in images
     if with_normals:
-        planes += [images[n] for n in (*_NORMAL_NAMES, "occlusion")]
+        planes += [*images["normal"], images["occlusion"]]
         background += [0.0, 0.0, 1.0, 1.0]  # flat, open
     dilate(planes, inside, limit=dilate_px, background=background)
     normal = occlusion = None
     if with_normals:
-        normal = np.stack([images.pop(n) for n in _NORMAL_NAMES], axis=-1)
+        # (res, res, 3) view of the planes: normal[..., k] is C-contiguous.
+        normal = np.moveaxis(images.pop("normal"), 0, -1)
         occlusion = images.pop("occlusion")
     timings["dilate"] = time.perf_counter() - t3
     return CrackMaps(
