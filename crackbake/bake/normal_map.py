@@ -1,9 +1,11 @@
 """Depth-normal and occlusion maps of the crack bake: inputs, shader variant, conventions.
 
-The normal map is computed analytically per texel in ``shaders/crack_normal.glsl`` (the second
-bake pass): the crack's own depth profile, height ``h = -depth``, is differentiated in world space
-at the texel's surface point, so the result is exact at the texel centre whatever the UV stretch
-and continuous across UV seams (no image-space filter).  Steps per texel:
+The normal map is computed analytically per texel in ``shaders/crack_normal.glsl``, run by a
+compute pass (``shaders/crack_normal.comp``) over the texels whose depth a crack segment wins
+(the crack pass records that segment): the crack's own depth profile, height ``h = -depth``, is
+differentiated in world space at the texel's surface point, so the result is exact at the texel
+centre whatever the UV stretch and continuous across UV seams (no image-space filter).  Steps
+per texel:
 
 1. The winning depth term (the segment whose depth is the texel's depth) is
    ``D(t) (1 - d / hw(t)) ** shape`` with ``d`` the world distance to the segment, ``t`` the

@@ -7,8 +7,8 @@ stays linear in faces + segments) and measures world-space distances.  So widths
 units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
 images are drawn in bands, and empty texels are then filled from their nearest island
 (dilation) so bilinear filtering and mip-maps never pull in background.  Given tangents, the
-second pass also writes the crack's depth-normal and occlusion maps
-(:mod:`crackbake.bake.normal_map`).
+second pass also records which segment's depth wins each texel, and a compute pass over the crack
+texels derives the depth-normal and occlusion maps from it (:mod:`crackbake.bake.normal_map`).
 
 All returned images have row 0 at the top (UV v = 1), the order image files store.
 """
