@@ -4,7 +4,12 @@ For each mesh and resolution a fresh child process runs the real stages (load, U
 readback, dilation, EXR/PNG/GLB write) on a crack network of about 1,000 segments, so every row
 pays first-run costs (shader JIT, page faults) as a one-shot CLI run does, and its peak RSS is
 its own.  The EXR write is compared with a bare write of the same planes by OpenImageIO and by
-the OpenEXR bindings.
+the OpenEXR bindings.  Each row bakes twice: the plain maps, then the same maps plus the
+depth-normal and occlusion maps (``bake_normals``: tangents given), so the two costs compare in one
+process.
+
+Tangents come from ``crackbake.bake.tangents.with_tangents`` (MikkTSpace) when present, else from
+:func:`simple_tangents` here (per-vertex UV-derivative tangents; the same cost for the bake).
 
 Meshes: spot (its own UVs; ../shared/meshes/spot.obj or examples/spot.obj) and a generated
 100k-face bumpy torus (unwrapped with xatlas; cached after the first run).
@@ -85,6 +90,39 @@ def random_network(mesh, n_cracks: int = 20, steps: int = 50, seed: int = 0):
     return CrackNetwork(cracks=cracks, mesh=mesh_info(mesh))
 
 
+def simple_tangents(vertices, faces, uv, normals) -> np.ndarray:
+    """(V, 4) per-vertex tangents: face UV derivatives summed per vertex, made orthogonal to the
+    normal, w the bitangent sign (a stand-in for MikkTSpace when it is not importable)."""
+    p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
+    t0, t1, t2 = (uv[faces[:, k]] for k in range(3))
+    e1, e2, q1, q2 = p1 - p0, p2 - p0, t1 - t0, t2 - t0
+    det = q1[:, 0] * q2[:, 1] - q1[:, 1] * q2[:, 0]
+    r = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0, 1, det), 0.0)[:, None]
+    dpdu = (e1 * q2[:, 1:2] - e2 * q1[:, 1:2]) * r
+    dpdv = (e2 * q1[:, 0:1] - e1 * q2[:, 0:1]) * r
+    tan = np.zeros((len(vertices), 3))
+    bit = np.zeros((len(vertices), 3))
+    for k in range(3):
+        np.add.at(tan, faces[:, k], dpdu)
+        np.add.at(bit, faces[:, k], dpdv)
+    tan -= normals * (tan * normals).sum(1, keepdims=True)
+    length = np.linalg.norm(tan, axis=1, keepdims=True)
+    tan = np.where(length > 0, tan / np.where(length > 0, length, 1), [1.0, 0.0, 0.0])
+    w = np.where((np.cross(normals, tan) * bit).sum(1) < 0, -1.0, 1.0)
+    return np.column_stack([tan, w])
+
+
+def uvmesh_tangents(uvm):
+    """(vertices, faces, uv, normals, tangents) to bake the normal map with."""
+    try:
+        from crackbake.bake.tangents import with_tangents
+    except ImportError:
+        tangents = simple_tangents(uvm.vertices, uvm.faces, uvm.uv, uvm.normals)
+        return uvm.vertices, uvm.faces, uvm.uv, uvm.normals, tangents, "simple"
+    t = with_tangents(uvm)
+    return t.vertices, t.faces, t.uv, t.normals, t.tangents, "mikktspace"
+
+
 def bare_exr_writes(planes: dict[str, np.ndarray], folder: Path) -> dict[str, float]:
     """Seconds for the plainest write of the same planes by each library (ZIP, same types)."""
     import OpenEXR
@@ -147,6 +185,19 @@ def child(mesh_name: str, res: int) -> dict:
     for k in ("candidates", "setup", "render", "readback", "dilate"):
         row[k] = maps.timings.get(k, 0.0)
     row["render+read+dilate"] = row["render"] + row["readback"] + row["dilate"]
+    t = time.perf_counter()
+    v, f, uv, n, tangents, row["tangents"] = uvmesh_tangents(uvm)
+    row["tangent_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    nmaps = bake_cracks(v, f, uv, segs, res, normals=n, tangents=tangents)
+    row["bake_normals"] = time.perf_counter() - t
+    for k in ("setup", "render", "readback", "dilate"):
+        row[f"{k}_normals"] = nmaps.timings.get(k, 0.0)
+    row["normals"] = nmaps.timings["normals"]  # the compute pass over the crack texels
+    row["render+read+dilate_normals"] = sum(nmaps.timings[k] for k in ("render", "readback",
+                                                                         "dilate", "normals"))
+    row["normal_vs_plain"] = row["render+read+dilate_normals"] / row["render+read+dilate"]
+    del nmaps
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         planes = exr_channels(maps, float32=False)
@@ -178,7 +229,8 @@ def child(mesh_name: str, res: int) -> dict:
 COLUMNS = [
     ("mesh", "{}"), ("faces", "{}"), ("res", "{}"), ("segments", "{}"), ("load", "{:.2f}"),
     ("uv", "{:.2f}"), ("render", "{:.2f}"), ("readback", "{:.2f}"), ("dilate", "{:.2f}"),
-    ("render+read+dilate", "{:.2f}"), ("exr", "{:.2f}"), ("bare_openexr", "{:.2f}"),
+    ("render+read+dilate", "{:.2f}"), ("render+read+dilate_normals", "{:.2f}"),
+    ("normal_vs_plain", "{:.2f}"), ("exr", "{:.2f}"), ("bare_openexr", "{:.2f}"),
     ("bare_oiio", "{:.2f}"), ("exr_vs_bare", "{:.2f}"), ("png", "{:.2f}"), ("glb", "{:.2f}"),
     ("peak_rss_GiB", "{:.2f}"),
 ]  # fmt: skip

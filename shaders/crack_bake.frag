@@ -3,6 +3,10 @@
 // point (recorded by crack_surface.frag) to the crack segments listed for its face's bin
 // (crackbake/bake/grid.py), and turns it into the crack channels.  Working in world space makes
 // the width independent of UV stretch and continuous across UV seams.
+// Compiled with CRACK_NORMALS defined it also records which segment's depth term wins each
+// texel, for crack_normal.comp to compute the depth-normal and occlusion at the crack texels
+// only (llvmpipe runs both sides of a branch, so doing it here cost every texel); the code the
+// other channels run is the same in both variants, so they come out bit-identical.
 
 struct Segment {
     vec4 a;      // xyz start, w = width at start
@@ -31,7 +35,7 @@ layout(location = 2) out float o_time;      // R16F
 layout(location = 3) out float o_depth;     // R32F
 layout(location = 4) out float o_distance;  // R32F
 layout(location = 5) out float o_id;        // R32F
-layout(location = 6) out float o_inside;    // R8
+layout(location = 6) out float o_inside;    // R8; with CRACK_NORMALS R32F: 2 + deepest segment
 
 void main() {
     ivec2 texel = ivec2(gl_FragCoord.xy);
@@ -61,6 +65,9 @@ void main() {
     // plus one footprint, and the footprint along any direction is at most |(|dpx|, |dpy|)|.
     float cover_reach = u_half_width + length(vec2(length(dpx), length(dpy)));
     int best_seg = -1;
+#ifdef CRACK_NORMALS
+    int deepest_seg = -1;  // the segment whose depth term wins (the normal's profile)
+#endif
     for (uint k = bin_start[bin]; k < bin_start[bin + 1u]; ++k) {
         // Segments come nearest-bound first: the rest cannot be nearer or add coverage.
         if (cand_bound[k] > max(best_d, cover_reach)) break;
@@ -98,6 +105,9 @@ void main() {
             dd = depth_here * c / (u_shape + 1.0);
         }
         coverage = max(coverage, c);
+#ifdef CRACK_NORMALS
+        if (dd > depth) deepest_seg = int(si);
+#endif
         depth = max(depth, dd);
         // Ties go to the lowest index, so the result does not depend on the list order.
         if (d < best_d || (d == best_d && best_seg >= 0 && int(si) < best_seg)) {
@@ -114,5 +124,10 @@ void main() {
     o_depth = depth;
     o_distance = best_d;
     o_id = best_id;
+#ifdef CRACK_NORMALS
+    // 1 on a face with no crack depth, 2 + the segment whose depth term wins (exact < 2^24).
+    o_inside = float(deepest_seg + 2);
+#else
     o_inside = 1.0;
+#endif
 }

@@ -6,7 +6,9 @@ segments listed for that bin (:mod:`crackbake.bake.grid`: nearby faces share one
 stays linear in faces + segments) and measures world-space distances.  So widths are in mesh
 units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
 images are drawn in bands, and empty texels are then filled from their nearest island
-(dilation) so bilinear filtering and mip-maps never pull in background.
+(dilation) so bilinear filtering and mip-maps never pull in background.  Given tangents, the
+second pass also records which segment's depth wins each texel, and a compute pass over the crack
+texels derives the depth-normal and occlusion maps from it (:mod:`crackbake.bake.normal_map`).
 
 All returned images have row 0 at the top (UV v = 1), the order image files store.
 """
@@ -19,9 +21,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from crackbake.bake.context import GLScope, shader_source
+from crackbake.bake.context import GLScope
 from crackbake.bake.dilation import dilate
 from crackbake.bake.grid import FaceBins, face_bins
+from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import TILE_DEFAULT
@@ -62,6 +65,13 @@ class CrackMaps:
         Id of the nearest crack, -1 where none within ``max_distance``.
     inside : bool
         Texels whose centre lies on a face (before dilation).
+    normal : (res, res, 3) float32 or None
+        Unit tangent-space normal of the crack's depth profile, OpenGL convention (X along T,
+        Y along B = +v, Z along N; flat = (0, 0, 1)), for decoding as
+        ``normalize(x T + y B + z N)`` with the tangents baked with; ``None`` without tangents.
+        A view of planar storage: each ``normal[..., k]`` is C-contiguous.
+    occlusion : (res, res) float16 or None
+        Sky visibility 0..1 (1 = open, crack interiors dark); ``None`` without tangents.
     """
 
     res: int
@@ -74,6 +84,8 @@ class CrackMaps:
     inside: np.ndarray
     max_distance: float
     profile_shape: float
+    normal: np.ndarray | None = None
+    occlusion: np.ndarray | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
     def channels(self) -> dict[str, np.ndarray]:
@@ -113,6 +125,8 @@ def bake_cracks(
     dilate_px: int | None = None,
     tile: int = TILE_DEFAULT,
     ctx=None,
+    normals: np.ndarray | None = None,
+    tangents: np.ndarray | None = None,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
 
@@ -141,6 +155,12 @@ def bake_cracks(
         texels (67 bytes each on the GL side).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
+    normals : (V, 3) float, optional
+        Shading normals of the vertices (``UVMesh.normals``), used with ``tangents``; default
+        area-weighted normals welded across UV seams.
+    tangents : (V, 4) float, optional
+        MikkTSpace tangents (xyz, w = bitangent sign) of the vertices; when given, the maps
+        also hold ``normal`` and ``occlusion`` (:mod:`crackbake.bake.normal_map`).
 
     Returns
     -------
@@ -157,13 +177,14 @@ def bake_cracks(
     if profile_shape <= 0:
         raise CrackbakeError(f"profile shape {profile_shape} must be > 0 (1 = V profile)")
     max_distance = _max_distance(vertices, segments, max_distance)
+    frames = None if tangents is None else frame_attributes(vertices, faces, normals, tangents)
 
     bins = face_bins(vertices, faces, uv, segments, res, max_distance)
     timings["candidates"] = time.perf_counter() - t0
 
     images = _render(
         ctx, vertices, faces, uv, segments, res, tile, bins,
-        float(max_distance), float(profile_shape), timings,
+        float(max_distance), float(profile_shape), timings, frames,
     )  # fmt: skip
 
     return _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
@@ -175,23 +196,25 @@ _NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
-              max_distance: float, profile_shape: float):
-    """The surface pass (faces in UV space -> world position, footprint, bin per texel) and the
-    crack pass (one full-screen triangle measuring the cracks per texel), with their buffers."""
+              max_distance: float, profile_shape: float, frames: np.ndarray | None):
+    """The surface pass (faces in UV space -> world position, footprint, bin per texel; with
+    ``frames``, the face too) and the crack pass (one full-screen triangle measuring the cracks
+    per texel; with ``frames``, reading the faces' vertex frames), with their buffers."""
     ctx = gl.ctx
+    with_normals = frames is not None
     vertex = np.empty((len(vertices), 5), np.float32)
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
     surface = gl.keep(
         ctx.program(
-            vertex_shader=shader_source("crack_bake.vert"),
-            fragment_shader=shader_source("crack_surface.frag"),
+            vertex_shader=shader_variant("crack_bake.vert", with_normals),
+            fragment_shader=shader_variant("crack_surface.frag", with_normals),
         )
     )
     prog = gl.keep(
         ctx.program(
-            vertex_shader=shader_source("crack_screen.vert"),
-            fragment_shader=shader_source("crack_bake.frag"),
+            vertex_shader=shader_variant("crack_screen.vert", with_normals),
+            fragment_shader=shader_variant("crack_bake.frag", with_normals),
         )
     )
     vbo = gl.keep(ctx.buffer(vertex))
@@ -200,6 +223,9 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
         ctx.vertex_array(surface, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
                          index_element_size=4)
     )  # fmt: skip
+    if with_normals:
+        ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
+        gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
     screen = gl.keep(ctx.vertex_array(prog, []))
     buffers = (
         _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
@@ -213,7 +239,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     return surface, vao, screen
 
 
-def _targets(gl: GLScope, res: int, band: int):
+def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     """Framebuffers of one band: the surface pass's three float targets (bound as textures for
     the crack pass) and the crack pass's one target per channel."""
     import moderngl
@@ -224,7 +250,7 @@ def _targets(gl: GLScope, res: int, band: int):
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.use(unit)
     gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer))
-    textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in _DTYPES]
+    textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
     fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
     return gfbo, fbo
 
@@ -241,23 +267,35 @@ def _render(
     max_distance: float,
     profile_shape: float,
     timings: dict[str, float],
+    frames: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Draw the faces in UV space band by band; the planar channel images (row 0 = v = 0)."""
     import moderngl
 
+    with_normals = frames is not None
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
         surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
-                                         max_distance, profile_shape)
+                                         max_distance, profile_shape, frames)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (67 bytes a texel: 48 for the surface pass, 19 for the maps).
+        # (67 bytes a texel: 48 for the surface pass, 19 for the maps; 70 with the normal map,
+        # whose inside target holds the winning segment as R32F).
         band = max(1, min(res, (tile * tile) // res))
-        images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, _DTYPES, strict=True)}
-        gfbo, fbo = _targets(gl, res, band)
+        # With the normal map the inside target also says which segment's depth wins (R32F).
+        dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
+        images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
+        if with_normals:
+            normal_pass = NormalPass(gl, profile_shape)
+            # Flat and open wherever no crack's depth reaches.  Planar storage: each component
+            # dilates as its own image and EXR writers take the planes without a copy.
+            images["normal"] = np.zeros((3, res, res), np.float32)
+            images["normal"][2] = 1.0
+            images["occlusion"] = np.ones((res, res), np.float16)
+        gfbo, fbo = _targets(gl, res, band, dtypes)
         gl.ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
         timings["setup"] = time.perf_counter() - t1
-        t_draw = t_read = 0.0
+        t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
@@ -269,13 +307,21 @@ def _render(
             screen.render(moderngl.TRIANGLES, vertices=3)
             gl.ctx.finish()
             tb = time.perf_counter()
-            for k, (n, d) in enumerate(zip(_NAMES, _DTYPES, strict=True)):
+            for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
                               attachment=k, dtype=d)  # fmt: skip
+            tc = time.perf_counter()
+            if with_normals:
+                # Only the crack texels, while this band's surface targets are still bound.
+                planes = [*images["normal"], images["occlusion"]]
+                normal_pass.run(images["inside"][y0 : y0 + h], planes, y0)
             t_draw += tb - ta
-            t_read += time.perf_counter() - tb
+            t_read += tc - tb
+            t_normals += time.perf_counter() - tc
         timings["render"] = t_draw
         timings["readback"] = t_read
+        if with_normals:
+            timings["normals"] = t_normals
     return images
 
 
@@ -312,12 +358,18 @@ def _dilated_maps(
     inside = images.pop("inside") > 0
 
     t3 = time.perf_counter()
-    dilate(
-        [mask, width, time_ch, depth, distance, crack_id],
-        inside,
-        limit=dilate_px,
-        background=[0.0, 0.0, 0.0, 0.0, max_distance, -1.0],
-    )
+    planes = [mask, width, time_ch, depth, distance, crack_id]
+    background = [0.0, 0.0, 0.0, 0.0, max_distance, -1.0]
+    with_normals = "occlusion" in images
+    if with_normals:
+        planes += [*images["normal"], images["occlusion"]]
+        background += [0.0, 0.0, 1.0, 1.0]  # flat, open
+    dilate(planes, inside, limit=dilate_px, background=background)
+    normal = occlusion = None
+    if with_normals:
+        # (res, res, 3) view of the planes: normal[..., k] is C-contiguous.
+        normal = np.moveaxis(images.pop("normal"), 0, -1)
+        occlusion = images.pop("occlusion")
     timings["dilate"] = time.perf_counter() - t3
     return CrackMaps(
         res=res,
@@ -330,5 +382,7 @@ def _dilated_maps(
         inside=inside,
         max_distance=float(max_distance),
         profile_shape=float(profile_shape),
+        normal=normal,
+        occlusion=occlusion,
         timings=timings,
     )

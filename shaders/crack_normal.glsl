@@ -1,0 +1,145 @@
+// Depth-normal and occlusion of one crack segment at a texel (inserted into crack_normal.comp,
+// which runs it at the crack texels only).  Everything is analytic in world space: the depth term that wins the
+// texel is differentiated in closed form, so the normal is exact at the texel centre whatever the
+// UV stretch, and continuous across UV seams (no image-space filter).
+//
+// The crack's cross-section: height z(x) = -D (1 - |x| / hw) ^ shape for |x| < hw, 0 outside,
+// x the world distance to the crack axis, hw the half width, D the depth.
+
+const int VIS_SAMPLES = 8;  // profile samples per side for the horizon search (exact for a V)
+
+float profile_z(float x, float hw, float depth) {
+    return -depth * pow(max(1.0 - abs(x) / hw, 0.0), u_shape);
+}
+
+// Sine of the angle from the unit normal n to the unit direction v, positive towards +x.
+float side_sine(vec2 n, vec2 v) { return v.x * n.y - v.y * n.x; }
+
+// Sky visibility (cosine-weighted, i.e. the view factor to the sky) of the point at distance
+// xp >= 0 from the axis of an infinitely long groove of that cross-section, with the 2D normal n.
+// For a long groove the view factor from a strip to the sky between the horizon directions at
+// angles a (towards -x) and b (towards +x) from the normal is (sin b - sin a) / 2; the horizons
+// are the highest profile points on either side (for a V the two rims: exact), clipped to the
+// tangent plane.  Flat ground gives 1; the apex of a V of slope angle alpha gives cos^2(alpha).
+float groove_visibility(float xp, float hw, float depth, vec2 n) {
+    vec2 p = vec2(xp, profile_z(xp, hw, depth));
+    float right = -1e30;  // highest elevation (tangent of the angle above +x) towards +x
+    float left = -1e30;   // towards -x
+    for (int k = 1; k <= VIS_SAMPLES; ++k) {
+        float f = float(k) / float(VIS_SAMPLES);
+        float xr = mix(xp, hw, f);
+        float xl = mix(xp, -hw, f);
+        if (xr > xp) right = max(right, (profile_z(xr, hw, depth) - p.y) / (xr - xp));
+        if (xl < xp) left = max(left, (profile_z(xl, hw, depth) - p.y) / (xp - xl));
+    }
+    // The apex: the lowest point, a horizon only for fuller (U-like) profiles.
+    if (xp > 0.0) left = max(left, (-depth - p.y) / xp);
+    vec2 vr = normalize(vec2(1.0, max(right, -1e6)));
+    vec2 vl = normalize(vec2(-1.0, max(left, -1e6)));
+    float sr = dot(n, vr) > 0.0 ? side_sine(n, vr) : 1.0;
+    float sl = dot(n, vl) > 0.0 ? side_sine(n, vl) : -1.0;
+    return clamp(0.5 * (sr - sl), 0.0, 1.0);
+}
+
+// Mean sky visibility over the walls of the groove: by reciprocity, everything entering the
+// opening (width 2 hw) lands on the walls, so wall length x mean view factor = 2 hw.
+float groove_mean_visibility(float hw, float depth) {
+    float len = 0.0;
+    vec2 q = vec2(-hw, 0.0);
+    for (int k = 1; k <= 2 * VIS_SAMPLES; ++k) {
+        float x = mix(-hw, hw, float(k) / float(2 * VIS_SAMPLES));
+        vec2 r = vec2(x, profile_z(x, hw, depth));
+        len += length(r - q);
+        q = r;
+    }
+    return clamp(2.0 * hw / max(len, 1e-30), 0.0, 1.0);
+}
+
+// World gradient of the segment's depth term at p (the term crack_bake.frag maximises), and the
+// occlusion there.  Full cracks (w >= fw): the point-sampled profile D(t) (1 - d / hw(t))^shape,
+// differentiated across (along the distance gradient g/d) and along the segment (D and w vary
+// linearly in t).  Sub-texel cracks (w < fw): the bake stores the area average over the texel,
+// a tent D w / ((shape + 1) fw) * (1 - d / fw) of one footprint's half width; its slope is the
+// slope of the texel-filtered height field (what a mip level of the full profile would show), and
+// the occlusion is the covered fraction times the groove's mean wall visibility.
+vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out float occ) {
+    vec3 ab = s.b.xyz - s.a.xyz;
+    float len2 = dot(ab, ab);
+    float t_raw = len2 > 0.0 ? dot(p - s.a.xyz, ab) / len2 : 0.0;
+    float t = clamp(t_raw, 0.0, 1.0);
+    // Past an end the distance is to the end point: t no longer moves with p.
+    vec3 grad_t = (t_raw > 0.0 && t_raw < 1.0) ? ab / len2 : vec3(0.0);
+    vec3 g = p - (s.a.xyz + t * ab);
+    float d = length(g);
+    float w = mix(s.a.w, s.b.w, t);
+    float hw = 0.5 * w;
+    float dw = s.b.w - s.a.w;         // d(width)/dt
+    float depth = mix(s.dt.x, s.dt.y, t);
+    float ddepth = s.dt.y - s.dt.x;   // d(depth)/dt
+    // On the axis itself the two walls meet: no across slope (their average).
+    vec3 gn = vec3(0.0);
+    float fw = texel_iso;
+    if (d > 1e-6 * texel_iso) {
+        gn = g / d;
+        fw = length(vec2(dot(gn, dpx), dot(gn, dpy)));
+    }
+    fw = max(fw, 1e-30);
+    occ = 1.0;
+    if (w >= fw) {
+        float u = d / max(hw, 1e-30);
+        if (u >= 1.0) return vec3(0.0);
+        float q = max(1.0 - u, 1e-6);  // U profiles (shape < 1) have vertical walls at the rim
+        float qs = pow(q, u_shape);
+        float qs1 = pow(q, u_shape - 1.0);
+        float across = -depth * u_shape * qs1 / max(hw, 1e-30);
+        float along = ddepth * qs + depth * u_shape * qs1 * u * (0.5 * dw) / max(hw, 1e-30);
+        occ = groove_visibility(d, hw, depth, normalize(vec2(across, 1.0)));
+        return across * gn + along * grad_t;
+    }
+    float ramp = clamp(1.0 - d / fw, 0.0, 1.0);
+    float k = 1.0 / (fw * (u_shape + 1.0));
+    float across = ramp > 0.0 ? -depth * w * k / fw : 0.0;
+    float along = (ddepth * w + depth * dw) * ramp * k;
+    occ = 1.0 - ramp * (w / fw) * (1.0 - groove_mean_visibility(hw, depth));
+    return across * gn + along * grad_t;
+}
+
+// The texel's tangent-space normal (xyz) and occlusion (w) for the winning segment.  The
+// perturbed world normal n' = normalize(N + grad_s depth) (height h = -depth over the shading
+// normal, grad_s the gradient projected into the plane normal to N) is expressed in the
+// interpolated frame an engine decodes with, n = normalize(x T + y B + z N), B = w cross(N, T),
+// by solving [T B N] (x, y, z) = n' and normalising.
+vec4 crack_normal(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, uint face) {
+    float occ;
+    vec3 grad = depth_gradient(s, p, dpx, dpy, texel_iso, occ);
+    // Barycentrics of p in its face (world positions are affine in UV inside a face, so these
+    // are the rasteriser's), then N and T interpolated as the engine's rasteriser does.
+    Frame f0 = frame[face_vertex[3u * face]];
+    Frame f1 = frame[face_vertex[3u * face + 1u]];
+    Frame f2 = frame[face_vertex[3u * face + 2u]];
+    vec3 e1 = f1.pos.xyz - f0.pos.xyz;
+    vec3 e2 = f2.pos.xyz - f0.pos.xyz;
+    vec3 q = p - f0.pos.xyz;
+    float d00 = dot(e1, e1), d01 = dot(e1, e2), d11 = dot(e2, e2);
+    float denom = d00 * d11 - d01 * d01;
+    vec3 bary = vec3(1.0 / 3.0);  // a face of no world area: its mean frame
+    if (denom > 1e-12 * d00 * d11) {
+        float b1 = (d11 * dot(q, e1) - d01 * dot(q, e2)) / denom;
+        float b2 = (d00 * dot(q, e2) - d01 * dot(q, e1)) / denom;
+        bary = vec3(1.0 - b1 - b2, b1, b2);
+    }
+    vec3 N = bary.x * f0.normal.xyz + bary.y * f1.normal.xyz + bary.z * f2.normal.xyz;
+    vec4 T4 = bary.x * f0.tangent + bary.y * f1.tangent + bary.z * f2.tangent;
+    vec3 T = T4.xyz;
+    vec3 B = (T4.w < 0.0 ? -1.0 : 1.0) * cross(N, T);
+    vec3 c0 = cross(B, N);
+    vec3 c1 = cross(N, T);
+    vec3 c2 = cross(T, B);
+    float det = dot(T, c0);
+    float scale = length(T) * length(B) * length(N);
+    if (!(abs(det) > 1e-6 * scale) || dot(grad, grad) == 0.0) return vec4(0.0, 0.0, 1.0, occ);
+    vec3 nn = normalize(N);
+    vec3 n = normalize(nn + (grad - dot(grad, nn) * nn));
+    vec3 ts = vec3(dot(n, c0), dot(n, c1), dot(n, c2)) / det;
+    return vec4(normalize(ts), occ);
+}
