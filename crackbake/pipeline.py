@@ -16,6 +16,7 @@ from pathlib import Path
 
 from crackbake.bake.context import create_context, renderer_info
 from crackbake.bake.raster import CrackMaps, bake_cracks
+from crackbake.bake.stress import StressMaps, bake_stress
 from crackbake.bake.tangents import with_tangents
 from crackbake.bake.uv import UVMesh, prepare_uvs
 from crackbake.errors import CrackbakeWarning
@@ -165,6 +166,7 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
         maps = _bake(ctx, uvmesh, network, params, timings)
+        stress = _bake_stress(ctx, uvmesh, solved, params, timings)
         logger.info("writing %s", params.out_dir)
         t = time.perf_counter()
         effective = effective_params(params, solver_stats, maps, uvmesh)
@@ -228,9 +230,33 @@ def _bake(
         dilate_px=params.dilate,
         tile=params.tile,
         ctx=ctx,
+        normals=uvmesh.normals,
+        tangents=uvmesh.tangents,
     )
     timings["bake"] = time.perf_counter() - t
     return maps
+
+
+def _bake_stress(
+    ctx, uvmesh: UVMesh, solved: Solved | None, params: RunParams, timings: dict[str, float]
+) -> StressMaps | None:
+    """The stress-field maps, timed as ``stress_bake``; None when nothing was solved."""
+    if solved is None:
+        return None  # a --cracks re-bake has no stress field
+    logger.info("baking the stress field %dx%d", params.res, params.res)
+    t = time.perf_counter()
+    stress = bake_stress(
+        uvmesh,
+        solved.result,
+        params.res,
+        tangents=uvmesh.tangents,
+        initial=solved.sim,
+        dilate_px=params.dilate,
+        tile=params.tile,
+        ctx=ctx,
+    )
+    timings["stress_bake"] = time.perf_counter() - t
+    return stress
 
 
 def solve(
