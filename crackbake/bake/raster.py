@@ -74,6 +74,8 @@ class CrackMaps:
     inside: np.ndarray
     max_distance: float
     profile_shape: float
+    normal: np.ndarray | None = None
+    occlusion: np.ndarray | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
     def channels(self) -> dict[str, np.ndarray]:

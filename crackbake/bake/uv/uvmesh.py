@@ -48,6 +48,7 @@ class UVMesh:
     method: str
     overlap_fraction: float
     padding_px: int
+    tangents: np.ndarray | None = None
 
 
 def default_padding(res: int) -> int:
