@@ -9,6 +9,9 @@ tangents come from the real bake when the installed crackbake has them, else fro
 of the same shapes and types (image-space depth gradient, occlusion 1 - 0.7 mask, per-vertex
 UV-gradient tangents), so the write has every map to encode either way.
 
+Each row gives wall and CPU seconds (all threads, this process): on a busy machine the CPU
+figures are the steadier comparison (the write's CPU / cores is its wall time on an idle one).
+
 Usage::
 
     python benchmarks/bench_write.py [--res 2048 4096] [--target gltf unreal] [--repeat 3]
@@ -81,13 +84,13 @@ def prepared(res: int):
         real = True
     except ImportError:
         uvm = replace(uvm, tangents=stand_in_tangents(uvm))
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     try:
         maps = bake_cracks(uvm.vertices, uvm.faces, uvm.uv, segments(network), res,
                            tangents=uvm.tangents)  # fmt: skip
     except TypeError:
         maps = bake_cracks(uvm.vertices, uvm.faces, uvm.uv, segments(network), res)
-    bake = time.perf_counter() - t
+    bake = (time.perf_counter() - t, time.process_time() - cpu)
     if maps.normal is None:
         real = False
         maps.normal, maps.occlusion = stand_in_surface(maps)
@@ -108,30 +111,36 @@ def main() -> None:
     args = ap.parse_args()
     ctx = create_context()
     rows = []
-    print("| res | target | bake s | write s (first) | write s (warm, best) | files | MB | maps |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| res | target | bake s wall / CPU | write s (first) | write s warm wall / CPU "
+          "| files | MB | maps | load |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for res in args.res:
         mesh, uvm, network, maps, bake, real = prepared(res)
         for target in args.target:
             params = RunParams(mesh=Path(mesh.source), res=res, target=target)
-            times = []
+            times, cpus = [], []
             for i in range(args.repeat):
                 last = args.keep is not None and i == args.repeat - 1
                 out = args.keep if last else Path(tempfile.mkdtemp()) / "out"
                 with OutputStage(out) as stage:
-                    t = time.perf_counter()
+                    t, cpu = time.perf_counter(), time.process_time()
                     write_outputs(stage, "spot", params, mesh, uvm, network, maps, ctx)
                     times.append(time.perf_counter() - t)
+                    cpus.append(time.process_time() - cpu)
                     records = stage.records()
                     if last:
                         stage.commit()
             mb = sum(r["bytes"] for r in records) / 1e6
-            row = {"res": res, "target": target, "bake": bake, "write_first": times[0],
-                   "write_warm": min(times[1:] or times), "files": len(records), "MB": mb,
-                   "real_maps": real, "threads": os.cpu_count()}  # fmt: skip
+            warm = 1 + int(np.argmin(times[1:])) if len(times) > 1 else 0
+            row = {"res": res, "target": target, "bake": bake[0], "bake_cpu": bake[1],
+                   "write_first": times[0], "write_warm": times[warm],
+                   "write_warm_cpu": cpus[warm], "files": len(records), "MB": mb,
+                   "real_maps": real, "cores": os.cpu_count(),
+                   "load_avg": os.getloadavg()[0]}  # fmt: skip
             rows.append(row)
-            print(f"| {res} | {target} | {bake:.2f} | {times[0]:.2f} | {row['write_warm']:.2f} "
-                  f"| {len(records)} | {mb:.1f} | {'baked' if real else 'stand-in'} |",
+            print(f"| {res} | {target} | {bake[0]:.2f} / {bake[1]:.2f} | {times[0]:.2f} "
+                  f"| {times[warm]:.2f} / {cpus[warm]:.2f} | {len(records)} | {mb:.1f} "
+                  f"| {'baked' if real else 'stand-in'} | {row['load_avg']:.1f} |",
                   flush=True)  # fmt: skip
     ctx.release()
     print(json.dumps(rows))

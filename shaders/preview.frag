@@ -7,7 +7,7 @@ in vec2 v_uv;
 in vec4 v_tangent;
 
 uniform sampler2D u_color;       // sRGB base colour, v up (row 0 of the upload is v = 0)
-uniform sampler2D u_normal_map;  // signed unit tangent-space normal, OpenGL +Y
+uniform sampler2D u_normal_map;  // tangent-space normal n * 0.5 + 0.5, OpenGL +Y
 uniform int u_use_normal_map;
 uniform vec3 u_key;              // unit directions towards the lights, world space
 uniform vec3 u_fill;
@@ -22,7 +22,7 @@ void main() {
     if (u_use_normal_map != 0) {
         vec3 t = v_tangent.xyz;
         vec3 b = v_tangent.w * cross(v_normal, t);
-        vec3 m = texture(u_normal_map, v_uv).xyz;
+        vec3 m = texture(u_normal_map, v_uv).xyz * 2.0 - 1.0;  // stored n * 0.5 + 0.5
         n = m.x * t + m.y * b + m.z * v_normal;
     }
     n = normalize(n);

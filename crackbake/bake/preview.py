@@ -76,8 +76,9 @@ def render_preview(
         Point looked at; the bounding-box centre by default.
     distance : float, optional
         Camera distance from ``target``; by default the whole mesh fits the frame.
-    normal_map : (H, W, 3) float, optional
-        Unit tangent-space normals, OpenGL +Y, row 0 = top (``CrackMaps.normal``).
+    normal_map : (H, W, 3) float or uint8, optional
+        Tangent-space normals, OpenGL +Y, row 0 = top: unit floats (``CrackMaps.normal``) or
+        8-bit ``n * 0.5 + 0.5`` as the normal PNGs store them.
     tangents : (V, 4) float, optional
         MikkTSpace tangents (xyz, w = bitangent sign); needed with ``normal_map``.
     ctx : moderngl.Context, optional
@@ -158,7 +159,10 @@ def _draw(gl: GLScope, mesh, color, normal_map, size, mvp, key, fill) -> np.ndar
     prog["u_color"].value = 0
     prog["u_use_normal_map"].value = int(use_map)
     if use_map:
-        _texture(gl, np.asarray(normal_map, np.float16), 1, "f2")
+        nm = np.asarray(normal_map)
+        if nm.dtype != np.uint8:
+            nm = np.clip(nm * 127.5 + 128.0, 0, 255).astype(np.uint8)
+        _texture(gl, nm, 1)
         prog["u_normal_map"].value = 1
     prog["u_mvp"].write(mvp.T.tobytes())  # GLSL matrices are column-major
     prog["u_key"].value = tuple(key.astype(np.float32))

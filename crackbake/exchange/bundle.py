@@ -78,12 +78,9 @@ def _exr_attributes(maps: CrackMaps) -> dict:
 
 @dataclass(eq=False)
 class _Smaller:
-    """The maps a texture needs, box-filtered to a smaller page (GLB, preview)."""
+    """The maps a GLB texture or the preview needs, box-filtered to a smaller page."""
 
     mask: np.ndarray
-    width: np.ndarray
-    depth: np.ndarray
-    time: np.ndarray
     normal: np.ndarray | None
     occlusion: np.ndarray | None
 
@@ -96,10 +93,7 @@ def _smaller(maps: CrackMaps, size: int) -> CrackMaps | _Smaller:
         normal = downsample(maps.normal, size)
         normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
     occ = None if maps.occlusion is None else downsample(maps.occlusion, size)
-    return _Smaller(
-        downsample(maps.mask, size), downsample(maps.width, size), downsample(maps.depth, size),
-        downsample(maps.time, size), normal, occ,
-    )  # fmt: skip
+    return _Smaller(downsample(maps.mask, size), normal, occ)
 
 
 class _Encoder:
@@ -230,7 +224,9 @@ def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx) -> None:
         tex = downsample(tex, PREVIEW_TEXTURE_MAX)
     colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
     tangents = getattr(uvmesh, "tangents", None)
-    normal = small.normal if tangents is not None else None
+    normal = None
+    if tangents is not None and small.normal is not None:
+        normal = pack("normal", small, 8, "gl")
     view_dir, up, target, distance = preview_camera(mesh, network)
     picture = render_preview(
         uvmesh.vertices,

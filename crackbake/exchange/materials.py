@@ -36,11 +36,38 @@ def half_lut(fn) -> np.ndarray:
 
 
 def downsample(image: np.ndarray, max_size: int | None) -> np.ndarray:
-    """Box-filter by powers of two until the edge is at most ``max_size`` (float32 out)."""
-    m = np.asarray(image, np.float32)
+    """Box-filter by powers of two until the edge is at most ``max_size``.
+
+    Returns ``image`` itself when it is small enough, else float32.  Four strided slices per
+    level (a reshape-mean over two axes was 10x slower at 4096²).
+    """
+    m = image
     while max_size is not None and m.shape[0] > max_size and m.shape[0] % 2 == 0:
-        m = m.reshape(m.shape[0] // 2, 2, m.shape[1] // 2, 2, *m.shape[2:]).mean(axis=(1, 3))
+        acc = m[0::2, 0::2].astype(np.float32)
+        acc += m[1::2, 0::2]
+        acc += m[0::2, 1::2]
+        acc += m[1::2, 1::2]
+        acc *= np.float32(0.25)
+        m = acc
     return m
+
+
+def unit_u8(plane: np.ndarray) -> np.ndarray:
+    """A [0, 1] plane rounded to uint8 (clipped; NaN -> 0); float16 through one table gather."""
+    if plane.dtype == np.float16:
+        lut = np.clip(half_lut(lambda x: x * 255 + 0.5), 0, 255).astype(np.uint8)
+        return np.take(lut, plane.view(np.uint16))
+    q = np.asarray(plane, np.float32) * np.float32(255)
+    q += np.float32(0.5)
+    np.clip(q, 0, 255, out=q)
+    return q.astype(np.uint8)
+
+
+def _factors() -> np.ndarray:
+    """(65536, 3) float64: the colour factor for mask m = i // 256 and occlusion o = i % 256."""
+    m = np.repeat(np.arange(256) / 255.0, 256)[:, None]
+    o = np.tile(np.arange(256) / 255.0, 256)[:, None]
+    return (1.0 + m * (CRACK_RGB / SURFACE_RGB - 1.0)) * o ** (1 / 2.2)
 
 
 def base_color(
@@ -50,6 +77,9 @@ def base_color(
     texture: np.ndarray | None = None,
 ) -> np.ndarray:
     """sRGB uint8 (H, W, 3) base colour: the texture (or light grey) with dark cracks.
+
+    Mask and occlusion are rounded to 8 bits and the colour looked up in a 65536-entry table
+    (one gather for the whole page): the result is within one level of the exact formula.
 
     Parameters
     ----------
@@ -62,19 +92,18 @@ def base_color(
     texture : (H, W, 3) uint8, optional
         The asset's sRGB base colour at the mask's resolution; :data:`SURFACE_RGB` when absent.
     """
-    m = downsample(mask, max_size)
-    tint = CRACK_RGB / SURFACE_RGB - 1.0
-    # factor = 1 + tint * m per channel: exactly CRACK_RGB on the grey default at m = 1.
-    factor = m[..., None] * tint
-    factor += 1.0
-    if occlusion is not None:
-        occ = downsample(occlusion, max_size)
-        np.clip(occ, 0.0, 1.0, out=occ)
-        factor *= (occ ** (1 / 2.2))[..., None]  # linear multiply, applied to sRGB values
-    if texture is None:
-        factor *= SURFACE_RGB
+    idx = unit_u8(downsample(mask, max_size)).astype(np.uint16) << 8
+    if occlusion is None:
+        idx |= 255
     else:
-        factor *= downsample(texture, max_size)
-    factor += 0.5
-    np.clip(factor, 0, 255, out=factor)
-    return factor.astype(np.uint8)
+        idx |= unit_u8(downsample(occlusion, max_size))
+    if texture is None:
+        table = np.clip(_factors() * SURFACE_RGB + 0.5, 0, 255).astype(np.uint8)
+        return np.take(table, idx, axis=0)  # 4x faster than table[idx] here
+    table = np.clip(_factors() * 256 + 0.5, 0, 256).astype(np.uint16)
+    tex = downsample(texture, max_size)
+    out = np.asarray(tex, np.uint16) if tex.dtype == np.uint8 else (tex + 0.5).astype(np.uint16)
+    out *= np.take(table, idx, axis=0)
+    out += 128
+    out >>= 8
+    return out.astype(np.uint8)

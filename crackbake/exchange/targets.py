@@ -119,11 +119,10 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
     dtype = np.uint8 if bits == 8 else np.uint16
     if plane.dtype == np.float16:  # one gather through a table of every half value
         lut = half_lut(lambda x: np.clip(x / scale * top + 0.5, 0, top))
-        return lut.astype(dtype)[plane.view(np.uint16)]
+        return np.take(lut.astype(dtype), plane.view(np.uint16))
     q = np.asarray(plane, np.float32) * np.float32(top / scale)
     q += np.float32(0.5)
-    np.nan_to_num(q, copy=False, nan=0.0)
-    np.clip(q, 0, top, out=q)
+    np.clip(q, 0, top, out=q)  # NaN stays NaN and casts to 0
     return q.astype(dtype)
 
 
@@ -138,9 +137,8 @@ def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
     if smooth:
         a, b = 1 - a, 1 - b
     lut = half_lut(lambda x: np.clip((a + (b - a) * np.clip(x, 0, 1)) * top + 0.5, 0, top))
-    return lut.astype(np.uint8 if bits == 8 else np.uint16)[
-        np.asarray(mask, np.float16).view(np.uint16)
-    ]
+    table = lut.astype(np.uint8 if bits == 8 else np.uint16)
+    return np.take(table, np.asarray(mask, np.float16).view(np.uint16))
 
 
 def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
@@ -155,8 +153,8 @@ def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
     q = n * half
     q += half + np.float32(0.5)
     if normal_y == "dx":
-        q[..., 1] = np.float32(_full(bits) + 1) - q[..., 1]  # -y*h + h + 0.5
-    np.clip(q, 0, _full(bits), out=q)
+        np.subtract(np.float32(_full(bits) + 1), q[..., 1], out=q[..., 1])  # -y h + h + 0.5
+    # Unit vectors give [0.5, top + 0.5]: the cast's truncation is the rounding, no clip needed.
     return q.astype(np.uint8 if bits == 8 else np.uint16)
 
 

@@ -48,6 +48,8 @@ def base_color_texture(mesh_path: str | Path, res: int) -> np.ndarray | None:
     """
     path = Path(mesh_path)
     suffix = path.suffix.lower()
+    if not path.is_file():  # meshes built in memory name a source that is not a file
+        return None
     try:
         if suffix == ".obj":
             found = _obj_texture(path)
