@@ -151,3 +151,30 @@ def test_unknown_target_is_one_clear_error():
         RunParams(mesh="x.obj", target="cryengine").validate()
     with pytest.raises(CrackbakeError, match="--normal-y 'up' is unknown"):
         RunParams(mesh="x.obj", normal_y="up").validate()
+
+
+def test_cli_target_unreal_writes_its_set_and_the_manifest_says_so(tmp_path):
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    out = tmp_path / "ue"
+    r = subprocess.run(
+        [sys.executable, "-m", "crackbake", str(repo / "examples" / "spot.obj"), "--res", "128",
+         "--sim-faces", "300", "--impact", "0.4,0,0.3", "--max-cracks", "3",
+         "--target", "unreal", "--formats", "png,glb", "-o", str(out), "-q"],
+        capture_output=True, text=True, timeout=300,
+        env={**os.environ, "PYTHONPATH": str(repo)},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    names = {p.name for p in out.iterdir()}
+    want = {"T_spot_BC.png", "T_spot_N.png", "T_spot_ORM.png", "T_spot_Data.png", "spot.glb"}
+    assert want <= names
+    manifest = json.loads((out / "manifest.json").read_text())
+    tex = manifest["maps"]["textures"]
+    assert tex["target"] == "unreal" and tex["normal_y"] == "dx"
+    assert manifest["params"]["target"] == "unreal" and tex["data_scales"]["width"] > 0
+    assert _read(out / "T_spot_Data.png").dtype == np.uint16
