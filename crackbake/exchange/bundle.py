@@ -33,8 +33,10 @@ from crackbake.params import RunParams
 
 #: Largest edge of the textures the preview samples (its picture is 1024 pixels wide).
 PREVIEW_TEXTURE_MAX = 2048
-#: Encoding threads: one per core, at most 4 (more only adds memory).
-WRITE_THREADS = max(1, min(4, os.cpu_count() or 1))
+#: Encoding threads.  More than cores on small machines: the jobs spend most of their time in
+#: zlib and OpenEXR with the GIL released, and short texture jobs should not wait behind the
+#: EXR; at most 6 (each holds a few full-size temporaries).
+WRITE_THREADS = max(4, min(6, os.cpu_count() or 1))
 
 
 def exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
@@ -112,8 +114,12 @@ class _Encoder:
         return key
 
     def start(self, keep: set[tuple]) -> dict[tuple, Future]:
-        """Submit every requested texture (16-bit first: the biggest); keep ``keep``'s bytes."""
-        order = sorted(self.requests, key=lambda k: -k[1])
+        """Submit every requested texture; keep ``keep``'s bytes (the GLB's).
+
+        Order: the 16-bit RGBA data map (the longest), then the GLB's textures (so the GLB is
+        assembled while the rest encode), then the others.
+        """
+        order = sorted(self.requests, key=lambda k: (k[0] != "data", k not in keep))
         return {k: self.pool.submit(self._job, k, self.requests[k], k in keep) for k in order}
 
     def _job(self, key: tuple, paths: list, keep: bool) -> bytes | None:

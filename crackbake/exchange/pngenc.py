@@ -42,7 +42,8 @@ def png_bytes(pixels: np.ndarray, level: int = PNG_LEVEL, srgb: bool = False) ->
     Parameters
     ----------
     pixels : (H, W) or (H, W, C) uint8 or uint16, C in 1..4
-        Row 0 = top of the image; the dtype sets the bit depth (8 or 16).
+        Row 0 = top of the image; the dtype sets the bit depth (8 or 16).  Big-endian uint16
+        (``>u2``) is used as it is, any other byte order converted.
     level : int
         zlib level 0..9.
     srgb : bool
@@ -59,7 +60,8 @@ def png_bytes(pixels: np.ndarray, level: int = PNG_LEVEL, srgb: bool = False) ->
     if (
         pixels.ndim != 3
         or pixels.shape[2] not in _COLOUR_TYPE
-        or pixels.dtype not in (np.uint8, np.uint16)
+        or pixels.dtype.kind != "u"
+    or pixels.dtype.itemsize not in (1, 2)
         or 0 in pixels.shape
     ):
         raise CrackbakeError(
@@ -67,7 +69,7 @@ def png_bytes(pixels: np.ndarray, level: int = PNG_LEVEL, srgb: bool = False) ->
         )
     h, w, c = pixels.shape
     bits = 8 * pixels.dtype.itemsize
-    if bits == 16:
+    if bits == 16 and pixels.dtype != np.dtype(">u2"):
         pixels = pixels.astype(">u2")  # PNG stores 16-bit samples big-endian
     raw = np.ascontiguousarray(pixels).view(np.uint8).reshape(h, -1)
     rows = np.empty((h, raw.shape[1] + 1), np.uint8)

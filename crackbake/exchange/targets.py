@@ -113,10 +113,15 @@ def _full(bits: int) -> int:
     return 255 if bits == 8 else 65535
 
 
+def _dtype(bits: int) -> np.dtype:
+    # 16-bit samples come out big-endian, the order PNG stores, saving the encoder a copy.
+    return np.dtype(np.uint8) if bits == 8 else np.dtype(">u2")
+
+
 def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
     """``plane / scale`` in [0, 1] rounded to uint8 or uint16 (clipped; NaN -> 0)."""
     top = _full(bits)
-    dtype = np.uint8 if bits == 8 else np.uint16
+    dtype = _dtype(bits)
     if plane.dtype == np.float16:  # one gather through a table of every half value
         lut = half_lut(lambda x: np.clip(x / scale * top + 0.5, 0, top))
         return np.take(lut.astype(dtype), plane.view(np.uint16))
@@ -127,8 +132,7 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
 
 
 def _const(shape, value: float, bits: int) -> np.ndarray:
-    dtype = np.uint8 if bits == 8 else np.uint16
-    return np.full(shape, int(round(value * _full(bits))), dtype)
+    return np.full(shape, int(round(value * _full(bits))), _dtype(bits))
 
 
 def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
@@ -137,14 +141,13 @@ def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
     if smooth:
         a, b = 1 - a, 1 - b
     lut = half_lut(lambda x: np.clip((a + (b - a) * np.clip(x, 0, 1)) * top + 0.5, 0, top))
-    table = lut.astype(np.uint8 if bits == 8 else np.uint16)
-    return np.take(table, np.asarray(mask, np.float16).view(np.uint16))
+    return np.take(lut.astype(_dtype(bits)), np.asarray(mask, np.float16).view(np.uint16))
 
 
 def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
     res = maps.mask.shape
     if maps.normal is None:
-        out = np.empty((*res, 3), np.uint8 if bits == 8 else np.uint16)
+        out = np.empty((*res, 3), _dtype(bits))
         out[..., 0:2] = _const((), 0.5, bits)
         out[..., 2] = _full(bits)
         return out
@@ -155,7 +158,7 @@ def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
     if normal_y == "dx":
         np.subtract(np.float32(_full(bits) + 1), q[..., 1], out=q[..., 1])  # -y h + h + 0.5
     # Unit vectors give [0.5, top + 0.5]: the cast's truncation is the rounding, no clip needed.
-    return q.astype(np.uint8 if bits == 8 else np.uint16)
+    return q.astype(_dtype(bits))
 
 
 def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.ndarray:
@@ -174,7 +177,7 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
 
     Returns
     -------
-    (H, W) or (H, W, C) uint8 or uint16
+    (H, W) or (H, W, C) uint8, or big-endian uint16 (``>u2``) for 16 bits
     """
     shape = maps.mask.shape
     occ = maps.occlusion
