@@ -107,7 +107,7 @@ def main() -> None:
     ap.add_argument("--res", type=int, nargs="+", default=[4096])
     ap.add_argument("--target", nargs="+", default=["gltf"])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--keep", type=Path, help="write the last set into KEEP/<target>")
+    ap.add_argument("--keep", type=Path, help="write the last set into KEEP/<res>-<target>")
     args = ap.parse_args()
     ctx = create_context()
     rows = []
@@ -121,7 +121,7 @@ def main() -> None:
             times, cpus = [], []
             for i in range(args.repeat):
                 last = args.keep is not None and i == args.repeat - 1
-                out = args.keep / target if last else Path(tempfile.mkdtemp()) / "out"
+                out = args.keep / f"{res}-{target}" if last else Path(tempfile.mkdtemp()) / "o"
                 with OutputStage(out) as stage:
                     t, cpu = time.perf_counter(), time.process_time()
                     write_outputs(stage, "spot", params, mesh, uvm, network, maps, ctx)

@@ -28,7 +28,7 @@ _COLOUR_TYPE = {1: 0, 2: 4, 3: 2, 4: 6}  # channels -> grey, grey+alpha, RGB, RG
 _FILTER_UP = 2
 
 #: zlib level of the maps: level 1 is 3-5x faster than level 6 for files about 10 % larger
-#: (4096² normal map: 0.4 s / 11.4 MB at 1 against 1.9 s / 9.0 MB at 6, measured here).
+#: (a noisy 4096² RGB test image: 0.4 s / 11.4 MB at 1 against 1.9 s / 9.0 MB at 6).
 PNG_LEVEL = 1
 
 
@@ -81,7 +81,10 @@ def png_bytes(pixels: np.ndarray, level: int = PNG_LEVEL, srgb: bool = False) ->
     parts = [_SIGNATURE, _chunk(b"IHDR", ihdr)]
     if srgb:
         parts.append(_chunk(b"sRGB", b"\x00"))  # perceptual intent
-    parts.append(_chunk(b"IDAT", zlib.compress(memoryview(rows).cast("B"), int(level))))
+    # Z_RLE: after the Up filter the maps are long runs of zeros; on crackbake's maps it was as
+    # fast as the default strategy or faster and 4-25 % smaller (base colour: 4x smaller).
+    z = zlib.compressobj(int(level), zlib.DEFLATED, 15, 9, zlib.Z_RLE)
+    parts.append(_chunk(b"IDAT", z.compress(memoryview(rows).cast("B")) + z.flush()))
     parts.append(_chunk(b"IEND", b""))
     return b"".join(parts)
 
