@@ -4,8 +4,8 @@ Why our own encoder: the output stage encodes many large maps at once on a threa
 CPython's zlib releases the GIL while it deflates, so encodes overlap on every core (Pillow's PNG
 encoder holds the GIL, so its encodes run one after another).  The "Up" filter (each byte minus
 the byte above) is one vectorised subtraction and compresses smooth maps about as well as
-Pillow's adaptive filtering; at zlib level 1 it encoded a 4096² RGB map 1.9x faster than
-Pillow at level 1 (measured, ``benchmarks/bench_write.py``).
+Pillow's adaptive filtering; at zlib level 1 it encoded a 4096² RGB test image in 0.40 s
+against Pillow's 0.76 s at level 1 (measured here, one thread).
 
 Colour textures carry an ``sRGB`` chunk; data maps carry no colour chunk at all (no sRGB, gAMA
 or cHRM), so readers take the values as they are.
