@@ -16,9 +16,11 @@ from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.params import (
     FORMATS,
     METHODS,
+    NORMAL_Y,
     RES_MAX,
     RES_MIN,
     SIM_FACES_DEFAULT,
+    TARGETS,
     UV_MODES,
     RunParams,
     load_preset,
@@ -241,6 +243,18 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     show_default=True,
     callback=_split_formats,
     help="Which outputs to write (cracks.json, cracks.obj and manifest.json always are).",
+)
+@click.option(
+    "--target",
+    type=click.Choice(TARGETS),
+    default="gltf",
+    show_default=True,
+    help="Engine profile: PNG names, packed maps, normal convention, bit depths.",
+)
+@click.option(
+    "--normal-y",
+    type=click.Choice(NORMAL_Y),
+    help="Normal-map Y convention: gl (+Y, OpenGL) or dx (-Y, DirectX) [the target's].",
 )
 @click.option("--float", "float32", is_flag=True, help="Write every EXR channel as 32-bit float.")
 @click.option("--object", "object_name", help="Pick this object from a multi-object file.")

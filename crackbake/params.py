@@ -17,6 +17,10 @@ from crackbake.errors import CrackbakeError
 
 FORMATS = ("exr", "png", "glb", "preview")
 UV_MODES = ("auto", "keep", "unwrap")
+#: Engine profiles (``--target``; the table is :data:`crackbake.exchange.targets.TARGETS`).
+TARGETS = ("gltf", "unity", "unity-hdrp", "unreal", "godot", "blender")
+#: Normal-map Y conventions (``--normal-y``): OpenGL (+Y, green up) or DirectX (-Y).
+NORMAL_Y = ("gl", "dx")
 METHODS = ("iben", "thesis")
 RES_MIN, RES_MAX = 64, 16384
 #: Largest framebuffer edge of one bake pass (the bake tiles bigger textures): default, range.
@@ -243,6 +247,10 @@ class RunParams:
         Subset of ``exr``, ``png``, ``glb``, ``preview`` (a shaded picture, ``preview.png``).
     float32 : bool
         Write every EXR channel as 32-bit float.
+    target : str
+        Engine profile deciding the PNG set: one of :data:`TARGETS`.
+    normal_y : str or None
+        ``gl`` or ``dx`` normal-map Y convention; ``None`` = the target's own.
     object_name : str or None
         Object to pick from a multi-object file.
     unwrap_timeout : float
@@ -278,6 +286,8 @@ class RunParams:
     seed: int = 0
     formats: tuple[str, ...] = FORMATS
     float32: bool = False
+    target: str = "gltf"
+    normal_y: str | None = None
     object_name: str | None = None
     unwrap_timeout: float = 300.0
     cache: bool = True
@@ -332,6 +342,12 @@ class RunParams:
             raise CrackbakeError(
                 f"--formats: unknown format '{bad[0]}'; use a subset of {','.join(FORMATS)}"
             )
+        if self.target not in TARGETS:
+            raise CrackbakeError(
+                f"--target '{self.target}' is unknown; use one of {', '.join(TARGETS)}"
+            )
+        if self.normal_y is not None and self.normal_y not in NORMAL_Y:
+            raise CrackbakeError(f"--normal-y '{self.normal_y}' is unknown; use gl or dx")
         _check_range("--unwrap-timeout", self.unwrap_timeout, *UNWRAP_TIMEOUT_RANGE, " s")
         if not TILE_MIN <= self.tile <= TILE_MAX:
             raise CrackbakeError(

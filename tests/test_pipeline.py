@@ -164,6 +164,10 @@ def test_outputs_manifest_and_determinism(plate, tmp_path):
             "plate_cracks.exr",
             "plate_mask.png",
             "plate_depth.png",
+            "plate_basecolor.png",
+            "plate_normal.png",
+            "plate_orm.png",
+            "plate_data.png",
             "plate.glb",
             "cracks.json",
             "cracks.obj",
@@ -185,7 +189,7 @@ def test_outputs_manifest_and_determinism(plate, tmp_path):
         assert recorded[f.name]["sha256"] == hashlib.sha256(f.read_bytes()).hexdigest()
     # Same inputs, same bytes (the manifest differs only in timings).
     for name in ("cracks.json", "plate_mask.png", "plate_depth.png", "plate_cracks.exr",
-                 "preview.png"):
+                 "preview.png", "plate_data.png", "plate.glb"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
     assert a.summary()["files"][-1] == "manifest.json" and b.manifest["cracks"]["cracks"] == 1
     # The preview looks at the plate: mostly surface colour, with the dark crack somewhere.

@@ -52,7 +52,7 @@ def test_preview_direction_faces_the_cracks():
     m = _two_sided_box()
     crack = Crack(id=0, points=[[0.6, 0.1, 0.0], [0.9, 0.2, 0.0]], faces=[2, 2], time=[0, 1],
                   width=[0.01, 0.01], depth=[0.0, 0.0])  # fmt: skip
-    d = preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)))
+    d = preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)), up=(0, 1, 0))
     assert np.isclose(np.linalg.norm(d), 1.0) and d[2] < 0  # the cracked side faces -z
     crack.faces = np.array([0, 0])
-    assert preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)))[2] > 0
+    assert preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)), (0, 1, 0))[2] > 0

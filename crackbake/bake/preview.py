@@ -50,9 +50,15 @@ def render_preview(
     up: tuple[float, float, float] = (0.0, 1.0, 0.0),
     target: np.ndarray | None = None,
     distance: float | None = None,
+    normal_map: np.ndarray | None = None,
+    tangents: np.ndarray | None = None,
     ctx=None,
 ) -> np.ndarray:
     """Render the mesh textured with ``color`` from a three-quarter view.
+
+    With ``normal_map`` and ``tangents`` the shading normal is perturbed per pixel exactly as
+    engines decode tangent-space maps (``n = normalize(x T + y B + z N)``, ``B = w N x T``), so
+    cracks read as grooves.
 
     Parameters
     ----------
@@ -70,6 +76,11 @@ def render_preview(
         Point looked at; the bounding-box centre by default.
     distance : float, optional
         Camera distance from ``target``; by default the whole mesh fits the frame.
+    normal_map : (H, W, 3) float or uint8, optional
+        Tangent-space normals, OpenGL +Y, row 0 = top: unit floats (``CrackMaps.normal``) or
+        8-bit ``n * 0.5 + 0.5`` as the normal PNGs store them.
+    tangents : (V, 4) float, optional
+        MikkTSpace tangents (xyz, w = bitangent sign); needed with ``normal_map``.
     ctx : moderngl.Context, optional
 
     Returns
@@ -96,13 +107,33 @@ def render_preview(
     fill = fill / max(np.linalg.norm(fill), 1e-12)
 
     with GLScope(ctx) as gl:
-        pixels = _draw(gl, vertices, faces, uv, normals, color, size, mvp, key, fill)
+        pixels = _draw(
+            gl, (vertices, faces, uv, normals, tangents), color, normal_map, size, mvp, key, fill
+        )
     return np.ascontiguousarray(np.flipud(pixels))
 
 
-def _draw(gl: GLScope, vertices, faces, uv, normals, color, size, mvp, key, fill) -> np.ndarray:
+def _texture(gl: GLScope, image: np.ndarray, unit: int, dtype: str = "f1"):
+    """Upload an (H, W, 3) image, bottom row first (GL's first row is v = 0), mip-mapped."""
+    import moderngl
+
+    img = np.ascontiguousarray(np.flipud(image[..., :3]))
+    tex = gl.keep(gl.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype=dtype))
+    tex.build_mipmaps()
+    tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    tex.anisotropy = 8.0
+    tex.use(unit)
+    return tex
+
+
+def _draw(gl: GLScope, mesh, color, normal_map, size, mvp, key, fill) -> np.ndarray:
     """Draw the textured mesh with 4x MSAA; the (size, size, 3) uint8 picture, row 0 = bottom."""
     import moderngl
+
+    vertices, faces, uv, normals, tangents = mesh
+    use_map = normal_map is not None and tangents is not None
+    if not use_map:
+        tangents = np.zeros((len(vertices), 4))
 
     ctx = gl.ctx
     prog = gl.keep(
@@ -112,23 +143,27 @@ def _draw(gl: GLScope, vertices, faces, uv, normals, color, size, mvp, key, fill
         )
     )
     data = np.concatenate(
-        [vertices, np.asarray(normals, np.float64), np.asarray(uv, np.float64)], axis=1
-    ).astype(np.float32)
+        [vertices, np.asarray(normals, np.float64), np.asarray(uv, np.float64),
+         np.asarray(tangents, np.float64)], axis=1,
+    ).astype(np.float32)  # fmt: skip
     vbo = gl.keep(ctx.buffer(data.tobytes()))
     ibo = gl.keep(ctx.buffer(np.asarray(faces, np.uint32).tobytes()))
     vao = gl.keep(
         ctx.vertex_array(
-            prog, [(vbo, "3f 3f 2f", "in_pos", "in_normal", "in_uv")], index_buffer=ibo
+            prog,
+            [(vbo, "3f 3f 2f 4f", "in_pos", "in_normal", "in_uv", "in_tangent")],
+            index_buffer=ibo,
         )
     )
-    # Texture rows: GL's first row is v = 0, so upload the image bottom row first.
-    img = np.ascontiguousarray(np.flipud(np.asarray(color, np.uint8)[..., :3]))
-    tex = gl.keep(ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes()))
-    tex.build_mipmaps()
-    tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-    tex.anisotropy = 8.0
-    tex.use(0)
+    _texture(gl, np.asarray(color, np.uint8), 0)
     prog["u_color"].value = 0
+    prog["u_use_normal_map"].value = int(use_map)
+    if use_map:
+        nm = np.asarray(normal_map)
+        if nm.dtype != np.uint8:
+            nm = np.clip(nm * 127.5 + 128.0, 0, 255).astype(np.uint8)
+        _texture(gl, nm, 1)
+        prog["u_normal_map"].value = 1
     prog["u_mvp"].write(mvp.T.tobytes())  # GLSL matrices are column-major
     prog["u_key"].value = tuple(key.astype(np.float32))
     prog["u_fill"].value = tuple(fill.astype(np.float32))
@@ -147,13 +182,56 @@ def _draw(gl: GLScope, vertices, faces, uv, normals, color, size, mvp, key, fill
     return np.frombuffer(out_fbo.read(components=3), np.uint8).reshape(size, size, 3)
 
 
-def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, float]:
+def up_axis(mesh: Mesh) -> np.ndarray:
+    """The mesh's up axis, +Y or +Z: the one it stands on.
+
+    glTF is Y-up by definition.  For other files each candidate scores the area of the convex
+    hull's facets facing straight down along it (within 5 degrees): the support polygon of the
+    feet or base the object rests on (spot's four hooves span one big hull facet; a rounded
+    end spans none).  Z wins only when its support is clearly bigger (1.5x), so meshes that
+    rest on nothing keep the Y-up convention of OBJ and most DCC tools.
+
+    Returns
+    -------
+    (3,) float64
+        ``(0, 1, 0)`` or ``(0, 0, 1)``.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    y_up, z_up = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    if str(mesh.source).lower().endswith((".gltf", ".glb")):
+        return y_up
+    pts = np.asarray(mesh.vertices, np.float64)
+    pts = pts[:: max(1, len(pts) // 100_000)]  # the hull of a subset: scans have millions
+    try:
+        hull = ConvexHull(pts)
+    except (QhullError, ValueError):  # flat or degenerate: no support to judge by
+        return y_up
+    tri = pts[hull.simplices]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    down = hull.equations[:, :3] < -np.cos(np.radians(5))  # outward normal points down
+    score_y, score_z = area[down[:, 1]].sum(), area[down[:, 2]].sum()
+    return z_up if score_z > 1.5 * score_y else y_up
+
+
+def _frame(up: np.ndarray) -> np.ndarray:
+    """Rotation taking the Y-up candidate directions to a mesh whose up is ``up``."""
+    if up[2] > 0.5:
+        return np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # y -> z, z -> -y
+    return np.eye(3)
+
+
+def preview_direction(
+    mesh: Mesh, network: CrackNetwork, up: np.ndarray | None = None
+) -> tuple[float, float, float]:
     """The camera direction (from the mesh towards the camera) that shows the most cracks.
 
     Candidates are the 17 directions of the upper half of a cube's corners, edges and faces
-    (y is up), tilted 20 degrees upwards; each scores the crack length facing it, with the
-    mesh area facing it breaking ties (and choosing the view when there are no cracks).
+    (``up`` is up; :func:`up_axis` when not given), tilted 20 degrees upwards; each scores the
+    crack length facing it, with the mesh area facing it breaking ties (and choosing the view
+    when there are no cracks).
     """
+    up = up_axis(mesh) if up is None else np.asarray(up, np.float64)
     cand = np.array(
         [
             (x, y, z)
@@ -167,6 +245,7 @@ def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, 
     cand /= np.linalg.norm(cand, axis=1, keepdims=True)
     cand[:, 1] += np.tan(np.radians(20))
     cand /= np.linalg.norm(cand, axis=1, keepdims=True)
+    cand = cand @ _frame(up).T
     tri = mesh.vertices[mesh.faces]
     area_normals = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     score = np.maximum(area_normals @ cand.T, 0).sum(axis=0)
@@ -180,3 +259,30 @@ def preview_direction(mesh: Mesh, network: CrackNetwork) -> tuple[float, float, 
             n = unit[crack.faces[:-1]]
             score += (seg[:, None] * np.maximum(n @ cand.T, 0)).sum(axis=0)
     return tuple(float(x) for x in cand[int(np.argmax(score))])
+
+
+def preview_camera(mesh: Mesh, network: CrackNetwork):
+    """Where the preview camera looks from: ``(view_dir, up, target, distance)``.
+
+    The view is :func:`preview_direction` with the mesh's :func:`up_axis`; the camera aims at
+    the middle of the crack points seen from there and comes close enough that they fill
+    about 80 % of the frame, but never closer than framing 40 % of the mesh (so the picture
+    keeps context) nor farther than framing the whole mesh.  Without cracks it frames the mesh.
+    """
+    up = up_axis(mesh)
+    view_dir = np.asarray(preview_direction(mesh, network, up))
+    lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
+    if not network.cracks:
+        return tuple(view_dir), tuple(up), None, None
+    tri = mesh.vertices[mesh.faces]
+    an = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    pts = np.concatenate([np.asarray(c.points) for c in network.cracks])
+    fcs = np.concatenate([np.asarray(c.faces) for c in network.cracks])
+    seen = an[fcs] @ view_dir > 0
+    pts = pts[seen] if seen.any() else pts
+    target = 0.5 * (pts.min(0) + pts.max(0))
+    mesh_radius = float(np.linalg.norm(mesh.vertices - target, axis=1).max())
+    crack_radius = float(np.linalg.norm(pts - target, axis=1).max())
+    half = np.radians(35.0) / 2  # render_preview's field of view
+    frame = np.clip(crack_radius / 0.8, 0.4 * 0.5 * np.linalg.norm(hi - lo), mesh_radius)
+    return tuple(view_dir), tuple(up), target, float(frame / np.sin(half))

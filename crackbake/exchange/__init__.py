@@ -13,6 +13,8 @@ from crackbake.exchange.manifest import build_manifest, effective_params, write_
 from crackbake.exchange.materials import CRACK_RGB, GLB_TEXTURE_MAX, SURFACE_RGB, base_color
 from crackbake.exchange.output import OutputStage, sha256_file
 from crackbake.exchange.png import write_png
+from crackbake.exchange.pngenc import png_bytes
+from crackbake.exchange.targets import TARGETS, describe, pack
 
 __all__ = [
     "CRACK_RGB",
@@ -20,11 +22,15 @@ __all__ = [
     "LOSSLESS_COMPRESSIONS",
     "LOSSY_COMPRESSIONS",
     "SURFACE_RGB",
+    "TARGETS",
     "OutputStage",
     "base_color",
     "build_manifest",
+    "describe",
     "effective_params",
     "exr_channels",
+    "pack",
+    "png_bytes",
     "read_exr",
     "sha256_file",
     "write_exr",

@@ -1,36 +1,142 @@
-"""The files one run writes: EXR master, PNGs, GLB, preview, sidecar and OBJ polylines."""
+"""The files one run writes: EXR master, the target's PNGs, GLB, preview, sidecar and OBJ lines.
+
+Encoding is the slow part of the output stage, so every file is encoded on a thread pool
+(zlib and OpenEXR release the GIL while compressing) while the main thread renders the preview
+with the run's GL context.  Each distinct texture is encoded once: the GLB embeds the very PNG
+bytes the glTF/Godot profile writes as files.
+"""
 
 from __future__ import annotations
+
+import os
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 
 from crackbake import __version__
-from crackbake.bake.preview import preview_direction, render_preview
+from crackbake.bake.preview import preview_camera, render_preview
 from crackbake.bake.raster import CHANNELS, CrackMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.exchange.exr import write_exr
 from crackbake.exchange.glb import write_glb
-from crackbake.exchange.materials import GLB_TEXTURE_MAX, base_color
+from crackbake.exchange.materials import GLB_TEXTURE_MAX, base_color, downsample
 from crackbake.exchange.output import OutputStage
-from crackbake.exchange.png import write_png
+from crackbake.exchange.pngenc import png_bytes, write_bytes
+from crackbake.exchange.targets import TARGETS, normal_convention, pack
 from crackbake.io.mesh import Mesh
 from crackbake.io.obj_lines import write_obj
 from crackbake.io.sidecar import write_sidecar
+from crackbake.io.texture import base_color_texture
 from crackbake.network import CrackNetwork
 from crackbake.params import RunParams
+
+#: Largest edge of the textures the preview samples (its picture is 1024 pixels wide).
+PREVIEW_TEXTURE_MAX = 2048
+#: Encoding threads.  More than cores on small machines: the jobs spend most of their time in
+#: zlib and OpenEXR with the GIL released, and short texture jobs should not wait behind the
+#: EXR; at most 6 (each holds a few full-size temporaries).
+WRITE_THREADS = max(4, min(6, os.cpu_count() or 1))
 
 
 def exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
     """The EXR master's planes: :data:`CHANNELS` types (half where bounded), or all float32."""
-    chans = maps.channels()
-    if float32:
-        return {k: v.astype(np.float32, copy=False) for k, v in chans.items()}
-    # Types follow CHANNELS: half for bounded data, float where range or precision needs it.
     out = {}
-    for name, arr in chans.items():
-        want = np.float16 if CHANNELS[name] == "half" else np.float32
+    for name, arr in maps.channels().items():
+        # Types follow CHANNELS: half for bounded data, float where range or precision needs it.
+        want = np.float32 if float32 or CHANNELS[name] != "half" else np.float16
         out[name] = arr if arr.dtype == want else arr.astype(want)
+    out.update(surface_exr_channels(maps, float32))
     return out
+
+
+def surface_exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
+    """The normal and occlusion planes of the EXR (none when they were not baked).
+
+    ``normal.X/Y/Z``: signed unit tangent-space normal, OpenGL +Y; ``occlusion.Y``: 0..1.  Half
+    floats (10-bit mantissa: 0.06 degrees) unless ``float32``.  The EXR layout module may
+    replace these names; this function is the one place that chooses them.
+    """
+    dtype = np.float32 if float32 else np.float16
+    out: dict[str, np.ndarray] = {}
+    if maps.normal is not None:
+        for i, axis in enumerate("XYZ"):
+            out[f"normal.{axis}"] = np.ascontiguousarray(maps.normal[..., i], dtype=dtype)
+    if maps.occlusion is not None:
+        out["occlusion.Y"] = np.asarray(maps.occlusion, dtype=dtype)
+    return out
+
+
+def _exr_attributes(maps: CrackMaps) -> dict:
+    return {
+        "crackbake:version": __version__,
+        "crackbake:units": "mesh",
+        "crackbake:uvConvention": "texel (0,0) is UV (0,1): v up, top row first",
+        "crackbake:depthProfile": f"V exponent {maps.profile_shape:g}",
+        "crackbake:maxDistance": float(maps.max_distance),
+        "crackbake:normalConvention": "tangent space, MikkTSpace frame, OpenGL +Y",
+    }
+
+
+@dataclass(eq=False)
+class _Smaller:
+    """The maps a GLB texture or the preview needs, box-filtered to a smaller page."""
+
+    mask: np.ndarray
+    normal: np.ndarray | None
+    occlusion: np.ndarray | None
+
+
+def _smaller(maps: CrackMaps, size: int) -> CrackMaps | _Smaller:
+    if maps.mask.shape[0] <= size:
+        return maps
+    normal = None
+    if maps.normal is not None:
+        normal = downsample(maps.normal, size)
+        normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
+    occ = None if maps.occlusion is None else downsample(maps.occlusion, size)
+    return _Smaller(downsample(maps.mask, size), normal, occ)
+
+
+class _Encoder:
+    """Encodes each distinct (content, bits, normal_y, size) texture once on the pool."""
+
+    def __init__(self, pool: ThreadPoolExecutor, maps: CrackMaps, texture: np.ndarray | None):
+        self.pool = pool
+        self.maps = maps
+        self.texture = texture
+        self.requests: dict[tuple, list] = {}
+
+    def want(self, key: tuple, path=None) -> tuple:
+        self.requests.setdefault(key, [])
+        if path is not None:
+            self.requests[key].append(path)
+        return key
+
+    def start(self, keep: set[tuple]) -> dict[tuple, Future]:
+        """Submit every requested texture; keep ``keep``'s bytes (the GLB's).
+
+        Order: the 16-bit RGBA data map (the longest), then the GLB's textures (so the GLB is
+        assembled while the rest encode), then the others.
+        """
+        order = sorted(self.requests, key=lambda k: (k[0] != "data", k not in keep))
+        return {k: self.pool.submit(self._job, k, self.requests[k], k in keep) for k in order}
+
+    def _job(self, key: tuple, paths: list, keep: bool) -> bytes | None:
+        content, bits, normal_y, size = key
+        maps = _smaller(self.maps, size)
+        pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
+        data = png_bytes(pixels, srgb=content == "base_color")
+        del pixels
+        for path in paths:
+            write_bytes(path, data)
+        return data if keep else None
+
+    def _base(self, maps, size: int) -> np.ndarray:
+        tex = self.texture
+        if tex is not None and tex.shape[0] > size:
+            tex = downsample(tex, size)
+        return base_color(maps.mask, occlusion=maps.occlusion, texture=tex)
 
 
 def write_outputs(
@@ -52,49 +158,94 @@ def write_outputs(
     stem : str
         Prefix of the map file names (the mesh file's stem).
     params : RunParams
-        ``formats`` and ``float32`` decide what is written.
+        ``formats``, ``float32``, ``target`` and ``normal_y`` decide what is written.
     mesh, uvmesh, network, maps
-        The stages' results.
+        The stages' results (``maps.normal``, ``maps.occlusion`` and ``uvmesh.tangents`` are
+        used when present).
     ctx : moderngl.Context, optional
         The run's GL context, for the preview; a temporary one when not given.
     """
-    depth_max = float(maps.depth.max())
-    if "exr" in params.formats:
-        write_exr(
-            stage.path(f"{stem}_cracks.exr"),
-            exr_channels(maps, params.float32),
-            attributes={
-                "crackbake:version": __version__,
-                "crackbake:units": "mesh",
-                "crackbake:uvConvention": "texel (0,0) is UV (0,1): v up, top row first",
-                "crackbake:depthProfile": f"V exponent {maps.profile_shape:g}",
-                "crackbake:maxDistance": float(maps.max_distance),
-            },
-        )
-    if "png" in params.formats:
-        write_png(stage.path(f"{stem}_mask.png"), maps.mask, bits=8)
-        scale = depth_max if depth_max > 0 else 1.0
-        write_png(stage.path(f"{stem}_depth.png"), maps.depth / scale, bits=16)
-    if "glb" in params.formats:
-        write_glb(
-            stage.path(f"{stem}.glb"),
-            uvmesh.vertices,
-            uvmesh.faces,
-            uvmesh.uv,
-            uvmesh.normals,
-            base_color(maps.mask, GLB_TEXTURE_MAX),
-            name=stem,
-        )
-    if "preview" in params.formats:
-        picture = render_preview(
-            uvmesh.vertices,
-            uvmesh.faces,
-            uvmesh.uv,
-            uvmesh.normals,
-            base_color(maps.mask),
-            view_dir=preview_direction(mesh, network),
-            ctx=ctx,
-        )
-        write_png(stage.path("preview.png"), picture, bits=8)
-    write_sidecar(network, stage.path("cracks.json"))
-    write_obj(network, stage.path("cracks.obj"))
+    formats = params.formats
+    texture = None
+    if mesh.source and {"png", "glb", "preview"} & set(formats):
+        texture = base_color_texture(mesh.source, maps.res)
+    with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
+        jobs: list[Future] = []
+        if "exr" in formats:
+            jobs.append(pool.submit(_write_exr, stage.path(f"{stem}_cracks.exr"), maps, params))
+        enc = _Encoder(pool, maps, texture)
+        if "png" in formats:
+            normal_y = normal_convention(params.target, params.normal_y)
+            for f in TARGETS[params.target].files:
+                ny = normal_y if f.content == "normal" else "gl"
+                enc.want((f.content, f.bits, ny, maps.res), stage.path(f.name.format(stem=stem)))
+        glb_keys = {}
+        if "glb" in formats:
+            size = min(maps.res, GLB_TEXTURE_MAX)
+            glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal", "orm")}
+        encoded = enc.start(set(glb_keys.values()))
+        jobs.extend(encoded.values())
+        try:
+            if "preview" in formats:
+                _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx)
+            write_sidecar(network, stage.path("cracks.json"))
+            write_obj(network, stage.path("cracks.obj"))
+            if glb_keys:
+                _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, encoded, glb_keys)
+        finally:
+            for job in jobs:  # every job ends before the stage can be committed or discarded
+                job.exception()
+        for job in jobs:
+            job.result()  # the first failure, in submission order
+
+
+def _write_exr(path, maps: CrackMaps, params: RunParams) -> None:
+    write_exr(path, exr_channels(maps, params.float32), attributes=_exr_attributes(maps))
+
+
+def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict) -> None:
+    """glTF material: base colour, ORM (occlusion + metallic-roughness), normal with TANGENT."""
+    orm = encoded[keys["orm"]].result()
+    extra = {"occlusion": orm, "metallic_roughness": orm}
+    tangents = getattr(uvmesh, "tangents", None)
+    if maps.normal is not None and tangents is not None:
+        extra["normal"] = encoded[keys["normal"]].result()
+    write_glb(
+        path,
+        uvmesh.vertices,
+        uvmesh.faces,
+        uvmesh.uv,
+        uvmesh.normals,
+        encoded[keys["base_color"]].result(),
+        name=stem,
+        extra_textures=extra,
+        tangents=tangents,
+    )
+
+
+def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx) -> None:
+    small = _smaller(maps, PREVIEW_TEXTURE_MAX)
+    tex = texture
+    if tex is not None and tex.shape[0] > PREVIEW_TEXTURE_MAX:
+        tex = downsample(tex, PREVIEW_TEXTURE_MAX)
+    colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
+    tangents = getattr(uvmesh, "tangents", None)
+    normal = None
+    if tangents is not None and small.normal is not None:
+        normal = pack("normal", small, 8, "gl")
+    view_dir, up, target, distance = preview_camera(mesh, network)
+    picture = render_preview(
+        uvmesh.vertices,
+        uvmesh.faces,
+        uvmesh.uv,
+        uvmesh.normals,
+        colour,
+        view_dir=view_dir,
+        up=up,
+        target=target,
+        distance=distance,
+        normal_map=normal,
+        tangents=tangents,
+        ctx=ctx,
+    )
+    write_bytes(stage.path("preview.png"), png_bytes(picture, level=6, srgb=True))

@@ -6,7 +6,6 @@ is ours to set.  Embedded textures are PNGs encoded in memory by Pillow.
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import struct
@@ -14,6 +13,7 @@ import struct
 import numpy as np
 
 from crackbake.errors import CrackbakeError
+from crackbake.exchange.pngenc import png_bytes
 
 PathLike = str | os.PathLike
 
@@ -27,6 +27,7 @@ _UNSIGNED_INT = 5125
 _LINEAR = 9729
 _LINEAR_MIPMAP_LINEAR = 9987
 _REPEAT = 10497
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 # extra_textures key -> how the material binds it
 _EXTRA_TEXTURE_SLOTS = ("normal", "occlusion", "metallic_roughness")
@@ -80,21 +81,20 @@ def _vertex_array(name: str, arr, n: int | None, width: int) -> np.ndarray:
     return a
 
 
-def _png_bytes(image: np.ndarray, what: str) -> bytes:
-    """Encode an (H, W, C) uint8 texture for embedding (Pillow writes to memory directly)."""
-    from PIL import Image
-
+def _png_bytes(image: np.ndarray | bytes, what: str) -> bytes:
+    """PNG bytes of an (H, W, C) uint8 texture, or ``image`` itself when already PNG bytes."""
+    if isinstance(image, bytes | bytearray | memoryview):
+        data = bytes(image)
+        if not data.startswith(_PNG_SIGNATURE):
+            raise CrackbakeError(f"GLB {what} texture bytes are not a PNG; pass PNG bytes")
+        return data
     image = np.asarray(image)
     if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] not in (3, 4):
         raise CrackbakeError(
             f"GLB {what} texture must be (H, W, 3) or (H, W, 4) uint8, got {image.shape} "
             f"{image.dtype}; quantise it to 8 bits first"
         )
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image), "RGB" if image.shape[2] == 3 else "RGBA").save(
-        buf, format="PNG", compress_level=6
-    )
-    return buf.getvalue()
+    return png_bytes(image, srgb=what == "base colour")
 
 
 def write_glb(
@@ -122,14 +122,16 @@ def write_glb(
         convention, so image row 0 (top) lands at ``v = 1`` as everywhere in crackbake.
     normals : (V, 3) float
         Vertex normals; renormalised (zero ones become +Z, glTF requires unit length).
-    base_color : (H, W, 3) or (H, W, 4) uint8
-        sRGB base colour, row 0 = top; embedded as PNG.
+    base_color : (H, W, 3) or (H, W, 4) uint8, or PNG bytes
+        sRGB base colour, row 0 = top; embedded as PNG (bytes are embedded as they are).
     name : str
         Mesh, node and material name.
     extra_textures : dict, optional
-        More (H, W, 3|4) uint8 maps, embedded as PNG, keyed by material slot: ``"normal"``
+        More (H, W, 3|4) uint8 maps or PNG bytes, keyed by material slot: ``"normal"``
         (tangent-space, OpenGL Y+, linear), ``"occlusion"`` (R channel, linear) and
         ``"metallic_roughness"`` (G = roughness, B = metallic, linear; the factors become 1).
+        Passing the same object for ``"occlusion"`` and ``"metallic_roughness"`` (an ORM map)
+        embeds it once and binds it to both.
     tangents : (V, 4) float, optional
         MikkTSpace tangents, xyz unit and w = +-1 the bitangent sign; written as TANGENT.
 
@@ -197,10 +199,16 @@ def _material(
 ) -> dict:
     """The PBR material; embeds its textures, appending to ``images`` and ``textures``."""
 
-    def add_texture(image: np.ndarray, what: str) -> int:
-        images.append({"bufferView": b.view(_png_bytes(image, what)), "mimeType": "image/png"})
-        textures.append({"sampler": 0, "source": len(images) - 1})
-        return len(textures) - 1
+    added: dict[int, int] = {}
+
+    def add_texture(image: np.ndarray | bytes, what: str) -> int:
+        # The same object given for two slots (an ORM map for occlusion and
+        # metallic-roughness, as glTF allows) is embedded once and shared.
+        if id(image) not in added:
+            images.append({"bufferView": b.view(_png_bytes(image, what)), "mimeType": "image/png"})
+            textures.append({"sampler": 0, "source": len(images) - 1})
+            added[id(image)] = len(textures) - 1
+        return added[id(image)]
 
     pbr: dict = {
         "baseColorTexture": {"index": add_texture(base_color, "base colour")},

@@ -14,6 +14,7 @@ from crackbake.bake.raster import CHANNELS, CrackMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.errors import CrackbakeError
 from crackbake.exchange.output import sha256_file
+from crackbake.exchange.targets import describe
 from crackbake.io.mesh import Mesh
 from crackbake.network import CrackNetwork
 from crackbake.params import RunParams
@@ -95,6 +96,7 @@ def build_manifest(
             "max_distance": maps.max_distance,
             "covered_fraction": float(maps.inside.mean()),
             "exr_channels": {k: ("float" if params.float32 else v) for k, v in CHANNELS.items()},
+            "textures": describe(params.target, params.normal_y, Path(params.mesh).stem, maps),
         },
         "renderer": renderer,
         "files": files,

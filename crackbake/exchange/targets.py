@@ -1,0 +1,234 @@
+"""Engine profiles (``--target``): which PNGs a run writes, their names, packing and bit depths.
+
+One table, :data:`TARGETS`: each profile lists its files as (name pattern, content, bits); the
+contents are packed here from the baked maps by :func:`pack`.  Channel layouts follow what each
+engine's standard material reads:
+
+- glTF / Godot ``orm``: R occlusion, G roughness, B metallic (glTF's occlusion and
+  metallicRoughness textures may share one image; Godot's ORM material reads the same layout).
+- Unity HDRP ``mask_map``: R metallic, G occlusion, B detail mask, A smoothness.
+- Unity built-in/URP ``metallic_smoothness``: R metallic, A smoothness; occlusion its own map.
+- Unreal ``orm``: the same R/G/B layout, the usual packed-mask convention of its materials.
+- ``data`` (every target): R mask, G width / width scale, B depth / depth scale, A crack time,
+  16 bit; the scales are in the manifest (:func:`describe`), for custom crack shaders.
+
+Normal maps are tangent space, ``n * 0.5 + 0.5``; ``gl`` = +Y (OpenGL: glTF, Unity, Godot,
+Blender), ``dx`` = -Y (DirectX: Unreal).  Without a baked normal map (no tangents) the normal
+file is flat (0.5, 0.5, 1) and the occlusion is 1 (open).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from crackbake.exchange.materials import ROUGHNESS_CRACK, ROUGHNESS_SURFACE, half_lut
+from crackbake.params import NORMAL_Y
+from crackbake.params import TARGETS as TARGET_NAMES
+
+#: What each packed content holds, channel by channel (also written into the manifest).
+CONTENTS: dict[str, str] = {
+    "base_color": "RGB sRGB base colour: the asset's texture (or grey) with the cracks over it",
+    "normal": "RGB tangent-space normal, n * 0.5 + 0.5 (Y convention in the manifest)",
+    "orm": "R occlusion (1 = open), G roughness, B metallic",
+    "mask_map": "R metallic, G occlusion, B detail mask (1), A smoothness (1 - roughness)",
+    "metallic_smoothness": "R metallic, G 0, B 0, A smoothness (1 - roughness)",
+    "occlusion": "grey occlusion, 1 = open",
+    "roughness": "grey roughness",
+    "mask": "grey crack coverage 0..1",
+    "depth": "grey crack depth / depth scale",
+    "data": "R mask, G width / width scale, B depth / depth scale, A crack time 0..1",
+}
+
+
+@dataclass(frozen=True)
+class MapFile:
+    """One PNG of a profile: ``name`` with ``{stem}`` replaced, its content and bit depth."""
+
+    name: str
+    content: str
+    bits: int = 8
+
+
+@dataclass(frozen=True)
+class Target:
+    """An engine profile: its normal-map convention and the PNGs it writes."""
+
+    name: str
+    engine: str
+    normal_y: str
+    files: tuple[MapFile, ...]
+
+
+def _t(name, engine, normal_y, *files) -> Target:
+    return Target(name, engine, normal_y, tuple(MapFile(*f) for f in files))
+
+
+#: The profiles.  ``base_color`` is sRGB; every other file is linear data.
+TARGETS: dict[str, Target] = {
+    t.name: t
+    for t in (
+        _t("gltf", "glTF 2.0 viewers, three.js, Babylon.js", "gl",
+           ("{stem}_mask.png", "mask"), ("{stem}_depth.png", "depth", 16),
+           ("{stem}_basecolor.png", "base_color"), ("{stem}_normal.png", "normal"),
+           ("{stem}_orm.png", "orm"), ("{stem}_data.png", "data", 16)),
+        _t("unity", "Unity built-in / URP Lit", "gl",
+           ("{stem}_Albedo.png", "base_color"), ("{stem}_Normal.png", "normal"),
+           ("{stem}_MetallicSmoothness.png", "metallic_smoothness"),
+           ("{stem}_Occlusion.png", "occlusion"), ("{stem}_CrackData.png", "data", 16)),
+        _t("unity-hdrp", "Unity HDRP Lit", "gl",
+           ("{stem}_BaseColor.png", "base_color"), ("{stem}_Normal.png", "normal"),
+           ("{stem}_MaskMap.png", "mask_map"), ("{stem}_CrackData.png", "data", 16)),
+        _t("unreal", "Unreal Engine 5", "dx",
+           ("T_{stem}_BC.png", "base_color"), ("T_{stem}_N.png", "normal"),
+           ("T_{stem}_ORM.png", "orm"), ("T_{stem}_Data.png", "data", 16)),
+        _t("godot", "Godot 4 StandardMaterial3D (ORM)", "gl",
+           ("{stem}_albedo.png", "base_color"), ("{stem}_normal.png", "normal"),
+           ("{stem}_orm.png", "orm"), ("{stem}_data.png", "data", 16)),
+        _t("blender", "Blender Principled BSDF", "gl",
+           ("{stem}_base_color.png", "base_color"), ("{stem}_normal.png", "normal", 16),
+           ("{stem}_roughness.png", "roughness"), ("{stem}_ao.png", "occlusion"),
+           ("{stem}_depth.png", "depth", 16), ("{stem}_data.png", "data", 16)),
+    )
+}  # fmt: skip
+assert tuple(TARGETS) == TARGET_NAMES  # params.TARGETS validates --target; keep them one list
+
+
+def normal_convention(target: str, normal_y: str | None = None) -> str:
+    """``gl`` or ``dx``: ``normal_y`` when given, else the target's own."""
+    y = normal_y or TARGETS[target].normal_y
+    assert y in NORMAL_Y
+    return y
+
+
+def data_scales(maps) -> dict[str, float]:
+    """Divisors of the data map's G (width) and B (depth) channels, mesh units (1 when 0)."""
+    w = float(np.max(maps.width)) if maps.width.size else 0.0
+    d = float(np.max(maps.depth)) if maps.depth.size else 0.0
+    return {"width": w if w > 0 else 1.0, "depth": d if d > 0 else 1.0}
+
+
+def _full(bits: int) -> int:
+    return 255 if bits == 8 else 65535
+
+
+def _dtype(bits: int) -> np.dtype:
+    # 16-bit samples come out big-endian, the order PNG stores, saving the encoder a copy.
+    return np.dtype(np.uint8) if bits == 8 else np.dtype(">u2")
+
+
+def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
+    """``plane / scale`` in [0, 1] rounded to uint8 or uint16 (clipped; NaN -> 0)."""
+    top = _full(bits)
+    dtype = _dtype(bits)
+    if plane.dtype == np.float16:  # one gather through a table of every half value
+        lut = half_lut(lambda x: np.clip(x / scale * top + 0.5, 0, top))
+        return np.take(lut.astype(dtype), plane.view(np.uint16))
+    q = np.asarray(plane, np.float32) * np.float32(top / scale)
+    q += np.float32(0.5)
+    np.clip(q, 0, top, out=q)  # NaN stays NaN and casts to 0
+    return q.astype(dtype)
+
+
+def _const(shape, value: float, bits: int) -> np.ndarray:
+    return np.full(shape, int(round(value * _full(bits))), _dtype(bits))
+
+
+def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
+    top = _full(bits)
+    a, b = ROUGHNESS_SURFACE, ROUGHNESS_CRACK
+    if smooth:
+        a, b = 1 - a, 1 - b
+    lut = half_lut(lambda x: np.clip((a + (b - a) * np.clip(x, 0, 1)) * top + 0.5, 0, top))
+    return np.take(lut.astype(_dtype(bits)), np.asarray(mask, np.float16).view(np.uint16))
+
+
+def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
+    res = maps.mask.shape
+    if maps.normal is None:
+        out = np.empty((*res, 3), _dtype(bits))
+        out[..., 0:2] = _const((), 0.5, bits)
+        out[..., 2] = _full(bits)
+        return out
+    n = np.asarray(maps.normal, np.float32)
+    half = np.float32(_full(bits) / 2)
+    q = n * half
+    q += half + np.float32(0.5)
+    if normal_y == "dx":
+        np.subtract(np.float32(_full(bits) + 1), q[..., 1], out=q[..., 1])  # -y h + h + 0.5
+    # Unit vectors give [0.5, top + 0.5]: the cast's truncation is the rounding, no clip needed.
+    return q.astype(_dtype(bits))
+
+
+def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.ndarray:
+    """The pixels of one packed file.
+
+    Parameters
+    ----------
+    content : str
+        A key of :data:`CONTENTS`.
+    maps : CrackMaps
+        The bake (``normal`` and ``occlusion`` may be None).
+    bits : {8, 16}
+    normal_y : {"gl", "dx"}
+    base : callable, optional
+        Returns the (H, W, 3) uint8 base colour; called only for ``base_color``.
+
+    Returns
+    -------
+    (H, W) or (H, W, C) uint8, or big-endian uint16 (``>u2``) for 16 bits
+    """
+    shape = maps.mask.shape
+    occ = maps.occlusion
+
+    def occlusion():
+        return _const(shape, 1.0, bits) if occ is None else quantise(occ, bits)
+
+    if content == "base_color":
+        return base()
+    if content == "normal":
+        return _normal(maps, bits, normal_y)
+    if content == "mask":
+        return quantise(maps.mask, bits)
+    if content == "depth":
+        return quantise(maps.depth, bits, data_scales(maps)["depth"])
+    if content == "occlusion":
+        return occlusion()
+    if content == "roughness":
+        return _roughness(maps.mask, bits)
+    planes = {
+        "orm": lambda: (occlusion(), _roughness(maps.mask, bits), _const(shape, 0.0, bits)),
+        "mask_map": lambda: (
+            _const(shape, 0.0, bits), occlusion(), _const(shape, 1.0, bits),
+            _roughness(maps.mask, bits, smooth=True),
+        ),
+        "metallic_smoothness": lambda: (
+            _const(shape, 0.0, bits), _const(shape, 0.0, bits), _const(shape, 0.0, bits),
+            _roughness(maps.mask, bits, smooth=True),
+        ),
+        "data": lambda: (
+            quantise(maps.mask, bits), quantise(maps.width, bits, data_scales(maps)["width"]),
+            quantise(maps.depth, bits, data_scales(maps)["depth"]), quantise(maps.time, bits),
+        ),
+    }[content]()  # fmt: skip
+    return np.stack(planes, axis=-1)
+
+
+def describe(target: str, normal_y: str | None, stem: str, maps) -> dict:
+    """The manifest's ``textures`` entry: target, normal convention, files, data scales."""
+    t = TARGETS[target]
+    return {
+        "target": target,
+        "engine": t.engine,
+        "normal_y": normal_convention(target, normal_y),
+        "files": {
+            f.name.format(stem=stem): {
+                "content": f.content, "bits": f.bits, "channels": CONTENTS[f.content],
+                "colorspace": "sRGB" if f.content == "base_color" else "linear",
+            }
+            for f in t.files
+        },  # fmt: skip
+        "data_scales": data_scales(maps),
+        "normal_baked": maps.normal is not None,
+    }
