@@ -39,10 +39,11 @@ demo: setup
 	$(VENV)/bin/crackbake examples/spot.obj --preset glass --impact 0.334,0.044,0.287 --res 2048 -o spot_cracks
 	@echo
 	@echo "Outputs are in ./spot_cracks/ (README 'Output files'):"
-	@echo "  spot_cracks.exr  EXR master: crack.mask/width/depth/time/id/distance (linear, mesh units)"
-	@echo "  spot_mask.png    8-bit crack mask      spot_depth.png  16-bit crack depth"
-	@echo "  spot.glb         the mesh with the cracks on its base colour (open in any glTF viewer)"
-	@echo "  preview.png      a shaded picture of the result"
+	@echo "  spot_cracks.exr  EXR master: crack.<map>.V layers + crack.normal (linear, mesh units)"
+	@echo "  spot_stress.exr  initial and final stress in the tangent frame (crackbake inspect it)"
+	@echo "  spot_basecolor/normal/orm/data.png  glTF texture set; spot_mask.png, spot_depth.png"
+	@echo "  spot.glb         the mesh with base colour, normal and occlusion maps (any glTF viewer)"
+	@echo "  preview.png      the result lit with its normal map"
 	@echo "  cracks.json      crack network sidecar (re-bake it with --cracks)  cracks.obj  polylines"
 	@echo "  manifest.json    inputs, parameters, files, timings"
 

@@ -159,7 +159,7 @@ def child(mesh_name: str, res: int) -> dict:
     from crackbake.bake.raster import bake_cracks
     from crackbake.bake.uv import prepare_uvs
     from crackbake.exchange import GLB_TEXTURE_MAX, base_color, write_exr, write_glb, write_png
-    from crackbake.exchange.bundle import exr_channels
+    from crackbake.exchange.layers import crack_planes
     from crackbake.io.mesh import load_mesh
     from crackbake.network import segments
 
@@ -200,7 +200,7 @@ def child(mesh_name: str, res: int) -> dict:
     del nmaps
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        planes = exr_channels(maps, float32=False)
+        planes = crack_planes(maps.channels(), float32=False)
         # Two alternating rounds, best of each: single writes vary by +-30 % on 2 busy cores.
         ours, bares = [], []
         for _ in range(2):

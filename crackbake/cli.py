@@ -20,6 +20,7 @@ from crackbake.params import (
     RES_MAX,
     RES_MIN,
     SIM_FACES_DEFAULT,
+    STRESS_RES_DEFAULT,
     TARGETS,
     UV_MODES,
     RunParams,
@@ -49,9 +50,15 @@ Examples:
   # scripted batch use: quiet, machine-readable summary on stdout
   crackbake wall.glb --cracks wall_cracks.json --quiet --json > run.json
 \b
-Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.mask, crack.width,
-crack.depth, crack.time, crack.id, crack.distance), <stem>_mask.png, <stem>_depth.png,
-<stem>.glb, preview.png, cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
+\b
+  # Unreal texture set (DirectX normals, packed ORM); describe the EXR master
+  crackbake examples/spot.obj --preset mud --target unreal -o mud_ue/
+  crackbake inspect mud_ue/spot_cracks.exr --png mud_ue/inspect/
+\b
+Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.<map>.V layers: mask,
+width, time, depth, distance, id, occlusion; crack.normal.NX/NY/NZ), <stem>_stress.exr, the
+--target PNGs (gltf: basecolor, normal, orm, data, mask, depth), <stem>.glb, preview.png,
+cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
 """
 
 
@@ -243,6 +250,11 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     show_default=True,
     callback=_split_formats,
     help="Which outputs to write (cracks.json, cracks.obj and manifest.json always are).",
+)
+@click.option(
+    "--stress-res",
+    type=int,
+    help=f"Stress map size in texels [min(--res, {STRESS_RES_DEFAULT})].",
 )
 @click.option(
     "--target",

@@ -15,7 +15,10 @@ from pathlib import Path
 
 from crackbake.errors import CrackbakeError
 
-FORMATS = ("exr", "png", "glb", "preview")
+FORMATS = ("exr", "png", "glb", "preview", "stress")
+#: Default edge of the stress maps: the stress lives on the simulation mesh (about 100k faces, a
+#: few hundred triangles across), so 1024 texels already give each sim triangle several texels.
+STRESS_RES_DEFAULT = 1024
 UV_MODES = ("auto", "keep", "unwrap")
 #: Engine profiles (``--target``; the table is :data:`crackbake.exchange.targets.TARGETS`).
 TARGETS = ("gltf", "unity", "unity-hdrp", "unreal", "godot", "blender")
@@ -244,7 +247,10 @@ class RunParams:
     seed : int
         Random seed.
     formats : tuple of str
-        Subset of ``exr``, ``png``, ``glb``, ``preview`` (a shaded picture, ``preview.png``).
+        Subset of ``exr``, ``png``, ``glb``, ``preview`` (a shaded picture, ``preview.png``) and
+        ``stress`` (``<stem>_stress.exr``, the solver's stress fields; not with ``--cracks``).
+    stress_res : int or None
+        Edge of the stress maps in texels; ``None`` = ``min(res, STRESS_RES_DEFAULT)``.
     float32 : bool
         Write every EXR channel as 32-bit float.
     target : str
@@ -285,6 +291,7 @@ class RunParams:
     profile: float = 1.0
     seed: int = 0
     formats: tuple[str, ...] = FORMATS
+    stress_res: int | None = None
     float32: bool = False
     target: str = "gltf"
     normal_y: str | None = None
@@ -334,6 +341,7 @@ class RunParams:
         if self.uv not in UV_MODES:
             raise CrackbakeError(f"--uv '{self.uv}' is unknown; use one of {', '.join(UV_MODES)}")
         _check_range("--padding", self.padding, 0, RES_MAX, " texels")
+        _check_range("--stress-res", self.stress_res, RES_MIN, RES_MAX, " texels")
         _check_range("--dilate", self.dilate, 0, RES_MAX, " texels")
         if not self.formats:
             raise CrackbakeError(f"--formats is empty; use a subset of {','.join(FORMATS)}")

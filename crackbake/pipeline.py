@@ -27,7 +27,7 @@ from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.network import CrackNetwork, from_solver, segments
-from crackbake.params import RunParams
+from crackbake.params import STRESS_RES_DEFAULT, RunParams
 from crackbake.simulate.setup import check_scale, sidecar_params, solver_params, stress_sources
 
 logger = logging.getLogger(__name__)
@@ -170,7 +170,9 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
         logger.info("writing %s", params.out_dir)
         t = time.perf_counter()
         effective = effective_params(params, solver_stats, maps, uvmesh)
-        write_outputs(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx)
+        write_outputs(
+            stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx, stress
+        )
         files = stage.records()
         timings["write"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t_start
@@ -241,14 +243,15 @@ def _bake_stress(
     ctx, uvmesh: UVMesh, solved: Solved | None, params: RunParams, timings: dict[str, float]
 ) -> StressMaps | None:
     """The stress-field maps, timed as ``stress_bake``; None when nothing was solved."""
-    if solved is None:
+    if solved is None or "stress" not in params.formats:
         return None  # a --cracks re-bake has no stress field
-    logger.info("baking the stress field %dx%d", params.res, params.res)
+    res = params.stress_res or min(params.res, STRESS_RES_DEFAULT)
+    logger.info("baking the stress field %dx%d", res, res)
     t = time.perf_counter()
     stress = bake_stress(
         uvmesh,
         solved.result,
-        params.res,
+        res,
         tangents=uvmesh.tangents,
         initial=solved.sim,
         dilate_px=params.dilate,

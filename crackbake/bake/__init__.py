@@ -10,7 +10,6 @@ _EXPORTS = {
     "GLScope": "crackbake.bake.context",
     "create_context": "crackbake.bake.context",
     "renderer_info": "crackbake.bake.context",
-    "CHANNELS": "crackbake.bake.raster",
     "CrackMaps": "crackbake.bake.raster",
     "bake_cracks": "crackbake.bake.raster",
     "FaceBins": "crackbake.bake.grid",

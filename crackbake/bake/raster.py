@@ -29,17 +29,6 @@ from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import TILE_DEFAULT
 
-#: Channels of :class:`CrackMaps` in EXR order, with their storage type.
-CHANNELS: dict[str, str] = {
-    "crack.mask": "half",
-    "crack.width": "half",
-    "crack.time": "half",
-    "crack.depth": "float",
-    "crack.distance": "float",
-    # half holds integers exactly only up to 2048; networks can have more cracks than that.
-    "crack.id": "float",
-}
-
 #: Default clamp of the distance channel, as a fraction of the bounding-box diagonal.
 DEFAULT_MAX_DISTANCE_FRACTION = 0.02
 
@@ -89,15 +78,19 @@ class CrackMaps:
     timings: dict[str, float] = field(default_factory=dict)
 
     def channels(self) -> dict[str, np.ndarray]:
-        """EXR channel name -> image, in :data:`CHANNELS` order."""
-        return {
-            "crack.mask": self.mask,
-            "crack.width": self.width,
-            "crack.time": self.time,
-            "crack.depth": self.depth,
-            "crack.distance": self.distance,
-            "crack.id": self.crack_id,
+        """Role -> image for the maps that were baked (``normal``/``occlusion`` only with
+        tangents); the roles of :data:`crackbake.exchange.layers.CRACK_LAYERS`."""
+        roles = {
+            "mask": self.mask,
+            "width": self.width,
+            "time": self.time,
+            "depth": self.depth,
+            "distance": self.distance,
+            "id": self.crack_id,
+            "normal": self.normal,
+            "occlusion": self.occlusion,
         }
+        return {k: v for k, v in roles.items() if v is not None}
 
 
 def _segment_buffer(segments: Segments) -> np.ndarray:

@@ -51,7 +51,7 @@ __all__ = ["FIELDS", "FRAME", "STRESS_UNITS", "StressMaps", "TensorMaps", "bake_
 #: The two fields, in output order: the solver's initial and final (effective) stress.
 FIELDS = ("stress0", "stress")
 #: Units of xx, yy, xy, p1, p2 (recorded in the EXR header).
-STRESS_UNITS = "solver stress units (stress-source strength, relative; tension positive)"
+STRESS_UNITS = "source strength (relative)"
 #: The tangent frame, for headers.
 FRAME = ("tangent: e1 = normalize(T - N(N.T)) (+u), e2 = w cross(N, e1) (+v); "
          "components xx, yy, xy; dir = (cos, sin) of p1 in (e1, e2)")

@@ -1,7 +1,7 @@
 """Files for other tools: one module per format (EXR, PNG, GLB), the atomic output folder, the
 run's set of files and its manifest."""
 
-from crackbake.exchange.bundle import exr_channels, write_outputs
+from crackbake.exchange.bundle import write_outputs
 from crackbake.exchange.exr import (
     LOSSLESS_COMPRESSIONS,
     LOSSY_COMPRESSIONS,
@@ -28,7 +28,6 @@ __all__ = [
     "build_manifest",
     "describe",
     "effective_params",
-    "exr_channels",
     "pack",
     "png_bytes",
     "read_exr",

@@ -16,10 +16,17 @@ import numpy as np
 
 from crackbake import __version__
 from crackbake.bake.preview import preview_camera, render_preview
-from crackbake.bake.raster import CHANNELS, CrackMaps
+from crackbake.bake.raster import CrackMaps
+from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.exchange.exr import write_exr
 from crackbake.exchange.glb import write_glb
+from crackbake.exchange.layers import (
+    crack_attributes,
+    crack_planes,
+    stress_attributes,
+    stress_planes,
+)
 from crackbake.exchange.materials import GLB_TEXTURE_MAX, base_color, downsample
 from crackbake.exchange.output import OutputStage
 from crackbake.exchange.pngenc import png_bytes, write_bytes
@@ -37,45 +44,6 @@ PREVIEW_TEXTURE_MAX = 2048
 #: zlib and OpenEXR with the GIL released, and short texture jobs should not wait behind the
 #: EXR; at most 6 (each holds a few full-size temporaries).
 WRITE_THREADS = max(4, min(6, os.cpu_count() or 1))
-
-
-def exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
-    """The EXR master's planes: :data:`CHANNELS` types (half where bounded), or all float32."""
-    out = {}
-    for name, arr in maps.channels().items():
-        # Types follow CHANNELS: half for bounded data, float where range or precision needs it.
-        want = np.float32 if float32 or CHANNELS[name] != "half" else np.float16
-        out[name] = arr if arr.dtype == want else arr.astype(want)
-    out.update(surface_exr_channels(maps, float32))
-    return out
-
-
-def surface_exr_channels(maps: CrackMaps, float32: bool) -> dict[str, np.ndarray]:
-    """The normal and occlusion planes of the EXR (none when they were not baked).
-
-    ``normal.X/Y/Z``: signed unit tangent-space normal, OpenGL +Y; ``occlusion.Y``: 0..1.  Half
-    floats (10-bit mantissa: 0.06 degrees) unless ``float32``.  The EXR layout module may
-    replace these names; this function is the one place that chooses them.
-    """
-    dtype = np.float32 if float32 else np.float16
-    out: dict[str, np.ndarray] = {}
-    if maps.normal is not None:
-        for i, axis in enumerate("XYZ"):
-            out[f"normal.{axis}"] = np.ascontiguousarray(maps.normal[..., i], dtype=dtype)
-    if maps.occlusion is not None:
-        out["occlusion.Y"] = np.asarray(maps.occlusion, dtype=dtype)
-    return out
-
-
-def _exr_attributes(maps: CrackMaps) -> dict:
-    return {
-        "crackbake:version": __version__,
-        "crackbake:units": "mesh",
-        "crackbake:uvConvention": "texel (0,0) is UV (0,1): v up, top row first",
-        "crackbake:depthProfile": f"V exponent {maps.profile_shape:g}",
-        "crackbake:maxDistance": float(maps.max_distance),
-        "crackbake:normalConvention": "tangent space, MikkTSpace frame, OpenGL +Y",
-    }
 
 
 @dataclass(eq=False)
@@ -148,6 +116,7 @@ def write_outputs(
     network: CrackNetwork,
     maps: CrackMaps,
     ctx=None,
+    stress: StressMaps | None = None,
 ) -> None:
     """Write the requested maps, the GLB, the preview and the network into ``stage``.
 
@@ -164,6 +133,8 @@ def write_outputs(
         used when present).
     ctx : moderngl.Context, optional
         The run's GL context, for the preview; a temporary one when not given.
+    stress : StressMaps, optional
+        The baked stress fields: written as ``<stem>_stress.exr`` with the ``stress`` format.
     """
     formats = params.formats
     texture = None
@@ -173,6 +144,10 @@ def write_outputs(
         jobs: list[Future] = []
         if "exr" in formats:
             jobs.append(pool.submit(_write_exr, stage.path(f"{stem}_cracks.exr"), maps, params))
+        if stress is not None and "stress" in formats:
+            jobs.append(
+                pool.submit(_write_stress_exr, stage.path(f"{stem}_stress.exr"), stress)
+            )
         enc = _Encoder(pool, maps, texture)
         if "png" in formats:
             normal_y = normal_convention(params.target, params.normal_y)
@@ -200,7 +175,17 @@ def write_outputs(
 
 
 def _write_exr(path, maps: CrackMaps, params: RunParams) -> None:
-    write_exr(path, exr_channels(maps, params.float32), attributes=_exr_attributes(maps))
+    planes = crack_planes(maps.channels(), float32=params.float32)
+    attributes = crack_attributes(
+        __version__, maps.max_distance, maps.profile_shape, channels=planes
+    )
+    write_exr(path, planes, attributes=attributes)
+
+
+def _write_stress_exr(path, stress: StressMaps) -> None:
+    attributes = stress_attributes(__version__, units=stress.units)
+    attributes["crackbake:stressFrame"] = stress.frame
+    write_exr(path, stress_planes(stress.fields(), units=stress.units), attributes=attributes)
 
 
 def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict) -> None:

@@ -134,7 +134,7 @@ STRESS_COMPONENTS: dict[str, tuple[tuple[str, ...], str, str, str]] = {
         ("X", "Y"), "vector", "-1..1",
         "unit direction of p1 in (T, B) components (a line: its sign is arbitrary)",
     ),
-    "sep": (("V",), "value", ">= 0", "separation value that drives cracking"),
+    "sep": (("V",), "value", ">= 0", "separation that drives cracking / toughness (>= 1 fails)"),
 }  # fmt: skip
 
 
@@ -149,7 +149,8 @@ def stress_layers(units: str = "stress") -> dict[str, Layer]:
     out = {}
     for field in STRESS_FIELDS:
         for comp, (chans, kind, rng, text) in STRESS_COMPONENTS.items():
-            unit = "unit vector" if comp == "dir" else units
+            # sep is relative to the toughness, whatever the stress units are.
+            unit = {"dir": "unit vector", "sep": "x toughness"}.get(comp, units)
             role = f"{field}.{comp}"
             out[role] = Layer(role, role, chans, kind, False, unit, rng, text)
     return out

@@ -10,9 +10,10 @@ import json
 from pathlib import Path
 
 from crackbake import __version__
-from crackbake.bake.raster import CHANNELS, CrackMaps
+from crackbake.bake.raster import CrackMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.errors import CrackbakeError
+from crackbake.exchange.layers import CRACK_LAYERS
 from crackbake.exchange.output import sha256_file
 from crackbake.exchange.targets import describe
 from crackbake.io.mesh import Mesh
@@ -95,7 +96,12 @@ def build_manifest(
             "depth_png_scale": float(maps.depth.max()),
             "max_distance": maps.max_distance,
             "covered_fraction": float(maps.inside.mean()),
-            "exr_channels": {k: ("float" if params.float32 else v) for k, v in CHANNELS.items()},
+            "exr_channels": {
+                name: ("half" if layer.half and not params.float32 else "float")
+                for role in maps.channels()
+                for layer in [CRACK_LAYERS[role]]
+                for name in layer.names
+            },
             "textures": describe(params.target, params.normal_y, Path(params.mesh).stem, maps),
         },
         "renderer": renderer,
