@@ -178,3 +178,29 @@ def test_cli_target_unreal_writes_its_set_and_the_manifest_says_so(tmp_path):
     assert tex["target"] == "unreal" and tex["normal_y"] == "dx"
     assert manifest["params"]["target"] == "unreal" and tex["data_scales"]["width"] > 0
     assert _read(out / "T_spot_Data.png").dtype == np.uint16
+
+
+def test_fused_data_map_equals_the_numpy_quantisation():
+    # The fused 16-bit kernel against quantise() plane by plane, on values that exercise the
+    # rounding, the clipping and NaN (-> 0) of every channel.
+    from types import SimpleNamespace
+
+    from crackbake.exchange.targets import data_scales, pack, quantise
+
+    rng = np.random.default_rng(3)
+    shape = (37, 53)
+    mask = rng.uniform(-0.2, 1.2, shape).astype(np.float16)
+    width = rng.uniform(0, 0.01, shape).astype(np.float16)
+    time = rng.uniform(0, 1, shape).astype(np.float16)
+    depth = rng.uniform(-1e-3, 5e-3, shape).astype(np.float32)
+    mask[0, 0], width[1, 1], time[2, 2], depth[3, 3] = np.nan, np.nan, np.nan, np.nan
+    depth[4, 4] = 1.0  # far above the scale: clipped to the top
+    maps = SimpleNamespace(mask=mask, width=width, time=time, depth=depth, normal=None,
+                           occlusion=None)
+    s = data_scales(maps)
+    want = np.stack([quantise(mask, 16), quantise(width, 16, s["width"]),
+                     quantise(depth, 16, s["depth"]), quantise(time, 16)], axis=-1)
+    got = pack("data", maps, 16)
+    assert got.dtype == np.dtype(">u2") and got.shape == (*shape, 4)
+    assert np.array_equal(got.astype(np.int64), want.astype(np.int64))
+    assert got[4, 4, 2] == 65535 and got[3, 3, 2] == 0 and got[0, 0, 0] == 0

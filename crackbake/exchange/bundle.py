@@ -140,10 +140,14 @@ def write_outputs(
     texture = None
     if mesh.source and {"png", "glb", "preview"} & set(formats):
         texture = base_color_texture(mesh.source, maps.res)
+    planes = crack_planes(maps.channels(), float32=params.float32) if "exr" in formats else None
     with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
         jobs: list[Future] = []
-        if "exr" in formats:
-            jobs.append(pool.submit(_write_exr, stage.path(f"{stem}_cracks.exr"), maps, params))
+        if planes is not None:
+            # The longest job, so it starts first, with its planes ready: converting them in
+            # the job made it wait for the GIL behind every texture's numpy work.
+            path = stage.path(f"{stem}_cracks.exr")
+            jobs.append(pool.submit(_write_exr, path, planes, maps))
         if stress is not None and "stress" in formats:
             jobs.append(
                 pool.submit(_write_stress_exr, stage.path(f"{stem}_stress.exr"), stress)
@@ -174,8 +178,7 @@ def write_outputs(
             job.result()  # the first failure, in submission order
 
 
-def _write_exr(path, maps: CrackMaps, params: RunParams) -> None:
-    planes = crack_planes(maps.channels(), float32=params.float32)
+def _write_exr(path, planes: dict, maps: CrackMaps) -> None:
     attributes = crack_attributes(
         __version__, maps.max_distance, maps.profile_shape, channels=planes
     )

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackbake.exchange.materials import ROUGHNESS_CRACK, ROUGHNESS_SURFACE, half_lut
+from crackbake.exchange.packing import data16
 from crackbake.params import NORMAL_Y
 from crackbake.params import TARGETS as TARGET_NAMES
 
@@ -207,12 +208,27 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
             _const(shape, 0.0, bits), _const(shape, 0.0, bits), _const(shape, 0.0, bits),
             _roughness(maps.mask, bits, smooth=True),
         ),
-        "data": lambda: (
-            quantise(maps.mask, bits), quantise(maps.width, bits, data_scales(maps)["width"]),
-            quantise(maps.depth, bits, data_scales(maps)["depth"]), quantise(maps.time, bits),
-        ),
+        "data": lambda: _data_planes(maps, bits),
     }[content]()  # fmt: skip
+    if content == "data" and not isinstance(planes, tuple):
+        return planes
     return np.stack(planes, axis=-1)
+
+
+def _data_planes(maps, bits: int):
+    """R mask, G width, B depth, A time: one fused pass for the usual 16-bit float16 maps."""
+    scales = data_scales(maps)
+    halves = all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.width, maps.time))
+    if bits == 16 and halves:
+        luts = tuple(
+            half_lut(lambda x, s=s: np.clip(x / s * 65535 + 0.5, 0, 65535)).astype(np.uint16)
+            for s in (1.0, scales["width"], 1.0)
+        )
+        return data16(maps.mask, maps.width, maps.time, maps.depth, luts, scales["depth"])
+    return (
+        quantise(maps.mask, bits), quantise(maps.width, bits, scales["width"]),
+        quantise(maps.depth, bits, scales["depth"]), quantise(maps.time, bits),
+    )  # fmt: skip
 
 
 def describe(target: str, normal_y: str | None, stem: str, maps) -> dict:
