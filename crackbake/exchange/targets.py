@@ -128,7 +128,8 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
         return np.take(lut.astype(dtype), plane.view(np.uint16))
     q = np.asarray(plane, np.float32) * np.float32(top / scale)
     q += np.float32(0.5)
-    np.clip(q, 0, top, out=q)  # NaN stays NaN and casts to 0
+    np.nan_to_num(q, copy=False, nan=0.0)
+    np.clip(q, 0, top, out=q)
     return q.astype(dtype)
 
 
