@@ -188,7 +188,7 @@ def _check_blender_pass(info, layer, want):
         assert len(got) == 3  # Blender's vector passes are 3-D; a 2-D one gets Z = 0
         np.testing.assert_array_equal(got[len(planes) :], 0)
     for g, p in zip(got, planes, strict=False):
-        assert g.shape == (H, W)
+        assert g.shape == p.shape
         np.testing.assert_array_equal(g, p, err_msg=layer.role)
 
 
@@ -227,3 +227,52 @@ def test_old_layout_is_invisible_to_blender(tmp_path):
     write_exr(path, {f"crack.{k}": plane for k in ("mask", "width", "depth")})
     got = _blender_passes(path, tmp_path / "blender")
     assert got["layers"] == [] and got["passes"] == []
+
+
+@pytest.fixture(scope="module")
+def run_exrs(tmp_path_factory):
+    """Both EXRs of a real run (solve, bake with tangents, stress bake) on a small plate."""
+    from crackbake.params import Impact, RunParams
+    from crackbake.pipeline import run
+    from crackbake.precompile import plate_obj
+
+    folder = tmp_path_factory.mktemp("run")
+    mesh = folder / "plate.obj"
+    plate_obj(mesh)
+    out = folder / "out"
+    run(RunParams(mesh=mesh, preset="glass", impacts=(Impact((0.5, 0.5, 0.0), 0.3),),
+                  res=96, stress_res=64, sim_faces=3000, formats=("exr", "stress"), out=out))
+    return {"crack": out / "plate_cracks.exr", "stress": out / "plate_stress.exr"}
+
+
+def _layout_of(kind):
+    return CRACK_LAYERS if kind == "crack" else stress_layers()
+
+
+@pytest.mark.parametrize("kind", ["crack", "stress"])
+def test_every_exr_a_run_writes_through_openimageio(run_exrs, kind):
+    spec, pixels, formats = _oiio_read(run_exrs[kind])
+    chans, _ = read_exr(run_exrs[kind])
+    layers = _layout_of(kind)
+    want = {n: ("half" if layer.half else "float") for layer in layers.values()
+            for n in layer.names}
+    names = list(spec.channelnames)
+    assert sorted(names) == sorted(want)  # every layer of the layout, normal included
+    assert spec.z_channel == -1 and spec.alpha_channel == -1
+    for i, name in enumerate(names):
+        assert formats[i] == want[name], name
+        np.testing.assert_array_equal(pixels[..., i], chans[name].astype(np.float32), name)
+    assert np.isfinite(pixels).all()
+
+
+@pytest.mark.parametrize("kind", ["crack", "stress"])
+def test_every_exr_a_run_writes_through_blender(run_exrs, kind, tmp_path):
+    chans, _ = read_exr(run_exrs[kind])
+    want = {name: (None, plane) for name, plane in chans.items()}
+    got = _blender_passes(run_exrs[kind], tmp_path / "blender")
+    assert got["image_type"] == "MULTILAYER"
+    layers = _layout_of(kind)
+    assert len(got["passes"]) == len(layers)
+    for info in got["passes"]:
+        key = info["pass"] if kind == "crack" else f"{info['layer']}.{info['pass']}"
+        _check_blender_pass(info, layers[key], want)
