@@ -36,16 +36,18 @@ CASES: dict[str, list[str]] = {
 LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage"), ("thesis",))
 
 
-def plate_obj(path: Path, n: int = 12) -> None:
-    """Write a flat unit square of ``2 n^2`` triangles as OBJ, UVs inset in the page.
+def plate_obj(path: Path, n: int = 12, uv_margin: float = 0.1) -> Path:
+    """Write a flat unit square of ``2 n^2`` triangles as OBJ; return ``path``.
 
-    The UVs leave a margin so the bake has empty texels to fill (the dilation kernels run).
+    UVs are ``margin + (1 - 2 margin) * (x, y)``: the default margin leaves empty texels around
+    the island, so the bake's gutter fill (the dilation kernels) runs too.
     """
+    m = float(uv_margin)
     lines = []
     for j in range(n + 1):
         for i in range(n + 1):
             lines.append(f"v {i / n:.6f} {j / n:.6f} 0")
-            lines.append(f"vt {0.1 + 0.8 * i / n:.6f} {0.1 + 0.8 * j / n:.6f}")
+            lines.append(f"vt {m + (1 - 2 * m) * i / n:.6f} {m + (1 - 2 * m) * j / n:.6f}")
     for j in range(n):
         for i in range(n):
             a = j * (n + 1) + i + 1
@@ -53,6 +55,7 @@ def plate_obj(path: Path, n: int = 12) -> None:
             lines.append(f"f {a}/{a} {b}/{b} {c}/{c}")
             lines.append(f"f {a}/{a} {c}/{c} {d}/{d}")
     path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 def _run_case(name: str, mesh: Path, folder: Path) -> float:

@@ -22,6 +22,7 @@ from click.testing import CliRunner
 from PIL import Image
 
 from crackbake.cli import main
+from crackbake.precompile import plate_obj
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "tests" / "golden" / "golden.json"
@@ -30,19 +31,7 @@ RECORD = os.environ.get("CRACKBAKE_RECORD_GOLDEN") == "1"
 
 def _plate_obj(path: Path, n: int = 4) -> Path:
     """A 1 x 1 plate of n x n quads (2 n^2 triangles) with UVs equal to (x, y)."""
-    lines = []
-    for j in range(n + 1):
-        for i in range(n + 1):
-            lines.append(f"v {i / n:.6f} {j / n:.6f} 0")
-            lines.append(f"vt {i / n:.6f} {j / n:.6f}")
-    for j in range(n):
-        for i in range(n):
-            a = j * (n + 1) + i + 1
-            b, c, d = a + 1, a + n + 2, a + n + 1
-            lines.append(f"f {a}/{a} {b}/{b} {c}/{c}")
-            lines.append(f"f {a}/{a} {c}/{c} {d}/{d}")
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return plate_obj(path, n, uv_margin=0.0)
 
 
 CASES = {
