@@ -169,9 +169,7 @@ def mip_chain(image: np.ndarray, levels: int) -> list[np.ndarray]:
     return out
 
 
-def contact_sheet(
-    layout: Layout, atlases: dict, normal_y: str, thumb: int = 384
-) -> np.ndarray:
+def contact_sheet(layout: Layout, atlases: dict, normal_y: str, thumb: int = 384) -> np.ndarray:
     """A picture of every variant lit through its normal map and occlusion: (H, W, 3) uint8 sRGB.
 
     A low light from the upper left (tangent space (-0.6, 0.65, 0.45)), Lambert shading normalised
@@ -236,9 +234,11 @@ def document(params, layout: Layout, baked: list, depth_scale: float) -> dict:
         "seed": params.seed,
         "normal_y": params.normal_y,
         "normal": {
-            "space": "tangent", "encoding": "n * 0.5 + 0.5",
+            "space": "tangent",
+            "encoding": "n * 0.5 + 0.5",
             "frame": "T = +X = image right, B = +Y = image up, N = +Z out of the surface",
-            "y": "gl: +Y up (OpenGL, Unity, Godot, Blender)" if params.normal_y == "gl"
+            "y": "gl: +Y up (OpenGL, Unity, Godot, Blender)"
+            if params.normal_y == "gl"
             else "dx: -Y (DirectX, Unreal)",
         },  # fmt: skip
         "uv": {
@@ -248,14 +248,22 @@ def document(params, layout: Layout, baked: list, depth_scale: float) -> dict:
             "rect_px": "x, y (from the top-left texel), width, height",
         },
         "atlas": {
-            "width": layout.width, "height": layout.height, "grid": [layout.cols, layout.rows],
-            "cell": layout.cell, "gutter": [layout.pad, layout.cell - layout.res - layout.pad],
-            "mip_safe_level": layout.level, "variant_texels_at_mip_safe_level":
-                layout.res >> layout.level,
+            "width": layout.width,
+            "height": layout.height,
+            "grid": [layout.cols, layout.rows],
+            "cell": layout.cell,
+            "gutter": [layout.pad, layout.cell - layout.res - layout.pad],
+            "mip_safe_level": layout.level,
+            "variant_texels_at_mip_safe_level": layout.res >> layout.level,
         },  # fmt: skip
         "textures": {
-            role: {"file": name, "content": text, "bits": bits, "colorspace": "linear",
-                   **({"depth_scale": depth_scale} if role == "height" else {})}
+            role: {
+                "file": name,
+                "content": text,
+                "bits": bits,
+                "colorspace": "linear",
+                **({"depth_scale": depth_scale} if role == "height" else {}),
+            }
             for role, (name, text, bits) in ROLES.items()
         },  # fmt: skip
         "decals": decals,
