@@ -176,6 +176,7 @@ def test_uv_scale_bias_find_each_variant(lib3):
     np.testing.assert_array_equal(atlas[rows_down, cols], own)
     np.testing.assert_array_equal(atlas[rows_up, cols], own)
     assert d["unity"]["uvScale"] == d["uv_scale"] and d["unity"]["uvBias"] == d["uv_bias_v_up"]
+    assert d["unreal"]["UVBias"] == d["uv_bias_v_down"] == d["godot"]["uv1_offset"][:2]
     assert own.max() > 0  # there are cracks to find
 
 

@@ -201,6 +201,21 @@ def contact_sheet(layout: Layout, atlases: dict, normal_y: str, thumb: int = 384
     return (np.clip(sheet, 0, 1) ** (1 / 2.2) * 255 + 0.5).astype(np.uint8)
 
 
+def engine_blocks(rect: dict, size: float, depth: float) -> dict:
+    """Per-engine values for one variant: Unity's ``DecalProjector`` fields (uv v-up), the
+    parameters an Unreal decal material or a Godot ``StandardMaterial3D`` multiplies its UVs by
+    (both v-down: UV (0, 0) is the texture's top-left), and Godot's ``AtlasTexture`` region."""
+    scale, up, down = rect["uv_scale"], rect["uv_bias_v_up"], rect["uv_bias_v_down"]
+    return {
+        "unity": {"uvScale": scale, "uvBias": up, "size": [size, size, depth],
+                  "pivot": [0.0, 0.0, depth / 2]},
+        "unreal": {"UVScale": scale, "UVBias": down,
+                   "use": "material: TexCoord[0] * UVScale + UVBias (UV origin top-left)"},
+        "godot": {"uv1_scale": [*scale, 1.0], "uv1_offset": [*down, 0.0],
+                  "atlas_region_px": rect["rect_px"]},
+    }  # fmt: skip
+
+
 def document(params, layout: Layout, baked: list, depth_scale: float) -> dict:
     """The ``decals.json`` content (the top-level fields shared with mesh-projected decals:
     ``format``, ``version``, ``generator``, ``units``, ``normal_y``, ``textures``, ``decals``)."""
@@ -220,8 +235,7 @@ def document(params, layout: Layout, baked: list, depth_scale: float) -> dict:
             "size": [params.size, params.size], "depth": depth,
             "crack_depth_max": float(np.max(b.maps.depth)), "cracks": b.cracks,
             **rect,
-            "unity": {"uvScale": rect["uv_scale"], "uvBias": rect["uv_bias_v_up"],
-                      "size": [params.size, params.size, depth], "pivot": [0, 0, depth / 2]},
+            **engine_blocks(rect, params.size, depth),
             "textures": files, "normal_y": params.normal_y,
         })  # fmt: skip
     return {
