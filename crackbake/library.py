@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
+import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -228,31 +229,43 @@ def build_library(params: LibraryParams) -> dict:
     CrackbakeError
         Bad parameters or an unusable output folder (left unchanged).
     """
+    from crackbake.exchange.interrupt import RunInterrupted, interruptible
+    from crackbake.exchange.output import OutputStage
+
+    params = params.validate()
+    stage = OutputStage(params.out)
+    try:
+        with interruptible(), stage:
+            return _build(params, stage)
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: the folder keeps its previous set
+        signum = getattr(exc, "signum", signal.SIGINT)
+        raise RunInterrupted(stage.interrupted_message(), signum) from None
+
+
+def _build(params: LibraryParams, stage) -> dict:
+    """The variants' solves and bakes, then the files, inside the open ``stage``."""
     from crackbake.bake.context import create_context
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
     from crackbake.exchange.library import write_library
-    from crackbake.exchange.output import OutputStage
 
-    params = params.validate()
     t0 = time.perf_counter()
     timings: dict[str, float] = {"solve": 0.0, "bake": 0.0}
-    with OutputStage(params.out) as stage:
-        mesh = plate_mesh(params.size)
-        ctx = create_context()
-        try:
-            uvmesh = with_tangents(prepare_uvs(mesh, "keep", params.res, cache=False, ctx=ctx))
-            baked = []
-            for v in variants(params):
-                logger.info("variant %d/%d (%s)", v.index + 1, params.n, v.name)
-                b = bake_variant(ctx, mesh, uvmesh, params, v)
-                timings["solve"] += sum(b.timings[k] for k in ("simmesh", "stress", "solve"))
-                timings["bake"] += b.timings["bake"]
-                baked.append(b)
-        finally:
-            ctx.release()
-        doc = write_library(stage, params, baked, timings, t0)
-        stage.commit()
+    mesh = plate_mesh(params.size)
+    ctx = create_context()
+    try:
+        uvmesh = with_tangents(prepare_uvs(mesh, "keep", params.res, cache=False, ctx=ctx))
+        baked = []
+        for v in variants(params):
+            logger.info("variant %d/%d (%s)", v.index + 1, params.n, v.name)
+            b = bake_variant(ctx, mesh, uvmesh, params, v)
+            timings["solve"] += sum(b.timings[k] for k in ("simmesh", "stress", "solve"))
+            timings["bake"] += b.timings["bake"]
+            baked.append(b)
+    finally:
+        ctx.release()
+    doc = write_library(stage, params, baked, timings, t0)
+    stage.commit()
     return doc
 
 

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import click
 
 from crackbake.cli import _Command, _err
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.params import preset_names
 
 EPILOG = """\b
 Examples:
@@ -29,7 +31,12 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
     epilog=EPILOG,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )
-@click.option("--preset", default="glass", show_default=True, help="Material preset.")
+@click.option(
+    "--preset",
+    default="glass",
+    show_default=True,
+    help=f"Material preset ({', '.join(preset_names())}); glass gets one impact per variant.",
+)
 @click.option("-n", "n", type=int, default=16, show_default=True, help="Number of variants.")
 @click.option(
     "--size", type=float, default=0.5, show_default=True, help="Decal width/height, mesh units."
@@ -55,11 +62,18 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 @click.option("--json", "as_json", is_flag=True, help="Print decals.json's content on stdout.")
 def decals(quiet: bool, as_json: bool, **options) -> None:
     """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
+    def show(message, *_args, **_kwargs) -> None:
+        if not quiet:
+            _err(f"warning: {message}")
+
     try:
         from crackbake.library import LibraryParams, build_library
 
         params = LibraryParams(**options).validate()
-        doc = build_library(params)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", CrackbakeWarning)
+            warnings.showwarning = show  # one line each, like the main command
+            doc = build_library(params)
     except CrackbakeError as exc:
         _err(f"error: {exc}")
         sys.exit(exc.exit_code)

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -277,6 +279,21 @@ def test_cli_run_is_deterministic_and_replaces_its_folder(tmp_path):
 def _hashes(out: Path) -> dict[str, str]:
     files = json.loads((out / "manifest.json").read_text())["files"]
     return {f["name"]: f["sha256"] for f in files}
+
+
+def test_sigterm_leaves_no_folder(tmp_path):
+    out = tmp_path / "lib"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "crackbake", "decals", "-n", "64", "--res", "256", "-o", str(out)],
+        stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    time.sleep(4.0)  # inside the variants' solves and bakes
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "error: interrupted; no outputs were written"
+    assert not out.exists() and not list(tmp_path.iterdir())
 
 
 @pytest.mark.slow
