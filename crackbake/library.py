@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import signal
 import time
 from dataclasses import dataclass, field
@@ -89,14 +90,14 @@ class LibraryParams:
         if not str(self.out).strip():
             raise CrackbakeError("-o '' names no folder; give an output folder with -o")
         load_preset(self.preset)  # unknown preset: lists the names
-        if isinstance(self.n, bool) or not isinstance(self.n, int) or not 1 <= self.n <= N_MAX:
+        if not _integer(self.n) or not 1 <= self.n <= N_MAX:
             raise CrackbakeError(f"-n {self.n} is out of range; use 1 to {N_MAX} variants")
         if not _positive(self.size):
             raise CrackbakeError(
                 f"--size {self.size} is not a plate size; use a number above 0 up to "
                 f"{LENGTH_MAX:g} mesh units"
             )
-        if not isinstance(self.res, int) or not RES_MIN <= self.res <= VARIANT_RES_MAX:
+        if not _integer(self.res) or not RES_MIN <= self.res <= VARIANT_RES_MAX:
             raise CrackbakeError(
                 f"--res {self.res} is out of range; use {RES_MIN} to {VARIANT_RES_MAX} texels "
                 "per variant"
@@ -121,9 +122,13 @@ class LibraryParams:
         return float(self.depth) if self.depth is not None else self.size / 4.0
 
 
+def _integer(x) -> bool:
+    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
+
+
 def _positive(x) -> bool:
     return (
-        isinstance(x, int | float)
+        isinstance(x, numbers.Real)
         and not isinstance(x, bool)
         and math.isfinite(x)
         and 0 < x <= LENGTH_MAX

@@ -62,6 +62,7 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 @click.option("--json", "as_json", is_flag=True, help="Print decals.json's content on stdout.")
 def decals(quiet: bool, as_json: bool, **options) -> None:
     """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
+
     def show(message, *_args, **_kwargs) -> None:
         if not quiet:
             _err(f"warning: {message}")

@@ -37,7 +37,7 @@ MIP_TEXELS = 4
 #: Atlas files: role -> (file name, content described, bits).
 ROLES: dict[str, tuple[str, str, int]] = {
     "alpha": ("decals_alpha.png", "grey crack coverage 0..1: the decal's opacity", 8),
-    "normal": ("decals_normal.png", CONTENTS["normal"], 8),
+    "normal": ("decals_normal.png", "RGB tangent-space normal, n * 0.5 + 0.5 (Y: normal_y)", 8),
     "orm": ("decals_orm.png", CONTENTS["orm"], 8),
     "height": ("decals_height.png", "grey height: 1 = surface, 0 = depth_scale below it", 16),
 }
