@@ -234,7 +234,7 @@ def build_library(params: LibraryParams) -> dict:
     CrackbakeError
         Bad parameters or an unusable output folder (left unchanged).
     """
-    from crackbake.exchange.interrupt import RunInterrupted, interruptible
+    from crackbake.exchange.interrupt import RunInterrupted, interruptible, received
     from crackbake.exchange.output import OutputStage
 
     params = params.validate()
@@ -244,6 +244,12 @@ def build_library(params: LibraryParams) -> dict:
             return _build(params, stage)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: the folder keeps its previous set
         signum = getattr(exc, "signum", signal.SIGINT)
+        raise RunInterrupted(stage.interrupted_message(), signum) from None
+    except Exception:
+        # A signal inside a C extension can surface as another error (as in pipeline.run).
+        signum = received()
+        if signum is None:
+            raise
         raise RunInterrupted(stage.interrupted_message(), signum) from None
 
 
