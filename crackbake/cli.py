@@ -55,6 +55,9 @@ Examples:
   crackbake examples/spot.obj --preset mud --target unreal -o mud_ue/
   crackbake inspect mud_ue/spot_cracks.exr --png mud_ue/inspect/
 \b
+  # a decal library: 16 glass impacts in mip-safe atlases (crackbake decals --help)
+  crackbake decals --preset glass -n 16 --size 0.5 --res 1024 -o lib/
+\b
 Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.<map>.V layers: mask,
 width, time, depth, distance, id, occlusion; crack.normal.NX/NY/NZ), <stem>_stress.exr, the
 --target PNGs (gltf: basecolor, normal, orm, data, mask, depth), <stem>.glb, preview.png,
@@ -77,6 +80,12 @@ class _Command(click.Command):
 
             name = f"{prog_name or 'crackbake'} inspect"
             return inspect.main(argv[1:], name, complete_var, standalone_mode, **extra)
+        if argv[:1] == ["decals"] and self.name != "decals":
+            # `crackbake decals ...`: a decal library (crackbake/library_cli.py).
+            from crackbake.library_cli import decals
+
+            name = f"{prog_name or 'crackbake'} decals"
+            return decals.main(argv[1:], name, complete_var, standalone_mode, **extra)
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:

@@ -1,0 +1,89 @@
+"""``crackbake decals``: a decal library (N crack variants on a plate, packed into atlases)."""
+
+from __future__ import annotations
+
+import json
+import sys
+import warnings
+from pathlib import Path
+
+import click
+
+from crackbake.cli import _Command, _err
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.params import preset_names
+
+EPILOG = """\b
+Examples:
+  # 16 glass impacts, 0.5 units wide, 1024 texels each
+  crackbake decals --preset glass -n 16 --size 0.5 --res 1024 -o lib/
+\b
+  # mud patches for Unreal (DirectX normals)
+  crackbake decals --preset mud -n 9 --size 2 --normal-y dx -o mud_decals/
+\b
+Outputs: decals_alpha.png, decals_normal.png, decals_orm.png, decals_height.png (16 bit),
+contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias), manifest.json.
+"""
+
+
+@click.command(
+    cls=_Command,
+    epilog=EPILOG,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+)
+@click.option(
+    "--preset",
+    default="glass",
+    show_default=True,
+    help=f"Material preset ({', '.join(preset_names())}); glass gets one impact per variant.",
+)
+@click.option("-n", "n", type=int, default=16, show_default=True, help="Number of variants.")
+@click.option(
+    "--size", type=float, default=0.5, show_default=True, help="Decal width/height, mesh units."
+)
+@click.option(
+    "--res", type=int, default=1024, show_default=True, help="Texels per side of one variant."
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Library seed.")
+@click.option(
+    "--normal-y",
+    type=click.Choice(("gl", "dx")),
+    default="gl",
+    show_default=True,
+    help="Normal-map Y: gl (+Y, OpenGL: Unity, Godot, glTF) or dx (-Y, DirectX: Unreal).",
+)
+@click.option("--depth", type=float, help="Projector depth, mesh units [size / 4].")
+@click.option("--sim-faces", type=int, help="Simulation mesh size per variant, in faces.")
+@click.option(
+    "-o", "--out", type=click.Path(path_type=Path), default=Path("decals"), show_default=True,
+    help="Output folder (replaced as a whole).",
+)  # fmt: skip
+@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+@click.option("--json", "as_json", is_flag=True, help="Print decals.json's content on stdout.")
+def decals(quiet: bool, as_json: bool, **options) -> None:
+    """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
+
+    def show(message, *_args, **_kwargs) -> None:
+        if not quiet:
+            _err(f"warning: {message}")
+
+    try:
+        from crackbake.library import LibraryParams, build_library
+
+        params = LibraryParams(**options).validate()
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", CrackbakeWarning)
+            warnings.showwarning = show  # one line each, like the main command
+            doc = build_library(params)
+    except CrackbakeError as exc:
+        _err(f"error: {exc}")
+        sys.exit(exc.exit_code)
+    if as_json:
+        click.echo(json.dumps(doc, indent=1))
+    if not quiet:
+        a = doc["atlas"]
+        t = doc["timings_s"]
+        _err(
+            f"{len(doc['decals'])} {doc['preset']} decals in a {a['width']}x{a['height']} atlas "
+            f"({t['total']:.1f} s) -> {params.out}/"
+        )
