@@ -225,3 +225,19 @@ def bake_decal(
         profile_shape=profile_shape, dilate_px=DECAL_DILATE_PX, ctx=ctx, normals=normals,
         tangents=tangents, projection=clip, **extra,
     )  # fmt: skip
+
+
+def bake_decals(uvmesh, segs: Segments, maps: CrackMaps, impacts, size: float, res: int,
+                tile: int | None = None, ctx=None) -> list[tuple[Projector, CrackMaps, dict]]:
+    """One decal per impact on the baked mesh: ``(projector, maps, impact dict)`` each.
+
+    ``maps`` is the run's UV bake: its distance clamp and profile are reused, so the decal
+    measures exactly what the UV bake measured.
+    """
+    out = []
+    for imp in impacts:
+        proj = make_projector(uvmesh.vertices, uvmesh.faces, imp.point, size)
+        dec = bake_decal(uvmesh.vertices, uvmesh.faces, segs, proj, res, maps.max_distance,
+                         maps.profile_shape, tile, ctx)  # fmt: skip
+        out.append((proj, dec, imp.to_dict()))
+    return out
