@@ -46,14 +46,20 @@ ENGINE_AXES: dict[str, tuple[np.ndarray, float]] = {
 def quaternion(rot: np.ndarray) -> list[float]:
     """Unit quaternion (x, y, z, w) of a proper rotation matrix (columns = rotated axes)."""
     r = np.asarray(rot, np.float64)
-    w = np.sqrt(max(0.0, 1.0 + np.trace(r))) / 2.0
-    x = np.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2.0
-    y = np.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2.0
-    z = np.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2.0
-    x = np.copysign(x, r[2, 1] - r[1, 2])
-    y = np.copysign(y, r[0, 2] - r[2, 0])
-    z = np.copysign(z, r[1, 0] - r[0, 1])
-    q = np.array([x, y, z, w])
+    # Shepperd: divide by the largest of 4w^2, 4x^2, 4y^2, 4z^2 (stable near 180 degrees).
+    trace = np.trace(r)
+    k = int(np.argmax([trace, r[0, 0], r[1, 1], r[2, 2]]))
+    if k == 0:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        q = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1], s * s / 4]) / s
+    else:
+        i, j, m = k - 1, k % 3, (k + 1) % 3
+        s = 2.0 * np.sqrt(max(1.0 + r[i, i] - r[j, j] - r[m, m], 0.0))
+        q = np.empty(4)
+        q[i] = s / 4
+        q[j] = (r[j, i] + r[i, j]) / s
+        q[m] = (r[m, i] + r[i, m]) / s
+        q[3] = (r[m, j] - r[j, m]) / s
     return [float(v) for v in q / np.linalg.norm(q)]
 
 
