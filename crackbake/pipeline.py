@@ -144,7 +144,7 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
     solver_stats: dict = {}
     solved = None
     if params.cracks is not None:
-        if params.impacts:
+        if params.impacts and params.decal is None:  # with --decal they place the decals
             warnings.warn(
                 "--impact is ignored with --cracks (the network is baked as given)",
                 CrackbakeWarning,

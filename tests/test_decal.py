@@ -255,3 +255,23 @@ def test_bilinear_matches_texel_centres():
     u = (np.array([0, 3]) + 0.5) / 4
     v = 1 - (np.array([1, 2]) + 0.5) / 4
     np.testing.assert_allclose(bilinear(img, u, v), [img[1, 0], img[2, 3]])
+
+
+def test_decal_of_a_plate_seen_square_on_is_its_uv_bake(gl_ctx):
+    """A plate in z = 0 with uv = xy, decal centred over it, as wide as the plate: the projector
+    frame is the UV frame (X right, Y up, N = +z), so every map equals the UV bake bit for bit."""
+    from conftest import plate_mesh, tiny_network
+
+    m = plate_mesh(8)
+    seg = segments(tiny_network())
+    n_v = len(m.vertices)
+    frame = {
+        "normals": np.tile([0.0, 0, 1], (n_v, 1)), "tangents": np.tile([1.0, 0, 0, 1], (n_v, 1))
+    }
+    uvm = bake_cracks(m.vertices, m.faces, m.uv, seg, 128, max_distance=0.05, ctx=gl_ctx, **frame)
+    proj = make_projector(m.vertices, m.faces, [0.5, 0.5, 0.3], 1.0)
+    np.testing.assert_allclose(proj.matrix[:3], [[1, 0, 0, 0.5], [0, 1, 0, 0.5], [0, 0, 1, 0]])
+    assert proj.depth == pytest.approx(0.05)  # flat: only the margins
+    dec = bake_decal(m.vertices, m.faces, seg, proj, 128, uvm.max_distance, ctx=gl_ctx)
+    for name in ("mask", "width", "depth", "distance", "crack_id", "normal", "occlusion"):
+        np.testing.assert_array_equal(getattr(dec, name), getattr(uvm, name), err_msg=name)
