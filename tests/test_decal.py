@@ -275,3 +275,31 @@ def test_decal_of_a_plate_seen_square_on_is_its_uv_bake(gl_ctx):
     dec = bake_decal(m.vertices, m.faces, seg, proj, 128, uvm.max_distance, ctx=gl_ctx)
     for name in ("mask", "width", "depth", "distance", "crack_id", "normal", "occlusion"):
         np.testing.assert_array_equal(getattr(dec, name), getattr(uvm, name), err_msg=name)
+
+
+def test_decal_normal_is_in_the_projector_frame(gl_ctx):
+    """UVs turned 90 degrees on the plate (u = y, v = 1 - x: T = +y, B = -x) and the projector
+    square on (X = +x, Y = +y): the decal is the UV bake turned back, and its normals are the
+    same world normals written in the projector's frame, (x, y) -> (-y, x)."""
+    from conftest import plate_mesh, tiny_network
+
+    m = plate_mesh(8)
+    uv = np.stack([m.vertices[:, 1], 1.0 - m.vertices[:, 0]], 1)
+    seg = segments(tiny_network())
+    n_v = len(m.vertices)
+    res = 512
+    uvm = bake_cracks(m.vertices, m.faces, uv, seg, res, max_distance=0.05, ctx=gl_ctx,
+                      normals=np.tile([0.0, 0, 1], (n_v, 1)),
+                      tangents=np.tile([0.0, 1, 0, 1], (n_v, 1)))  # fmt: skip
+    proj = make_projector(m.vertices, m.faces, [0.5, 0.5, 0.0], 1.0)
+    dec = bake_decal(m.vertices, m.faces, seg, proj, res, uvm.max_distance, ctx=gl_ctx)
+    # Decal texel (r, c) is world (x, y) = ((c + .5) / R, 1 - (r + .5) / R): UV texel (c, R-1-r).
+    turned = lambda a: np.rot90(a, 1)  # noqa: E731  (b[r, c] = a[c, R - 1 - r])
+    mask_uv = turned(np.asarray(uvm.mask, np.float64))
+    np.testing.assert_allclose(np.asarray(dec.mask, np.float64), mask_uv, atol=2e-3)
+    assert (mask_uv > 0.5).sum() > 50
+    n_uv = np.stack([turned(uvm.normal[..., k]) for k in range(3)], -1)
+    expected = np.stack([-n_uv[..., 1], n_uv[..., 0], n_uv[..., 2]], -1)
+    tilted = np.linalg.norm(expected[..., :2], axis=-1) > 0.05
+    assert tilted.sum() > 50
+    np.testing.assert_allclose(dec.normal, expected, atol=2e-3)
