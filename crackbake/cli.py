@@ -14,6 +14,7 @@ from crackbake import __version__
 from crackbake.display import Display, display_mode
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.params import (
+    DECAL_RES_DEFAULT,
     FORMATS,
     METHODS,
     NORMAL_Y,
@@ -259,6 +260,17 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     show_default=True,
     callback=_split_formats,
     help="Which outputs to write (cracks.json, cracks.obj and manifest.json always are).",
+)
+@click.option(
+    "--decal",
+    type=float,
+    metavar="SIZE",
+    help="Also bake a projected decal per --impact, SIZE mesh units wide (decals.json).",
+)
+@click.option(
+    "--decal-res",
+    type=int,
+    help=f"Decal texture size in texels [min(--res, {DECAL_RES_DEFAULT})].",
 )
 @click.option(
     "--stress-res",

@@ -19,6 +19,8 @@ FORMATS = ("exr", "png", "glb", "preview", "stress")
 #: Default edge of the stress maps: the stress lives on the simulation mesh (about 100k faces, a
 #: few hundred triangles across), so 1024 texels already give each sim triangle several texels.
 STRESS_RES_DEFAULT = 1024
+#: Default decal texture edge: min(--res, this).
+DECAL_RES_DEFAULT = 1024
 UV_MODES = ("auto", "keep", "unwrap")
 #: Engine profiles (``--target``; the table is :data:`crackbake.exchange.targets.TARGETS`).
 TARGETS = ("gltf", "unity", "unity-hdrp", "unreal", "godot", "blender")
@@ -249,6 +251,10 @@ class RunParams:
     formats : tuple of str
         Subset of ``exr``, ``png``, ``glb``, ``preview`` (a shaded picture, ``preview.png``) and
         ``stress`` (``<stem>_stress.exr``, the solver's stress fields; not with ``--cracks``).
+    decal : float or None
+        Decal width = height, mesh units: one projected decal per impact (needs ``impacts``).
+    decal_res : int or None
+        Decal texture edge in texels; ``None`` = ``min(res, DECAL_RES_DEFAULT)``.
     stress_res : int or None
         Edge of the stress maps in texels; ``None`` = ``min(res, STRESS_RES_DEFAULT)``.
     float32 : bool
@@ -292,6 +298,8 @@ class RunParams:
     seed: int = 0
     formats: tuple[str, ...] = FORMATS
     stress_res: int | None = None
+    decal: float | None = None
+    decal_res: int | None = None
     float32: bool = False
     target: str = "gltf"
     normal_y: str | None = None
@@ -342,6 +350,15 @@ class RunParams:
             raise CrackbakeError(f"--uv '{self.uv}' is unknown; use one of {', '.join(UV_MODES)}")
         _check_range("--padding", self.padding, 0, RES_MAX, " texels")
         _check_range("--stress-res", self.stress_res, RES_MIN, RES_MAX, " texels")
+        _check_range("--decal", self.decal, 0.0, LENGTH_MAX, " mesh units", True)
+        _check_range("--decal-res", self.decal_res, RES_MIN, RES_MAX, " texels")
+        if (self.decal is not None or self.decal_res is not None) and not self.impacts:
+            raise CrackbakeError(
+                "--decal needs --impact X,Y,Z (one decal is centred on each impact); "
+                "add an impact or drop --decal"
+            )
+        if self.decal_res is not None and self.decal is None:
+            raise CrackbakeError("--decal-res needs --decal SIZE; add --decal or drop --decal-res")
         _check_range("--dilate", self.dilate, 0, RES_MAX, " texels")
         if not self.formats:
             raise CrackbakeError(f"--formats is empty; use a subset of {','.join(FORMATS)}")

@@ -27,7 +27,7 @@ from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.network import CrackNetwork, from_solver, segments
-from crackbake.params import STRESS_RES_DEFAULT, RunParams
+from crackbake.params import DECAL_RES_DEFAULT, STRESS_RES_DEFAULT, RunParams
 from crackbake.simulate.setup import check_scale, sidecar_params, solver_params, stress_sources
 
 logger = logging.getLogger(__name__)
@@ -144,7 +144,7 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
     solver_stats: dict = {}
     solved = None
     if params.cracks is not None:
-        if params.impacts:
+        if params.impacts and params.decal is None:  # with --decal they place the decals
             warnings.warn(
                 "--impact is ignored with --cracks (the network is baked as given)",
                 CrackbakeWarning,
@@ -173,6 +173,7 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
         write_outputs(
             stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx, stress
         )
+        _decals(ctx, uvmesh, network, maps, params, stage, timings)
         files = stage.records()
         timings["write"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t_start
@@ -237,6 +238,23 @@ def _bake(
     )
     timings["bake"] = time.perf_counter() - t
     return maps
+
+
+def _decals(ctx, uvmesh, network, maps, params: RunParams, stage, timings) -> None:
+    """One projected decal per impact (``--decal``) and ``decals.json``, timed as ``decals``."""
+    if params.decal is None:
+        return
+    from crackbake.bake.decal import bake_decals
+    from crackbake.exchange.decals import write_decal_set
+    from crackbake.exchange.targets import normal_convention
+
+    logger.info("baking %d decal(s)", len(params.impacts))
+    t = time.perf_counter()
+    res = params.decal_res or min(params.res, DECAL_RES_DEFAULT)
+    decals = bake_decals(uvmesh, segments(network), maps, params.impacts, params.decal, res,
+                         params.tile, ctx)  # fmt: skip
+    write_decal_set(stage.path, decals, normal_convention(params.target, params.normal_y))
+    timings["decals"] = time.perf_counter() - t
 
 
 def _bake_stress(

@@ -120,6 +120,7 @@ def bake_cracks(
     ctx=None,
     normals: np.ndarray | None = None,
     tangents: np.ndarray | None = None,
+    projection: np.ndarray | None = None,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
 
@@ -154,6 +155,12 @@ def bake_cracks(
     tangents : (V, 4) float, optional
         MikkTSpace tangents (xyz, w = bitangent sign) of the vertices; when given, the maps
         also hold ``normal`` and ``occlusion`` (:mod:`crackbake.bake.normal_map`).
+    projection : (4, 4) float, optional
+        Placement of the faces in the image: ``None`` draws them at their UVs (the texture
+        bake); a mesh -> clip matrix (column vectors, x right, y up, z -1 near .. 1 far) draws
+        them through that camera, depth-tested (``shaders/decal_project.vert``: the decal bake
+        of :mod:`crackbake.bake.decal`).  ``uv`` must then hold the same placement in [0, 1]
+        (``0.5 + 0.5 * clip.xy``), which the candidate bins use for the texel footprint.
 
     Returns
     -------
@@ -177,7 +184,7 @@ def bake_cracks(
 
     images = _render(
         ctx, vertices, faces, uv, segments, res, tile, bins,
-        float(max_distance), float(profile_shape), timings, frames,
+        float(max_distance), float(profile_shape), timings, frames, projection,
     )  # fmt: skip
 
     return _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
@@ -189,18 +196,23 @@ _NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
-              max_distance: float, profile_shape: float, frames: np.ndarray | None):
-    """The surface pass (faces in UV space -> world position, footprint, bin per texel; with
-    ``frames``, the face too) and the crack pass (one full-screen triangle measuring the cracks
-    per texel; with ``frames``, reading the faces' vertex frames), with their buffers."""
+              max_distance: float, profile_shape: float, frames: np.ndarray | None,
+              projection: np.ndarray | None = None):
+    """The surface pass (faces at their placement -> world position, footprint, bin per texel;
+    with ``frames``, the face too) and the crack pass (one full-screen triangle measuring the
+    cracks per texel; with ``frames``, reading the faces' vertex frames), with their buffers.
+
+    The placement is the vertex shader: ``crack_bake.vert`` puts each face at its UVs,
+    ``decal_project.vert`` through the ``projection`` camera; the passes after it are shared."""
     ctx = gl.ctx
     with_normals = frames is not None
     vertex = np.empty((len(vertices), 5), np.float32)
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
+    placement = "crack_bake.vert" if projection is None else "decal_project.vert"
     surface = gl.keep(
         ctx.program(
-            vertex_shader=shader_variant("crack_bake.vert", with_normals),
+            vertex_shader=shader_variant(placement, with_normals),
             fragment_shader=shader_variant("crack_surface.frag", with_normals),
         )
     )
@@ -212,10 +224,13 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     )
     vbo = gl.keep(ctx.buffer(vertex))
     ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
-    vao = gl.keep(
-        ctx.vertex_array(surface, [(vbo, "2f 3f", "in_uv", "in_pos")], index_buffer=ibo,
-                         index_element_size=4)
-    )  # fmt: skip
+    layout = [(vbo, "2f 3f", "in_uv", "in_pos")] if projection is None else [
+        (vbo, "8x 3f", "in_pos")
+    ]
+    vao = gl.keep(ctx.vertex_array(surface, layout, index_buffer=ibo, index_element_size=4))
+    if projection is not None:
+        # Column vectors in GLSL's column-major order: the transpose of the row-major array.
+        surface["u_projection"].write(np.asarray(projection, np.float32).T.tobytes())
     if with_normals:
         ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
         gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
@@ -232,9 +247,10 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     return surface, vao, screen
 
 
-def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
+def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...], depth: bool = False):
     """Framebuffers of one band: the surface pass's three float targets (bound as textures for
-    the crack pass) and the crack pass's one target per channel."""
+    the crack pass; with ``depth``, a depth buffer too) and the crack pass's one target per
+    channel."""
     import moderngl
 
     ctx = gl.ctx
@@ -242,7 +258,8 @@ def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     for unit, tex in enumerate(gbuffer):
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.use(unit)
-    gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer))
+    zbuffer = gl.keep(ctx.depth_renderbuffer((res, band))) if depth else None
+    gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer, depth_attachment=zbuffer))
     textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
     fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
     return gfbo, fbo
@@ -261,15 +278,16 @@ def _render(
     profile_shape: float,
     timings: dict[str, float],
     frames: np.ndarray | None = None,
+    projection: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
-    """Draw the faces in UV space band by band; the planar channel images (row 0 = v = 0)."""
+    """Draw the faces at their placement band by band; the planar channel images (row 0 = top)."""
     import moderngl
 
     with_normals = frames is not None
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
         surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
-                                         max_distance, profile_shape, frames)
+                                         max_distance, profile_shape, frames, projection)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
         # (67 bytes a texel: 48 for the surface pass, 19 for the maps; 70 with the normal map,
@@ -285,15 +303,17 @@ def _render(
             images["normal"] = np.zeros((3, res, res), np.float32)
             images["normal"][2] = 1.0
             images["occlusion"] = np.ones((res, res), np.float16)
-        gfbo, fbo = _targets(gl, res, band, dtypes)
-        gl.ctx.enable_only(moderngl.NOTHING)  # no blending, depth test or culling
+        projected = projection is not None
+        gfbo, fbo = _targets(gl, res, band, dtypes, depth=projected)
+        # No blending or culling; a camera placement keeps the surface nearest to it.
+        gl.ctx.enable_only(moderngl.DEPTH_TEST if projected else moderngl.NOTHING)
         timings["setup"] = time.perf_counter() - t1
         t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
             gfbo.use()
-            gfbo.clear(0.0, 0.0, 0.0, 0.0)
+            gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
             vao.render(moderngl.TRIANGLES)
             fbo.use()

@@ -1,0 +1,243 @@
+"""Decals from an impact: an orthographic projector over the impact and the crack bake through it.
+
+The projector's frame (right-handed, mesh units): origin at the impact's surface point (the centre
+of the box), local +X = image right, +Y = image up, +Z = the surface normal there, towards the
+projector; it projects along -Z.  The box spans ``x in [-w/2, w/2]``, ``y in [-h/2, h/2]``,
+``z in [-d/2, d/2]``; the depth ``d`` is measured from the mesh (the surface around the impact
+inside the footprint, plus a margin), so the curved surface under the decal stays inside.
+
+The decal texture is the crack bake of :func:`crackbake.bake.raster.bake_cracks` with the faces
+drawn through the projector's camera (depth-tested: the surface nearest to the projector) instead
+of at their UVs, every other pass unchanged, so the decal measures the same world-space cracks as
+the UV bake.  The normal map is in the projector's frame (T = +X, B = +Y, N = +Z): what an engine's
+decal shader decodes, whatever the surface's own tangents.  Texel ``(row, col)`` of a ``res``
+image covers ``x = (col + 0.5) / res * w - w/2``, ``y = h/2 - (row + 0.5) / res * h``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from crackbake.bake.raster import CrackMaps, bake_cracks
+from crackbake.errors import CrackbakeError
+from crackbake.geometry import closest_on_triangles, face_areas, face_normals
+from crackbake.network import Segments
+
+#: Depth margin on each side of the measured surface, as a fraction of the decal size.
+DEPTH_MARGIN = 0.025
+#: Radius over which the impact's normal is averaged, as a fraction of the decal size.
+NORMAL_RADIUS = 0.125
+#: Texels of gutter fill around the surface seen in the decal (bilinear filtering, mip-maps).
+DECAL_DILATE_PX = 4
+
+
+@dataclass(frozen=True)
+class Projector:
+    """An orthographic decal projector in mesh space.
+
+    Attributes
+    ----------
+    matrix : (4, 4) float64
+        Projector local -> mesh, column vectors (``p_mesh = matrix @ [x, y, z, 1]``); columns
+        0-2 are the unit axes +X (image right), +Y (image up), +Z (towards the projector),
+        column 3 the box centre.
+    width, height, depth : float
+        Box extents along local X, Y, Z, mesh units.
+    """
+
+    matrix: np.ndarray
+    width: float
+    height: float
+    depth: float
+
+    @property
+    def axes(self) -> np.ndarray:
+        """(3, 3): rows +X, +Y, +Z in mesh space."""
+        return self.matrix[:3, :3].T
+
+    @property
+    def centre(self) -> np.ndarray:
+        return self.matrix[:3, 3]
+
+    def to_local(self, points: np.ndarray) -> np.ndarray:
+        """Mesh points (N, 3) -> projector local coordinates (N, 3)."""
+        return (np.asarray(points, np.float64) - self.centre) @ self.axes.T
+
+    def clip_matrix(self) -> np.ndarray:
+        """Mesh -> clip (4, 4), column vectors: x, y in [-1, 1] across the box (+y = image up),
+        z = -1 at the projector's face (local z = d/2) .. +1 at the far face."""
+        scale = np.diag([2.0 / self.width, 2.0 / self.height, -2.0 / self.depth, 1.0])
+        inverse = np.eye(4)
+        inverse[:3, :3] = self.axes
+        inverse[:3, 3] = -self.axes @ self.centre
+        return scale @ inverse
+
+    def image_uv(self, points: np.ndarray) -> np.ndarray:
+        """Mesh points (N, 3) -> decal texture coordinates (N, 2), u right, v up, [0, 1] inside."""
+        local = self.to_local(points)
+        return np.stack([local[:, 0] / self.width + 0.5, local[:, 1] / self.height + 0.5], 1)
+
+
+def _frame(normal: np.ndarray) -> np.ndarray:
+    """Rows X, Y, Z of the projector: Z = normal, Y = the mesh's +Y made perpendicular to it
+    (-Z where the normal is within 2.6 degrees of +-Y: a floor or ceiling), X = Y x Z."""
+    z = normal / np.linalg.norm(normal)
+    ref = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.999 else np.array([0.0, 0.0, -1.0])
+    y = ref - np.dot(ref, z) * z
+    y /= np.linalg.norm(y)
+    return np.stack([np.cross(y, z), y, z])
+
+
+def make_projector(
+    vertices: np.ndarray, faces: np.ndarray, point: np.ndarray, size: float
+) -> Projector:
+    """The projector of one impact: over the surface point nearest ``point``, facing along the
+    area-weighted face normal within ``NORMAL_RADIUS * size``, deep enough for the surface under it.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+        Mesh positions, mesh units.
+    faces : (F, 3) int
+        Triangles.
+    point : (3,) float
+        The impact point (need not lie on the surface).
+    size : float
+        Decal width = height, mesh units.
+
+    Returns
+    -------
+    Projector
+    """
+    vertices = np.asarray(vertices, np.float64)
+    faces = np.asarray(faces, np.int64)
+    p = np.asarray(point, np.float64)
+    tri = vertices[faces]
+    closest, _ = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
+    dist = np.linalg.norm(closest - p, axis=1)
+    hit = int(np.argmin(dist))
+    centre = closest[hit]
+    normals = face_normals(vertices, faces)
+    near = np.linalg.norm(closest - centre, axis=1) <= NORMAL_RADIUS * size
+    near[hit] = True
+    n = (normals[near] * face_areas(vertices, faces)[near, None]).sum(0)
+    if not np.linalg.norm(n) > 0:
+        raise CrackbakeError(
+            f"the surface at the impact {tuple(np.round(p, 6))} has no normal (degenerate faces); "
+            "move the impact onto a face with area"
+        )
+    axes = _frame(n)
+    half = _surface_half_depth(vertices, faces, normals, axes, centre, size, hit)
+    depth = 2.0 * (half * 1.05 + DEPTH_MARGIN * size)
+    matrix = np.eye(4)
+    matrix[:3, :3] = axes.T
+    matrix[:3, 3] = centre
+    return Projector(matrix=matrix, width=float(size), height=float(size), depth=float(depth))
+
+
+def _surface_half_depth(vertices, faces, normals, axes, centre, size, hit) -> float:
+    """Largest |local z| of the surface under the footprint: the faces facing the projector whose
+    footprint overlaps the box, connected (through shared vertices) to the impact's face."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    local = (vertices - centre) @ axes.T
+    lo = local[faces].min(axis=1)
+    hi = local[faces].max(axis=1)
+    half = 0.5 * size
+    keep = (normals @ axes[2] > 0) & (lo[:, 0] <= half) & (hi[:, 0] >= -half)
+    keep &= (lo[:, 1] <= half) & (hi[:, 1] >= -half)
+    keep[hit] = True
+    idx = np.nonzero(keep)[0]
+    sub = faces[idx]
+    # Faces x vertices incidence; faces sharing a vertex are linked.
+    rows = np.repeat(np.arange(len(idx)), 3)
+    inc = coo_matrix((np.ones(rows.size), (rows, sub.ravel())), shape=(len(idx), len(vertices)))
+    _, label = connected_components((inc @ inc.T).tocsr(), directed=False)
+    own = label == label[int(np.searchsorted(idx, hit))]
+    return float(np.abs(local[sub[own].ravel(), 2]).max())
+
+
+def decal_faces(vertices: np.ndarray, faces: np.ndarray, projector: Projector) -> np.ndarray:
+    """Indices of the faces a decal bake draws: facing the projector and overlapping its box."""
+    local = projector.to_local(vertices)
+    lo = local[faces].min(axis=1)
+    hi = local[faces].max(axis=1)
+    ext = 0.5 * np.array([projector.width, projector.height, projector.depth])
+    overlap = np.all((lo <= ext) & (hi >= -ext), axis=1)
+    facing = face_normals(vertices, faces) @ projector.axes[2] > 0
+    return np.nonzero(overlap & facing)[0]
+
+
+def bake_decal(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    segments: Segments,
+    projector: Projector,
+    res: int,
+    max_distance: float,
+    profile_shape: float = 1.0,
+    tile: int | None = None,
+    ctx=None,
+) -> CrackMaps:
+    """Bake the crack network as the projector sees it: the decal texture set.
+
+    Parameters
+    ----------
+    vertices, faces
+        The baked mesh (the UV bake's), mesh units.
+    segments : Segments
+        The crack network in mesh space.
+    projector : Projector
+    res : int
+        Decal edge in texels.
+    max_distance : float
+        The UV bake's distance clamp (``CrackMaps.max_distance``), so both measure alike.
+    profile_shape : float
+        Depth profile exponent, as in the UV bake.
+    tile : int, optional
+        Largest framebuffer edge (default the bake's).
+    ctx : moderngl.Context, optional
+
+    Returns
+    -------
+    CrackMaps
+        Row 0 = top of the image (local +Y); ``inside`` marks texels showing the surface; the
+        normal is in the projector's frame (OpenGL: +Y = image up), flat (0, 0, 1).
+    """
+    vertices = np.asarray(vertices, np.float64)
+    sub = np.asarray(faces, np.int64)[decal_faces(vertices, faces, projector)]
+    if len(sub) == 0:
+        raise CrackbakeError("no surface faces the decal projector; check the impact point")
+    clip = projector.clip_matrix()
+    homo = np.c_[vertices, np.ones(len(vertices))] @ clip.T
+    placement = 0.5 + 0.5 * homo[:, :2]
+    n_vertices = len(vertices)
+    normals = np.broadcast_to(projector.axes[2], (n_vertices, 3))
+    tangents = np.empty((n_vertices, 4))
+    tangents[:, :3] = projector.axes[0]
+    tangents[:, 3] = 1.0  # B = cross(N, T) = +Y, image up
+    extra = {} if tile is None else {"tile": tile}
+    return bake_cracks(
+        vertices, sub, placement, segments, res, max_distance=max_distance,
+        profile_shape=profile_shape, dilate_px=DECAL_DILATE_PX, ctx=ctx, normals=normals,
+        tangents=tangents, projection=clip, **extra,
+    )  # fmt: skip
+
+
+def bake_decals(uvmesh, segs: Segments, maps: CrackMaps, impacts, size: float, res: int,
+                tile: int | None = None, ctx=None) -> list[tuple[Projector, CrackMaps, dict]]:
+    """One decal per impact on the baked mesh: ``(projector, maps, impact dict)`` each.
+
+    ``maps`` is the run's UV bake: its distance clamp and profile are reused, so the decal
+    measures exactly what the UV bake measured.
+    """
+    out = []
+    for imp in impacts:
+        proj = make_projector(uvmesh.vertices, uvmesh.faces, imp.point, size)
+        dec = bake_decal(uvmesh.vertices, uvmesh.faces, segs, proj, res, maps.max_distance,
+                         maps.profile_shape, tile, ctx)  # fmt: skip
+        out.append((proj, dec, imp.to_dict()))
+    return out
