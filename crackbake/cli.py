@@ -87,6 +87,12 @@ class _Command(click.Command):
 
             name = f"{prog_name or 'crackbake'} decals"
             return decals.main(argv[1:], name, complete_var, standalone_mode, **extra)
+        if argv[:1] == ["tile"] and self.name != "tile":
+            # `crackbake tile ...`: a seamlessly tiling texture set (crackbake/tile_cli.py).
+            from crackbake.tile_cli import tile
+
+            name = f"{prog_name or 'crackbake'} tile"
+            return tile.main(argv[1:], name, complete_var, standalone_mode, **extra)
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:

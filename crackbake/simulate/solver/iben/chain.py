@@ -16,7 +16,8 @@ def crack_graph(segp: np.ndarray) -> dict[int, list[int]]:
     return adj
 
 
-def chain(segp, info, X, onb, steps, params: SolverParams, X0, period: float = 0.0) -> list[CrackPath]:
+def chain(segp, info, X, onb, steps, params: SolverParams, X0,
+          period: float = 0.0) -> list[CrackPath]:
     """Chain crack segments into polylines between junctions and ends; width, depth, time.
 
     Point ``i`` of a path takes the asset face of segment ``i`` (the last point that of the last

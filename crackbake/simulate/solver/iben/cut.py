@@ -88,8 +88,10 @@ def crossings(s, w, c):
             k += 1
         a = F[f, (k + 1) % 3]
         b = F[f, (k + 2) % 3]
-        da = dot3(wrap(X[a, 0] - xc0, s.gp[5]), wrap(X[a, 1] - xc1, s.gp[6]), X[a, 2] - xc2, nc0, nc1, nc2)
-        db = dot3(wrap(X[b, 0] - xc0, s.gp[5]), wrap(X[b, 1] - xc1, s.gp[6]), X[b, 2] - xc2, nc0, nc1, nc2)
+        da = dot3(wrap(X[a, 0] - xc0, s.gp[5]), wrap(X[a, 1] - xc1, s.gp[6]),
+                  X[a, 2] - xc2, nc0, nc1, nc2)
+        db = dot3(wrap(X[b, 0] - xc0, s.gp[5]), wrap(X[b, 1] - xc1, s.gp[6]),
+                  X[b, 2] - xc2, nc0, nc1, nc2)
         if da == db or da * db > 0:
             continue
         tt = da / (da - db)
@@ -132,8 +134,10 @@ def choose_tips(s, p, w, c):
             continue
         a, b, tt = w.sa[side], w.sb[side], w.st[side]
         p0, p1, p2 = _crossing(s, w, side)
-        ang_a = angle(p0, p1, p2, wrap(X[a, 0] - xc0, s.gp[5]), wrap(X[a, 1] - xc1, s.gp[6]), X[a, 2] - xc2)
-        ang_b = angle(p0, p1, p2, wrap(X[b, 0] - xc0, s.gp[5]), wrap(X[b, 1] - xc1, s.gp[6]), X[b, 2] - xc2)
+        ang_a = angle(p0, p1, p2, wrap(X[a, 0] - xc0, s.gp[5]),
+                        wrap(X[a, 1] - xc1, s.gp[6]), X[a, 2] - xc2)
+        ang_b = angle(p0, p1, p2, wrap(X[b, 0] - xc0, s.gp[5]),
+                        wrap(X[b, 1] - xc1, s.gp[6]), X[b, 2] - xc2)
         thr_a = p.snap_b if on_boundary(F, NF, NFc, a) else p.snap
         thr_b = p.snap_b if on_boundary(F, NF, NFc, b) else p.snap
         snap_a = ang_a < thr_a or tt < p.snap_t
@@ -170,7 +174,8 @@ def drop_back_cuts(s, p, w, c):
             for q in range(3):
                 y = F[f, q]
                 if y != c and y != tip[side] and spoke_count(F, NF, NFc, c, y) == 1:
-                    if angle(p0, p1, p2, wrap(X[y, 0] - xc0, s.gp[5]), wrap(X[y, 1] - xc1, s.gp[6]), X[y, 2] - xc2) < p.back:
+                    if angle(p0, p1, p2, wrap(X[y, 0] - xc0, s.gp[5]),
+                             wrap(X[y, 1] - xc1, s.gp[6]), X[y, 2] - xc2) < p.back:
                         tip[side] = -1
                         split[side] = False
 

@@ -314,7 +314,8 @@ def record(s, p, w, c, nucleate, interior, sig_n):
         s.pcid[pid[c]] = cid
         s.pcid[pid[t]] = cid
         # A new crack's first segments start its direction afresh (c may lie on another).
-        smooth_dir(pid[c], pid[t], wrap(X[t, 0] - xc0, s.gp[5]), wrap(X[t, 1] - xc1, s.gp[6]), X[t, 2] - xc2,
+        smooth_dir(pid[c], pid[t], wrap(X[t, 0] - xc0, s.gp[5]),
+                   wrap(X[t, 1] - xc1, s.gp[6]), X[t, 2] - xc2,
                    0.0 if nucleate else p.dir_len, pdir)
         d0 = wrap(X[t, 0] - xc0, s.gp[5])
         d1 = wrap(X[t, 1] - xc1, s.gp[6])
