@@ -167,8 +167,12 @@ def tile_impacts(params: TileParams, radius_rel: float) -> list[tuple[float, flo
         return []
     n = 3 if params.impacts is None else int(params.impacts)
     rng = np.random.default_rng(np.random.SeedSequence([int(params.seed), 0x1A9AC7]))
-    xy = rng.uniform(0.0, params.size, (n, 2))
-    radius = radius_rel * params.size * math.sqrt(2.0)
+    # Latin hypercube: one impact per row and per column of an n x n grid, so that impacts
+    # spread over the tile instead of clumping (their fields would merge into one blob).
+    xy = (np.column_stack([rng.permutation(n), rng.permutation(n)])
+          + rng.uniform(0.0, 1.0, (n, 2))) * (params.size / n)
+    # The preset's radius, at most a third of the mean spacing of the impacts.
+    radius = min(radius_rel * params.size * math.sqrt(2.0), params.size / (3.0 * math.sqrt(n)))
     return [(float(x), float(y), float(radius)) for x, y in xy]
 
 
@@ -227,19 +231,19 @@ def _periodic_noise(points, scale, period, rng, count, waves: int = 16) -> np.nd
 
 
 def _impact_stress(cent, x, y, radius, period, hoop) -> np.ndarray:
-    """Radial + hoop tension of an impact at its nearest image, fading to 0 at ``2 radius``
-    (a plate version of the impact field: radial cracks from the centre, hoop further out)."""
+    """The impact field of :mod:`crackbake.simulate.stress.fields` on a flat plate (unit
+    strength): ``2 cos(d / radius) (r r^T + hoop c c^T)`` within ``d <= pi/2 radius`` of the
+    impact's nearest image, ``r`` the radial and ``c`` the hoop direction."""
     d = cent[:, :2] - np.array([x, y])
     d -= period * np.floor(d / period + 0.5)
     r = np.linalg.norm(d, axis=1)
     u = d / np.maximum(r, 1e-12)[:, None]
-    fade = np.clip(1.0 - r / (2.0 * radius), 0.0, 1.0) ** 2
-    radial = fade * np.exp(-r / radius)
-    hoop_t = hoop * fade * (r / radius) * np.exp(1.0 - r / radius) * 0.5
+    u[r < 1e-12] = (1.0, 0.0)
+    w = np.where(r <= 0.5 * np.pi * radius, 2.0 * np.cos(r / radius), 0.0)
+    c = np.column_stack([-u[:, 1], u[:, 0]])
     s = np.zeros((len(cent), 3, 3))
-    v = np.column_stack([-u[:, 1], u[:, 0]])
-    s[:, :2, :2] = (hoop_t[:, None, None] * np.einsum("ea,eb->eab", u, u)
-                    + radial[:, None, None] * np.einsum("ea,eb->eab", v, v))
+    s[:, :2, :2] = w[:, None, None] * (np.einsum("ea,eb->eab", u, u)
+                                       + hoop * np.einsum("ea,eb->eab", c, c))
     return s
 
 
