@@ -262,41 +262,37 @@ def split_at_border(points: np.ndarray, values: np.ndarray, period: float) -> li
     -------
     list of (points (n, 3), values (n, K))
     """
-    cell = np.floor(points[:, :2] / period)
-    out = []
-    cur_p, cur_v = [points[0]], [values[0]]
-    cur_cell = cell[0]
+    # Sub-segments between the grid lines each segment crosses strictly inside, each in the
+    # cell of its midpoint; a piece ends where the cell changes.  (Points lying exactly on a
+    # line belong to both sides, so they never decide a cell.)
+    runs: list[tuple[list, list, np.ndarray]] = []
     for k in range(1, len(points)):
         a, b = points[k - 1], points[k]
         va, vb = values[k - 1], values[k]
-        # Parameters where the segment crosses a grid line x = i L or y = j L.
-        ts = []
+        ts = [0.0, 1.0]
         for ax in (0, 1):
-            lo, hi = sorted((a[ax] / period, b[ax] / period))
-            for g in range(int(np.floor(lo)) + 1, int(np.floor(hi)) + 1 if hi != np.floor(hi)
-                           else int(hi)):
-                ts.append((g * period - a[ax]) / (b[ax] - a[ax]))
-        for t in sorted(ts):
-            p = a + t * (b - a)
-            v = va + t * (vb - va)
-            cur_p.append(p)
-            cur_v.append(v)
-            out.append((cur_p, cur_v, cur_cell))
-            mid = a + min(t + 1e-9, 1.0) * (b - a)
-            cur_cell = np.floor(mid[:2] / period)
-            cur_p, cur_v = [p], [v]
-        cur_p.append(b)
-        cur_v.append(vb)
-    out.append((cur_p, cur_v, cur_cell))
+            lo, hi = sorted((a[ax], b[ax]))
+            for g in range(int(np.floor(lo / period)) + 1, int(np.ceil(hi / period))):
+                tt = (g * period - a[ax]) / (b[ax] - a[ax])
+                if 0.0 < tt < 1.0:
+                    ts.append(tt)
+        ts.sort()
+        for t0, t1 in zip(ts[:-1], ts[1:], strict=True):
+            if t1 <= t0:
+                continue
+            cell = np.floor((a + 0.5 * (t0 + t1) * (b - a))[:2] / period)
+            p1, v1 = a + t1 * (b - a), va + t1 * (vb - va)
+            if runs and np.array_equal(runs[-1][2], cell):
+                runs[-1][0].append(p1)
+                runs[-1][1].append(v1)
+            else:
+                runs.append(([a + t0 * (b - a), p1], [va + t0 * (vb - va), v1], cell))
     pieces = []
-    for ps, vs, c in out:
-        if len(ps) < 2:
-            continue
+    for ps, vs, c in runs:
         p = np.array(ps)
         p[:, :2] -= c * period
+        # Rounding only: every point is in the closed cell of its piece.
         p[:, :2] = np.clip(p[:, :2], 0.0, period)
-        if np.linalg.norm(p[-1] - p[0]) == 0.0 and len(p) == 2:
-            continue
         pieces.append((p, np.array(vs)))
     return pieces
 

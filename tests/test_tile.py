@@ -174,3 +174,53 @@ def test_bad_options_one_line(tmp_path, args, words):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and words in lines[0], r.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_split_at_border_with_points_on_the_border():
+    # A path touching the line y = 0 at a vertex, then running below it (into the cell
+    # below, shifted up by the period), then back: three pieces, none squashed on the line.
+    pts = np.array([[0.1, 0.2, 0.0], [0.2, 0.0, 0.0], [0.3, -0.1, 0.0], [0.4, 0.0, 0.0],
+                    [0.5, 0.1, 0.0]])
+    vals = np.arange(5.0)[:, None]
+    pieces = split_at_border(pts, vals, SIZE)
+    assert [len(p) for p, _ in pieces] == [2, 3, 2]
+    np.testing.assert_allclose(pieces[1][0][:, :2], [[0.2, 2.0], [0.3, 1.9], [0.4, 2.0]])
+    np.testing.assert_allclose(pieces[2][0][:, :2], [[0.4, 0.0], [0.5, 0.1]])
+
+
+def _pieces(doc: dict, shift: float) -> list:
+    from types import SimpleNamespace
+
+    out = []
+    for p in doc["pieces"]:
+        pts = np.column_stack([np.array(p["points"]) + shift, np.zeros(len(p["points"]))])
+        vals = np.column_stack([p["width"], p["depth"], p["time"]])
+        for q, v in split_at_border(pts, vals, SIZE):
+            out.append(SimpleNamespace(crack=p["crack"], points=q, width=v[:, 0],
+                                       depth=v[:, 1], time=v[:, 2]))
+    return out
+
+
+def test_bake_is_shift_invariant(mud_tile, gl_ctx):
+    """The network moved by half a period (re-split at the border) bakes to the same maps
+    rolled by half the texture: the tile's border is no different from its middle."""
+    from crackbake.bake.tangents import with_tangents
+    from crackbake.bake.uv import prepare_uvs
+    from crackbake.exchange.tile import bake_tile
+    from crackbake.library import plate_mesh
+
+    res = 256
+    doc = json.loads((mud_tile / "cracks.json").read_text())
+    uvm = with_tangents(prepare_uvs(plate_mesh(SIZE), "keep", res, cache=False, ctx=gl_ctx))
+    a = bake_tile(_pieces(doc, 0.0), uvm, SIZE, res, 1.0, gl_ctx)
+    b = bake_tile(_pieces(doc, SIZE / 2), uvm, SIZE, res, 1.0, gl_ctx)
+    for name in ("mask", "depth", "distance", "width"):
+        ma = np.roll(np.asarray(getattr(a, name), np.float64), (res // 2, res // 2), (0, 1))
+        mb = np.asarray(getattr(b, name), np.float64)
+        scale = max(float(np.abs(mb).max()), 1e-12)
+        # float16 rounding everywhere; a few texels equidistant from two cracks may pick
+        # the other one (width).
+        off = np.abs(ma - mb) > 2e-3 * scale
+        assert off.mean() < 5e-4, (name, off.sum())
+    na = np.roll(a.normal, (res // 2, res // 2), (0, 1))
+    assert (np.abs(na - b.normal).max(axis=2) > 2e-3).mean() < 5e-4
