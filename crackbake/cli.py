@@ -59,6 +59,9 @@ Examples:
   # a decal library: 16 glass impacts in mip-safe atlases (crackbake decals --help)
   crackbake decals --preset glass -n 16 --size 0.5 --res 1024 -o lib/
 \b
+  # a seamlessly tiling mud texture set (crackbake tile --help)
+  crackbake tile --preset mud --size 2 --res 2048 -o mud_tile/
+\b
 Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.<map>.V layers: mask,
 width, time, depth, distance, id, occlusion; crack.normal.NX/NY/NZ), <stem>_stress.exr, the
 --target PNGs (gltf: basecolor, normal, orm, data, mask, depth), <stem>.glb, preview.png,
