@@ -59,6 +59,9 @@ Examples:
   # a decal library: 16 glass impacts in mip-safe atlases (crackbake decals --help)
   crackbake decals --preset glass -n 16 --size 0.5 --res 1024 -o lib/
 \b
+  # a seamlessly tiling mud texture set (crackbake tile --help)
+  crackbake tile --preset mud --size 2 --res 2048 -o mud_tile/
+\b
 Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.<map>.V layers: mask,
 width, time, depth, distance, id, occlusion; crack.normal.NX/NY/NZ), <stem>_stress.exr, the
 --target PNGs (gltf: basecolor, normal, orm, data, mask, depth), <stem>.glb, preview.png,
@@ -87,6 +90,12 @@ class _Command(click.Command):
 
             name = f"{prog_name or 'crackbake'} decals"
             return decals.main(argv[1:], name, complete_var, standalone_mode, **extra)
+        if argv[:1] == ["tile"] and self.name != "tile":
+            # `crackbake tile ...`: a seamlessly tiling texture set (crackbake/tile_cli.py).
+            from crackbake.tile_cli import tile
+
+            name = f"{prog_name or 'crackbake'} tile"
+            return tile.main(argv[1:], name, complete_var, standalone_mode, **extra)
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:

@@ -7,6 +7,7 @@ without allocating, so the compiled crack loop can call them.  ``cnt[1]``, ``cnt
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 
@@ -59,7 +60,7 @@ def _find(par, i):
 
 @njit(cache=True)
 def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crack_of, nver,
-               segp, seg_alive, seg_info, segof, cnt):
+               segp, seg_alive, seg_info, segof, cnt, per0=0.0, per1=0.0):
     """Split edge (a, b) at ``a + tt (b - a)``: one new node, each face on the edge in two.
 
     Children keep the parent's world stress (so its in-frame rotation is implicit), asset face and
@@ -82,6 +83,12 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
     cnt[1] += 1
     for q in range(3):
         X[p, q] = X[a, q] + tt * (X[b, q] - X[a, q])
+    if per0 != 0.0:
+        # Periodic plate: along the shorter way round, back into [0, per).
+        for q, per in ((0, per0), (1, per1)):
+            d = X[b, q] - X[a, q]
+            d -= per * np.floor(d / per + 0.5)
+            X[p, q] = (X[a, q] + tt * d) % per
     pid[p] = p
     hn[p] = 0.5 * (hn[a] + hn[b])
     taun[p] = 0.5 * (taun[a] + taun[b])

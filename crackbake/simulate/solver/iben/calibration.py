@@ -103,8 +103,15 @@ def percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
     return float(np.percentile(pool, REF_PERCENTILE)) if len(pool) else 0.0
 
 
-def shadow_grid(X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Empty shadow grid over the bounding box and its parameters ``origin, cell, radius``."""
+def shadow_grid(X0: np.ndarray, period: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Empty shadow grid over the bounding box and its parameters ``origin (3), cell, radius,
+    period x, period y`` (7,).
+
+    With ``period`` > 0 (a square periodic plate ``[0, period)²``, docs/solver.md "Periodic
+    plates") the grid spans exactly one period in x and y, so its cells wrap around.
+    """
+    if period > 0.0:
+        return _periodic_grid(X0, period)
     lo, hi = X0.min(0), X0.max(0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
     radius = SHADOW_REL * diag
@@ -117,4 +124,15 @@ def shadow_grid(X0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         cell *= 1.25
     origin = lo - pad * cell
     G = np.zeros((int(dims[0]), int(dims[1]), int(dims[2]), 6))
-    return G, np.array([origin[0], origin[1], origin[2], cell, radius])
+    return G, np.array([origin[0], origin[1], origin[2], cell, radius, 0.0, 0.0])
+
+
+def _periodic_grid(X0: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """The shadow grid of a periodic plate: radius from the period's diagonal, as on a plate."""
+    radius = SHADOW_REL * float(np.hypot(period, period))
+    n = max(int(np.ceil(period / (radius / 3.0))), 4)
+    while n * n * 5 > SHADOW_MAX_CELLS:
+        n = int(n / 1.25)
+    cell = period / n
+    z0 = float(X0[:, 2].min()) - 2 * cell
+    return np.zeros((n, n, 5, 6)), np.array([0.0, 0.0, z0, cell, radius, period, period])

@@ -16,7 +16,8 @@ def crack_graph(segp: np.ndarray) -> dict[int, list[int]]:
     return adj
 
 
-def chain(segp, info, X, onb, steps, params: SolverParams, X0) -> list[CrackPath]:
+def chain(segp, info, X, onb, steps, params: SolverParams, X0,
+          period: float = 0.0) -> list[CrackPath]:
     """Chain crack segments into polylines between junctions and ends; width, depth, time.
 
     Point ``i`` of a path takes the asset face of segment ``i`` (the last point that of the last
@@ -54,12 +55,18 @@ def chain(segp, info, X, onb, steps, params: SolverParams, X0) -> list[CrackPath
 
     rel = info[:, 2]
     wmax = float(rel.max()) if len(rel) and rel.max() > 0 else 1.0
-    diag = float(np.linalg.norm(X0.max(0) - X0.min(0)))
+    diag = (float(np.linalg.norm(X0.max(0) - X0.min(0))) if not period
+            else float(np.hypot(period, period)))
     width = params.crack_width if params.crack_width is not None else 1e-3 * diag
     total = max(steps, 1)
     out = []
     for pts, segs in chains:
         p = X[np.asarray(pts)]
+        if period:
+            # Periodic plate: unwrap to a continuous path (points may leave [0, period)).
+            d = np.diff(p, axis=0)
+            d[:, :2] -= period * np.floor(d[:, :2] / period + 0.5)
+            p = np.concatenate([p[:1], p[:1] + np.cumsum(d, axis=0)])
         sr = rel[segs] / wmax
         w = np.empty(len(pts))
         w[0], w[-1] = sr[0], sr[-1]

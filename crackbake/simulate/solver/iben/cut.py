@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from crackbake.simulate.solver.iben.vec import angle, cross3, dot3, norm3
+from crackbake.simulate.solver.iben.vec import angle, cross3, dot3, norm3, wrap
 from crackbake.simulate.solver.topology import on_boundary, separate, split_edge, spoke_count
 
 
@@ -88,13 +88,15 @@ def crossings(s, w, c):
             k += 1
         a = F[f, (k + 1) % 3]
         b = F[f, (k + 2) % 3]
-        da = dot3(X[a, 0] - xc0, X[a, 1] - xc1, X[a, 2] - xc2, nc0, nc1, nc2)
-        db = dot3(X[b, 0] - xc0, X[b, 1] - xc1, X[b, 2] - xc2, nc0, nc1, nc2)
+        da = dot3(wrap(X[a, 0] - xc0, s.gp[5]), wrap(X[a, 1] - xc1, s.gp[6]),
+                  X[a, 2] - xc2, nc0, nc1, nc2)
+        db = dot3(wrap(X[b, 0] - xc0, s.gp[5]), wrap(X[b, 1] - xc1, s.gp[6]),
+                  X[b, 2] - xc2, nc0, nc1, nc2)
         if da == db or da * db > 0:
             continue
         tt = da / (da - db)
-        p0 = X[a, 0] + tt * (X[b, 0] - X[a, 0]) - xc0
-        p1 = X[a, 1] + tt * (X[b, 1] - X[a, 1]) - xc1
+        p0 = wrap(X[a, 0] + tt * wrap(X[b, 0] - X[a, 0], s.gp[5]) - xc0, s.gp[5])
+        p1 = wrap(X[a, 1] + tt * wrap(X[b, 1] - X[a, 1], s.gp[6]) - xc1, s.gp[6])
         p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - xc2
         along = dot3(p0, p1, p2, tc0, tc1, tc2)
         side = 0 if along > 0 else 1
@@ -111,8 +113,8 @@ def _crossing(s, w, side):
     """Crossing point on ``side``, relative to the centre."""
     X = s.X
     a, b, tt = w.sa[side], w.sb[side], w.st[side]
-    p0 = X[a, 0] + tt * (X[b, 0] - X[a, 0]) - w.geo[0, 0]
-    p1 = X[a, 1] + tt * (X[b, 1] - X[a, 1]) - w.geo[0, 1]
+    p0 = wrap(X[a, 0] + tt * wrap(X[b, 0] - X[a, 0], s.gp[5]) - w.geo[0, 0], s.gp[5])
+    p1 = wrap(X[a, 1] + tt * wrap(X[b, 1] - X[a, 1], s.gp[6]) - w.geo[0, 1], s.gp[6])
     p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - w.geo[0, 2]
     return p0, p1, p2
 
@@ -132,8 +134,10 @@ def choose_tips(s, p, w, c):
             continue
         a, b, tt = w.sa[side], w.sb[side], w.st[side]
         p0, p1, p2 = _crossing(s, w, side)
-        ang_a = angle(p0, p1, p2, X[a, 0] - xc0, X[a, 1] - xc1, X[a, 2] - xc2)
-        ang_b = angle(p0, p1, p2, X[b, 0] - xc0, X[b, 1] - xc1, X[b, 2] - xc2)
+        ang_a = angle(p0, p1, p2, wrap(X[a, 0] - xc0, s.gp[5]),
+                        wrap(X[a, 1] - xc1, s.gp[6]), X[a, 2] - xc2)
+        ang_b = angle(p0, p1, p2, wrap(X[b, 0] - xc0, s.gp[5]),
+                        wrap(X[b, 1] - xc1, s.gp[6]), X[b, 2] - xc2)
         thr_a = p.snap_b if on_boundary(F, NF, NFc, a) else p.snap
         thr_b = p.snap_b if on_boundary(F, NF, NFc, b) else p.snap
         snap_a = ang_a < thr_a or tt < p.snap_t
@@ -170,7 +174,8 @@ def drop_back_cuts(s, p, w, c):
             for q in range(3):
                 y = F[f, q]
                 if y != c and y != tip[side] and spoke_count(F, NF, NFc, c, y) == 1:
-                    if angle(p0, p1, p2, X[y, 0] - xc0, X[y, 1] - xc1, X[y, 2] - xc2) < p.back:
+                    if angle(p0, p1, p2, wrap(X[y, 0] - xc0, s.gp[5]),
+                             wrap(X[y, 1] - xc1, s.gp[6]), X[y, 2] - xc2) < p.back:
                         tip[side] = -1
                         split[side] = False
 
@@ -205,7 +210,8 @@ def split_tips(s, w):
         if w.split[side]:
             tip[side] = split_edge(w.sa[side], w.sb[side], w.st[side], X, F, s.S, s.AF, s.GR,
                                    NF, NFc, s.pid, s.onb, hn, taun, s.rho, s.crack_of, s.nver,
-                                   s.segp, s.seg_alive, s.seg_info, s.segof, s.cnt)
+                                   s.segp, s.seg_alive, s.seg_info, s.segof, s.cnt,
+                                   s.gp[5], s.gp[6])
             s.nevl[tip[side]] = -1
     for side in range(2):
         if w.split[side]:
@@ -217,7 +223,8 @@ def split_tips(s, w):
                 for q in range(3):
                     y = F[f, q]
                     if y != p:
-                        hsum += np.sqrt((X[y, 0] - X[p, 0]) ** 2 + (X[y, 1] - X[p, 1]) ** 2
+                        hsum += np.sqrt(wrap(X[y, 0] - X[p, 0], s.gp[5]) ** 2
+                                        + wrap(X[y, 1] - X[p, 1], s.gp[6]) ** 2
                                         + (X[y, 2] - X[p, 2]) ** 2)
                         hcnt += 1
             if hcnt > 0:

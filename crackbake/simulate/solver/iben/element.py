@@ -12,6 +12,7 @@ import numpy as np
 from numba import njit
 
 from crackbake.simulate.solver.iben.shadow import face_shadow
+from crackbake.simulate.solver.iben.vec import wrap
 
 
 @njit(cache=True)
@@ -23,11 +24,11 @@ def _principal(a, b, c):
 
 
 @njit(cache=True)
-def face_frame(f, X, F, nrm, fr):
+def face_frame(f, X, F, nrm, fr, gp):
     """In-plane frame of face f: u along edge 0->1 -> fr[0], w = n x u -> fr[1]."""
     i0, i1 = F[f, 0], F[f, 1]
-    e0 = X[i1, 0] - X[i0, 0]
-    e1 = X[i1, 1] - X[i0, 1]
+    e0 = wrap(X[i1, 0] - X[i0, 0], gp[5])
+    e1 = wrap(X[i1, 1] - X[i0, 1], gp[6])
     e2 = X[i1, 2] - X[i0, 2]
     le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     fr[0, 0] = e0 / le
@@ -67,11 +68,11 @@ def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
     scratch rows.
     """
     i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-    e10 = X[i1, 0] - X[i0, 0]
-    e11 = X[i1, 1] - X[i0, 1]
+    e10 = wrap(X[i1, 0] - X[i0, 0], gp[5])
+    e11 = wrap(X[i1, 1] - X[i0, 1], gp[6])
     e12 = X[i1, 2] - X[i0, 2]
-    e20 = X[i2, 0] - X[i0, 0]
-    e21 = X[i2, 1] - X[i0, 1]
+    e20 = wrap(X[i2, 0] - X[i0, 0], gp[5])
+    e21 = wrap(X[i2, 1] - X[i0, 1], gp[6])
     e22 = X[i2, 2] - X[i0, 2]
     c0 = e11 * e22 - e12 * e21
     c1 = e12 * e20 - e10 * e22
@@ -92,14 +93,14 @@ def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
     for i in range(3):
         j = F[f, (i + 1) % 3]
         k = F[f, (i + 2) % 3]
-        d0 = X[k, 0] - X[j, 0]
-        d1 = X[k, 1] - X[j, 1]
+        d0 = wrap(X[k, 0] - X[j, 0], gp[5])
+        d1 = wrap(X[k, 1] - X[j, 1], gp[6])
         d2 = X[k, 2] - X[j, 2]
         # grad N_i = n x (x_k - x_j) / (2A).
         grad[f, i, 0] = (n1 * d2 - n2 * d1) / ta
         grad[f, i, 1] = (n2 * d0 - n0 * d2) / ta
         grad[f, i, 2] = (n0 * d1 - n1 * d0) / ta
-    face_frame(f, X, F, nrm, fr)
+    face_frame(f, X, F, nrm, fr, gp)
     u = fr[0]
     w = fr[1]
     s = S[f]
@@ -137,7 +138,7 @@ def tip_principal(f, X, F, S, nrm, G, gp, n0, n1, n2, fr, out):
     instead of turning back into the raw hoop direction.  Clamped like :func:`face_update`.
     ``out`` needs 14 entries (8 to 13 are scratch).
     """
-    face_frame(f, X, F, nrm, fr)
+    face_frame(f, X, F, nrm, fr, gp)
     u = fr[0]
     w = fr[1]
     s = S[f]

@@ -57,7 +57,7 @@ from crackbake.simulate.solver.iben.state import (
 )
 from crackbake.simulate.solver.iben.structs import state_ref, work_ref
 from crackbake.simulate.solver.iben.update import key, push
-from crackbake.simulate.solver.iben.vec import norm3
+from crackbake.simulate.solver.iben.vec import norm3, wrap
 from crackbake.simulate.solver.topology import on_boundary
 
 _WIDEN = 2  # crack_event: the table needs widening
@@ -314,10 +314,11 @@ def record(s, p, w, c, nucleate, interior, sig_n):
         s.pcid[pid[c]] = cid
         s.pcid[pid[t]] = cid
         # A new crack's first segments start its direction afresh (c may lie on another).
-        smooth_dir(pid[c], pid[t], X[t, 0] - xc0, X[t, 1] - xc1, X[t, 2] - xc2,
+        smooth_dir(pid[c], pid[t], wrap(X[t, 0] - xc0, s.gp[5]),
+                   wrap(X[t, 1] - xc1, s.gp[6]), X[t, 2] - xc2,
                    0.0 if nucleate else p.dir_len, pdir)
-        d0 = X[t, 0] - xc0
-        d1 = X[t, 1] - xc1
+        d0 = wrap(X[t, 0] - xc0, s.gp[5])
+        d1 = wrap(X[t, 1] - xc1, s.gp[6])
         d2 = X[t, 2] - xc2
         seglen = norm3(d0, d1, d2)
         w.segl[side] = seglen

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from crackbake.simulate.solver.iben.vec import wrap
+
 
 @njit(cache=True)
 def shadow_at(x0, x1, x2, G, gp, out):
@@ -17,6 +19,9 @@ def shadow_at(x0, x1, x2, G, gp, out):
     u0 = (x0 - gp[0]) / cs - 0.5
     u1 = (x1 - gp[1]) / cs - 0.5
     u2 = (x2 - gp[2]) / cs - 0.5
+    if gp[5] != 0.0:
+        _periodic_at(u0, u1, u2, G, out)
+        return
     i0 = min(max(int(np.floor(u0)), 0), G.shape[0] - 2)
     i1 = min(max(int(np.floor(u1)), 0), G.shape[1] - 2)
     i2 = min(max(int(np.floor(u2)), 0), G.shape[2] - 2)
@@ -39,6 +44,13 @@ def shadow_at(x0, x1, x2, G, gp, out):
 def face_shadow(f, X, F, G, gp, out):
     """Released stress at the centroid of face f -> out[6] (see :func:`shadow_at`)."""
     i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    if gp[5] != 0.0:
+        # Periodic plate: the centroid of the corners' nearest images of corner 0.
+        shadow_at(X[i0, 0] + (wrap(X[i1, 0] - X[i0, 0], gp[5]) + wrap(X[i2, 0] - X[i0, 0], gp[5]))
+                  / 3.0,
+                  X[i0, 1] + (wrap(X[i1, 1] - X[i0, 1], gp[6]) + wrap(X[i2, 1] - X[i0, 1], gp[6]))
+                  / 3.0, (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, out)
+        return
     shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
               (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, out)
 
@@ -60,6 +72,13 @@ def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
     hi0 = min(int(np.floor((p0 + rk - gp[0]) / cs)), G.shape[0] - 1)
     lo1 = max(int(np.floor((p1 - rk - gp[1]) / cs)), 0)
     hi1 = min(int(np.floor((p1 + rk - gp[1]) / cs)), G.shape[1] - 1)
+    nx, ny = G.shape[0], G.shape[1]
+    if gp[5] != 0.0:
+        # Periodic plate (the grid spans one period): every image of the kernel, cells mod n.
+        lo0 = int(np.floor((p0 - rk - gp[0]) / cs))
+        hi0 = int(np.floor((p0 + rk - gp[0]) / cs))
+        lo1 = int(np.floor((p1 - rk - gp[1]) / cs))
+        hi1 = int(np.floor((p1 + rk - gp[1]) / cs))
     lo2 = max(int(np.floor((p2 - rk - gp[2]) / cs)), 0)
     hi2 = min(int(np.floor((p2 + rk - gp[2]) / cs)), G.shape[2] - 1)
     t00 = n0 * n0
@@ -78,9 +97,35 @@ def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
                 if r2 >= 1.0:
                     continue
                 w = norm * (1.0 - r2) * (1.0 - r2)
-                G[i, j, k, 0] += w * t00
-                G[i, j, k, 1] += w * t01
-                G[i, j, k, 2] += w * t02
-                G[i, j, k, 3] += w * t11
-                G[i, j, k, 4] += w * t12
-                G[i, j, k, 5] += w * t22
+                ii = i % nx
+                jj = j % ny
+                G[ii, jj, k, 0] += w * t00
+                G[ii, jj, k, 1] += w * t01
+                G[ii, jj, k, 2] += w * t02
+                G[ii, jj, k, 3] += w * t11
+                G[ii, jj, k, 4] += w * t12
+                G[ii, jj, k, 5] += w * t22
+
+
+@njit(cache=True)
+def _periodic_at(u0, u1, u2, G, out):
+    """:func:`shadow_at` on a periodic plate: x and y cells wrap around (grid coordinates)."""
+    i0 = int(np.floor(u0))
+    i1 = int(np.floor(u1))
+    i2 = min(max(int(np.floor(u2)), 0), G.shape[2] - 2)
+    w0 = u0 - i0
+    w1 = u1 - i1
+    w2 = min(max(u2 - i2, 0.0), 1.0)
+    nx, ny = G.shape[0], G.shape[1]
+    for a in range(2):
+        wa = w0 if a else 1.0 - w0
+        ia = (i0 + a) % nx
+        for b in range(2):
+            wb = w1 if b else 1.0 - w1
+            ib = (i1 + b) % ny
+            for c in range(2):
+                w = wa * wb * (w2 if c else 1.0 - w2)
+                if w == 0.0:
+                    continue
+                for q in range(6):
+                    out[q] += w * G[ia, ib, i2 + c, q]

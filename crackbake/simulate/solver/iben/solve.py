@@ -114,12 +114,13 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     edge, uses = edges(F0, n0)
     bnd = np.zeros(n0, bool)
     bnd[edge[uses == 1].ravel()] = True
-    elen = np.linalg.norm(X0[edge[:, 0]] - X0[edge[:, 1]], axis=1)
+    period = float(getattr(sim, "period", 0.0) or 0.0)
+    elen = np.linalg.norm(_wrapped(X0[edge[:, 0]] - X0[edge[:, 1]], period), axis=1)
     hsum = np.bincount(edge.ravel(), np.repeat(elen, 2), minlength=n0)
     hcnt = np.bincount(edge.ravel(), minlength=n0)
     h_node = hsum / np.maximum(hcnt, 1)
     width = int(np.bincount(F0.ravel(), minlength=n0).max()) + C.EXTRA_DEGREE
-    G, gp = shadow_grid(X0)
+    G, gp = shadow_grid(X0, period)
     clen = np.zeros(min(1024, room))
     cnt = np.zeros(N_COUNTERS, np.int64)
     cnt[FIRST_CRACK] = -1
@@ -150,6 +151,16 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     if np.any(s.area[:m0] <= 0):
         raise CrackbakeError("the simulation mesh has zero-area faces; clean the mesh first")
     return s, mesh
+
+
+def _wrapped(d: np.ndarray, period: float) -> np.ndarray:
+    """Minimum image of the in-plane differences ``d`` (K, 3) on a periodic plate (``period``
+    0: ``d`` itself)."""
+    if period == 0.0:
+        return d
+    d = d.copy()
+    d[:, :2] -= period * np.floor(d[:, :2] / period + 0.5)
+    return d
 
 
 def _update_all(s: State, mesh: SimpleNamespace, stress: np.ndarray, nn: int | None = None,
@@ -192,8 +203,10 @@ def _loop_params(s: State, mesh: SimpleNamespace, cal: SimpleNamespace,
         np.linalg.norm(X0.max(0) - X0.min(0)))
     # The tip factor's reference step: the edge of an equilateral triangle of a
     # TIP_REF_FACES-face mesh of this surface (about the default simulation's edge length).
+    per = float(s.gp[5])
     total_area = 0.5 * float(np.linalg.norm(
-        np.cross(X0[F0[:, 1]] - X0[F0[:, 0]], X0[F0[:, 2]] - X0[F0[:, 0]]), axis=1).sum())
+        np.cross(_wrapped(X0[F0[:, 1]] - X0[F0[:, 0]], per),
+                 _wrapped(X0[F0[:, 2]] - X0[F0[:, 0]], per)), axis=1).sum())
     tip_len = (float(np.sqrt(4.0 * total_area / (np.sqrt(3.0) * C.TIP_REF_FACES)))
                if C.TIP_REF_FACES else 0.0)
     max_len = np.inf if params.max_crack_length is None else float(params.max_crack_length)
@@ -255,7 +268,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
     steps = int(cnt[STEP])
     alive = s.seg_alive[:ns]
     cracks = chain(s.segp[:ns][alive], s.seg_info[:ns][alive], s.X, s.onb, steps, params,
-                   mesh.X0)
+                   mesh.X0, float(s.gp[5]))
     taun, val = s.taun, s.val
     sep = np.where(taun[:nn] > 0, val[:nn] / np.where(taun[:nn] > 0, taun[:nn], 1.0), 0.0)
     pr = s.pr[:nf]

@@ -36,3 +36,13 @@ def angle(u0, u1, u2, v0, v1, v2):
     if nu == 0.0 or nv == 0.0:
         return 0.0
     return np.arccos(min(1.0, max(-1.0, dot3(u0, u1, u2, v0, v1, v2) / (nu * nv))))
+
+
+@njit(inline="always")
+def wrap(d, per):
+    """Minimum image of the coordinate difference ``d`` on a period ``per`` (a tiling plate,
+    docs/solver.md "Periodic plates"); ``per == 0`` (not periodic) returns ``d`` itself, so
+    the non-periodic path is bit for bit the old one."""
+    if per == 0.0:
+        return d
+    return d - per * np.floor(d / per + 0.5)

@@ -1,0 +1,68 @@
+"""``crackbake tile``: a seamlessly tiling crack texture set (the solver on a periodic plate)."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from pathlib import Path
+
+import click
+
+from crackbake.cli import _Command, _err
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.params import preset_names
+
+EPILOG = """\b
+Examples:
+  # a 2 x 2 unit mud tile, 2048 texels
+  crackbake tile --preset mud --size 2 --res 2048 -o mud_tile/
+\b
+  # a glass tile with 4 impacts
+  crackbake tile --preset glass --impacts 4 --size 1 -o glass_tile/
+\b
+Outputs: tile_basecolor.png, tile_normal.png, tile_orm.png, tile_data.png (16 bit),
+tile_mask.png, tile_height.png (16 bit), tile_cracks.exr, tile_3x3.png, cracks.json (the
+pieces and the period), manifest.json.
+"""
+
+
+@click.command(
+    cls=_Command,
+    epilog=EPILOG,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+)
+@click.option("--preset", default="mud", show_default=True,
+              help=f"Material preset ({', '.join(preset_names())}).")
+@click.option("--size", type=float, default=2.0, show_default=True,
+              help="Tile width/height (the period), mesh units.")
+@click.option("--res", type=int, default=2048, show_default=True, help="Texels per side.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--impacts", type=int, help="Random impacts on the tile (glass) [3].")
+@click.option("--sim-faces", type=int, help="Simulation mesh size, in faces [60000].")
+@click.option("--method", type=click.Choice(("iben", "thesis")),
+              help="Crack method (only iben runs on a periodic tile).")
+@click.option("-o", "--out", type=click.Path(path_type=Path), default=Path("tile"),
+              show_default=True, help="Output folder (replaced as a whole).")
+@click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+def tile(quiet: bool, **options) -> None:
+    """Grow cracks on a periodic plate and bake a texture set that tiles with no seam."""
+
+    def show(message, *_args, **_kwargs) -> None:
+        if not quiet:
+            _err(f"warning: {message}")
+
+    try:
+        from crackbake.tile import TileParams, build_tile
+
+        params = TileParams(**options).validate()
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", CrackbakeWarning)
+            warnings.showwarning = show
+            manifest = build_tile(params)
+    except CrackbakeError as exc:
+        _err(f"error: {exc}")
+        sys.exit(exc.exit_code)
+    if not quiet:
+        s = manifest["solver"]
+        _err(f"{params.preset} tile {params.size:g} x {params.size:g}, {s.get('cracks', 0)} "
+             f"cracks, {params.res}² ({manifest['timings_s']['total']:.1f} s) -> {params.out}/")
