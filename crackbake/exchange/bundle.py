@@ -27,8 +27,14 @@ from crackbake.exchange.layers import (
     stress_attributes,
     stress_planes,
 )
-from crackbake.exchange.materials import GLB_TEXTURE_MAX, base_color, downsample
+from crackbake.exchange.materials import (
+    GLB_TEXTURE_MAX,
+    base_color,
+    base_color_table,
+    downsample,
+)
 from crackbake.exchange.output import OutputStage
+from crackbake.exchange.packing import base_color_half, normal_half
 from crackbake.exchange.pngenc import png_bytes, write_bytes
 from crackbake.exchange.targets import TARGETS, normal_convention, pack
 from crackbake.io.mesh import Mesh
@@ -211,16 +217,43 @@ def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict)
     )
 
 
-def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx) -> None:
-    small = _smaller(maps, PREVIEW_TEXTURE_MAX)
-    tex = texture
-    if tex is not None and tex.shape[0] > PREVIEW_TEXTURE_MAX:
-        tex = downsample(tex, PREVIEW_TEXTURE_MAX)
-    colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
-    tangents = getattr(uvmesh, "tangents", None)
+def _preview_pages(maps: CrackMaps, texture, with_normal: bool):
+    """The preview's base colour and 8-bit normal map (or None), at most
+    :data:`PREVIEW_TEXTURE_MAX` on an edge.
+
+    The last halving, the compositing and the quantisation run fused (one pass each, GIL
+    released, so the encoders keep both cores); the pictures are the ones the numpy path
+    (:func:`_smaller`, :func:`base_color`, :func:`pack`) gives, bit for bit.
+    """
+    size = PREVIEW_TEXTURE_MAX
+    n = maps.mask.shape[0]
+    fused = size < n <= 4 * size and n % 4 == 0  # one numpy halving at most, then the kernels
+    if fused and texture is not None and texture.shape[:2] != maps.mask.shape:
+        fused = False
+    if not fused:
+        small = _smaller(maps, size)
+        tex = texture
+        if tex is not None and tex.shape[0] > size:
+            tex = downsample(tex, size)
+        colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
+        normal = None
+        if with_normal and small.normal is not None:
+            normal = pack("normal", small, 8, "gl")
+        return colour, normal
+    half = 2 * size
+    mask, occ = downsample(maps.mask, half), maps.occlusion
+    occ = None if occ is None else downsample(occ, half)
+    tex = None if texture is None else downsample(texture, half)
+    colour = base_color_half(mask, occ, base_color_table(tex is not None), tex)
     normal = None
-    if tangents is not None and small.normal is not None:
-        normal = pack("normal", small, 8, "gl")
+    if with_normal and maps.normal is not None:
+        normal = normal_half(downsample(maps.normal, half))
+    return colour, normal
+
+
+def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx) -> None:
+    tangents = getattr(uvmesh, "tangents", None)
+    colour, normal = _preview_pages(maps, texture, tangents is not None)
     view_dir, up, target, distance = preview_camera(mesh, network)
     picture = render_preview(
         uvmesh.vertices,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackbake.exchange.materials import ROUGHNESS_CRACK, ROUGHNESS_SURFACE, half_lut
-from crackbake.exchange.packing import data16
+from crackbake.exchange.packing import SRC_A, SRC_B, SRC_CONST, data16, lut_planes, normal_q
 from crackbake.params import NORMAL_Y
 from crackbake.params import TARGETS as TARGET_NAMES
 
@@ -124,8 +124,7 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
     top = _full(bits)
     dtype = _dtype(bits)
     if plane.dtype == np.float16:  # one gather through a table of every half value
-        lut = half_lut(lambda x: np.clip(x / scale * top + 0.5, 0, top))
-        return np.take(lut.astype(dtype), plane.view(np.uint16))
+        return np.take(_quant_lut(bits, scale), plane.view(np.uint16))
     q = np.asarray(plane, np.float32) * np.float32(top / scale)
     q += np.float32(0.5)
     np.nan_to_num(q, copy=False, nan=0.0)
@@ -133,17 +132,45 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
     return q.astype(dtype)
 
 
+def _quant_lut(bits: int, scale: float = 1.0) -> np.ndarray:
+    """(65536,) table of :func:`quantise` over every float16 bit pattern."""
+    top = _full(bits)
+    return half_lut(lambda x: np.clip(x / scale * top + 0.5, 0, top)).astype(_dtype(bits))
+
+
 def _const(shape, value: float, bits: int) -> np.ndarray:
     return np.full(shape, int(round(value * _full(bits))), _dtype(bits))
 
 
-def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
+def _rough_lut(bits: int, smooth: bool = False) -> np.ndarray:
+    """(65536,) table: roughness (or smoothness) of every float16 mask value, quantised."""
     top = _full(bits)
     a, b = ROUGHNESS_SURFACE, ROUGHNESS_CRACK
     if smooth:
         a, b = 1 - a, 1 - b
     lut = half_lut(lambda x: np.clip((a + (b - a) * np.clip(x, 0, 1)) * top + 0.5, 0, top))
-    return np.take(lut.astype(_dtype(bits)), np.asarray(mask, np.float16).view(np.uint16))
+    return lut.astype(_dtype(bits))
+
+
+def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
+    return np.take(_rough_lut(bits, smooth), np.asarray(mask, np.float16).view(np.uint16))
+
+
+def _packed(content: str, maps, bits: int) -> np.ndarray | None:
+    """ORM / mask map / metallic-smoothness by :func:`lut_planes` (one pass over float16
+    mask and occlusion, GIL released); None when the maps are not float16."""
+    occ = maps.occlusion
+    if maps.mask.dtype != np.float16 or (occ is not None and occ.dtype != np.float16):
+        return None
+    const = {v: (SRC_CONST, _const((), v, bits)) for v in (0.0, 1.0)}
+    o = const[1.0] if occ is None else (SRC_B, _quant_lut(bits))
+    rough, smooth = (SRC_A, _rough_lut(bits)), (SRC_A, _rough_lut(bits, smooth=True))
+    channels = {
+        "orm": [o, rough, const[0.0]],
+        "mask_map": [const[0.0], o, const[1.0], smooth],
+        "metallic_smoothness": [const[0.0], const[0.0], const[0.0], smooth],
+    }[content]
+    return lut_planes(maps.mask, maps.mask if occ is None else occ, channels)
 
 
 def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
@@ -153,7 +180,12 @@ def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
         out[..., 0:2] = _const((), 0.5, bits)
         out[..., 2] = _full(bits)
         return out
-    n = np.asarray(maps.normal, np.float32)
+    return normal_q(maps.normal, bits, flip_y=normal_y == "dx")  # one pass, GIL released
+
+
+def _normal_numpy(normal: np.ndarray, bits: int, normal_y: str) -> np.ndarray:
+    """The reference for :func:`normal_q` (tests): ``n * h + h + 0.5`` truncated, h = top / 2."""
+    n = np.asarray(normal, np.float32)
     half = np.float32(_full(bits) / 2)
     q = n * half
     q += half + np.float32(0.5)
@@ -199,6 +231,10 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
         return occlusion()
     if content == "roughness":
         return _roughness(maps.mask, bits)
+    if content != "data":
+        fused = _packed(content, maps, bits)
+        if fused is not None:
+            return fused
     planes = {
         "orm": lambda: (occlusion(), _roughness(maps.mask, bits), _const(shape, 0.0, bits)),
         "mask_map": lambda: (
