@@ -146,14 +146,14 @@ def write_outputs(
     texture = None
     if mesh.source and {"png", "glb", "preview"} & set(formats):
         texture = base_color_texture(mesh.source, maps.res)
-    planes = crack_planes(maps.channels(), float32=params.float32) if "exr" in formats else None
     with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
         jobs: list[Future] = []
-        if planes is not None:
-            # The longest job, so it starts first, with its planes ready: converting them in
-            # the job made it wait for the GIL behind every texture's numpy work.
+        if "exr" in formats:
+            # The longest job, so it starts first.  Its planes (the normal's float16 split) are
+            # converted in the job: numpy casts release the GIL, and the texture packs are
+            # nogil kernels, so the conversion no longer waits behind them.
             path = stage.path(f"{stem}_cracks.exr")
-            jobs.append(pool.submit(_write_exr, path, planes, maps))
+            jobs.append(pool.submit(_write_exr, path, maps, params.float32))
         if stress is not None and "stress" in formats:
             jobs.append(
                 pool.submit(_write_stress_exr, stage.path(f"{stem}_stress.exr"), stress)
@@ -184,7 +184,8 @@ def write_outputs(
             job.result()  # the first failure, in submission order
 
 
-def _write_exr(path, planes: dict, maps: CrackMaps) -> None:
+def _write_exr(path, maps: CrackMaps, float32: bool) -> None:
+    planes = crack_planes(maps.channels(), float32=float32)
     attributes = crack_attributes(
         __version__, maps.max_distance, maps.profile_shape, channels=planes
     )
@@ -217,15 +218,13 @@ def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict)
     )
 
 
-def _preview_pages(maps: CrackMaps, texture, with_normal: bool):
-    """The preview's base colour and 8-bit normal map (or None), at most
-    :data:`PREVIEW_TEXTURE_MAX` on an edge.
+def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREVIEW_TEXTURE_MAX):
+    """The preview's base colour and 8-bit normal map (or None), at most ``size`` on an edge.
 
     The last halving, the compositing and the quantisation run fused (one pass each, GIL
     released, so the encoders keep both cores); the pictures are the ones the numpy path
     (:func:`_smaller`, :func:`base_color`, :func:`pack`) gives, bit for bit.
     """
-    size = PREVIEW_TEXTURE_MAX
     n = maps.mask.shape[0]
     fused = size < n <= 4 * size and n % 4 == 0  # one numpy halving at most, then the kernels
     if fused and texture is not None and texture.shape[:2] != maps.mask.shape:

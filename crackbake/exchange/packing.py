@@ -109,8 +109,8 @@ def lut_planes(a: np.ndarray, b: np.ndarray, channels: list) -> np.ndarray:
     -------
     (H, W, C) array of the tables' dtype
     """
-    luts = np.stack([np.broadcast_to(t, (65536,)) for _, t in channels])
-    dtype = luts.dtype
+    dtype = np.asarray(channels[0][1]).dtype  # np.stack would give '>u2' in native order
+    luts = np.stack([np.broadcast_to(t, (65536,)) for _, t in channels]).astype(dtype)
     store = np.uint8 if dtype.itemsize == 1 else np.uint16  # '>u2' bytes, stored as they are
     out = np.empty((*a.shape, len(channels)), store)
     _lut_planes(
