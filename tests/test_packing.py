@@ -87,6 +87,9 @@ def test_normal_kernel_equals_numpy(maps, bits, normal_y):
     want = targets._normal_numpy(maps.normal, bits, normal_y)
     assert got.dtype == want.dtype
     np.testing.assert_array_equal(got, want)
+    # the bake's planar storage (CrackMaps.normal is a (H, W, 3) view of (3, H, W))
+    planar = np.moveaxis(np.ascontiguousarray(np.moveaxis(maps.normal, -1, 0)), 0, -1)
+    np.testing.assert_array_equal(normal_q(planar, bits, flip_y=normal_y == "dx"), want)
     top = 255 if bits == 8 else 65535
     # (0, 0, 1) -> (half, half, top) whatever the convention; +y flips under dx.
     assert got[0, 0].tolist() == [top // 2 + 1, top // 2 + 1, top]
@@ -139,4 +142,6 @@ def test_half_kernels_on_float32_and_half_agree():
         base_color_half(mask, None, table), base_color_half(mask.astype(np.float32), None, table)
     )
     n = _unit_normals(rng)
+    planar = np.moveaxis(np.ascontiguousarray(np.moveaxis(n, -1, 0)), 0, -1)
     assert normal_half(n).shape == (RES // 2, RES // 2, 3)
+    np.testing.assert_array_equal(normal_half(planar), normal_half(n))

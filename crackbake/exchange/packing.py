@@ -123,13 +123,19 @@ def lut_planes(a: np.ndarray, b: np.ndarray, channels: list) -> np.ndarray:
     return out.view(dtype)
 
 
+def _planar(normal: np.ndarray) -> np.ndarray:
+    """(3, H, W) float32 view of (H, W, 3) normals: free for the bake's planar storage
+    (``CrackMaps.normal`` is a view of it); interleaved arrays are copied once."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(normal, np.float32), -1, 0))
+
+
 @njit(cache=True, nogil=True)
 def _normal_q(n, half, offset, flip_y, top1, swap, out):
-    h, w, c = n.shape
+    c, h, w = n.shape
     for i in range(h):
         for j in range(w):
             for k in range(c):
-                q = n[i, j, k] * half
+                q = n[k, i, j] * half
                 q = q + offset
                 if k == 1 and flip_y:
                     q = top1 - q
@@ -159,8 +165,8 @@ def normal_q(normal: np.ndarray, bits: int, flip_y: bool) -> np.ndarray:
     half = np.float32(top / 2)
     store = np.uint8 if bits == 8 else np.uint16
     out = np.empty(normal.shape, store)
-    n = np.ascontiguousarray(normal, dtype=np.float32)
-    _normal_q(n, half, half + np.float32(0.5), flip_y, np.float32(top + 1), bits == 16, out)
+    offset, top1 = half + np.float32(0.5), np.float32(top + 1)
+    _normal_q(_planar(normal), half, offset, flip_y, top1, bits == 16, out)
     return out.view(">u2") if bits == 16 else out
 
 
@@ -317,9 +323,9 @@ def _normal_half(n, out):
     for i in range(h):
         for j in range(w):
             for k in range(3):
-                s = n[2 * i, 2 * j, k] + n[2 * i + 1, 2 * j, k]
-                s = s + n[2 * i, 2 * j + 1, k]
-                s = s + n[2 * i + 1, 2 * j + 1, k]
+                s = n[k, 2 * i, 2 * j] + n[k, 2 * i + 1, 2 * j]
+                s = s + n[k, 2 * i, 2 * j + 1]
+                s = s + n[k, 2 * i + 1, 2 * j + 1]
                 v[k] = s * np.float32(0.25)
             # np.linalg.norm's float32 sum over the last axis: x0² + (x1² + x2²).
             r = np.sqrt(v[0] * v[0] + (v[1] * v[1] + v[2] * v[2]))
@@ -343,5 +349,5 @@ def normal_half(normal: np.ndarray) -> np.ndarray:
     (H / 2, W / 2, 3) uint8
     """
     out = np.empty((normal.shape[0] // 2, normal.shape[1] // 2, 3), np.uint8)
-    _normal_half(np.ascontiguousarray(normal, dtype=np.float32), out)
+    _normal_half(_planar(normal), out)
     return out
