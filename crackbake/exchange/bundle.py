@@ -48,9 +48,11 @@ from crackbake.params import RunParams
 #: Largest edge of the textures the preview samples (its picture is 1024 pixels wide).
 PREVIEW_TEXTURE_MAX = 2048
 #: Encoding threads.  More than cores on small machines: the jobs spend most of their time in
-#: zlib and OpenEXR with the GIL released, and short texture jobs should not wait behind the
-#: EXR; at most 6 (each holds a few full-size temporaries).
-WRITE_THREADS = max(4, min(6, os.cpu_count() or 1))
+#: zlib, OpenEXR and nogil kernels with the GIL released, and short texture jobs should not wait
+#: behind the EXR; at most 6 (each holds a few full-size temporaries).  On 2 cores 3 beat 4
+#: (warm write at 4096², median 1.56 s against 1.73 s): the jobs are bound by memory traffic,
+#: and fewer at once evict each other's data less.
+WRITE_THREADS = max(3, min(6, os.cpu_count() or 1))
 #: OpenEXR's compression threads while the crack master is written (the library default is
 #: none: the calling thread compresses alone).  The master is the longest job; with workers it
 #: takes the cores the texture jobs leave when they finish instead of ending alone on one
