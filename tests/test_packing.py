@@ -12,7 +12,13 @@ import numpy as np
 import pytest
 
 from crackbake.exchange import bundle, materials, targets
-from crackbake.exchange.packing import base_color_half, lut_planes, normal_half, normal_q
+from crackbake.exchange.packing import (
+    base_color_half,
+    half_max,
+    lut_planes,
+    normal_half,
+    normal_q,
+)
 
 RES = 96
 
@@ -145,3 +151,14 @@ def test_half_kernels_on_float32_and_half_agree():
     planar = np.moveaxis(np.ascontiguousarray(np.moveaxis(n, -1, 0)), 0, -1)
     assert normal_half(n).shape == (RES // 2, RES // 2, 3)
     np.testing.assert_array_equal(normal_half(planar), normal_half(n))
+
+
+def test_half_max_equals_numpy():
+    rng = np.random.default_rng(11)
+    x = (rng.random((64, 64)) * 300 - 100).astype(np.float16)
+    assert half_max(x) == float(np.max(x))
+    x[5, 7] = np.inf
+    assert half_max(x) == np.inf
+    x[9, 9] = np.nan
+    assert np.isnan(half_max(x)) and np.isnan(np.max(x))
+    assert half_max(np.full((3, 3), -2.5, np.float16)) == -2.5

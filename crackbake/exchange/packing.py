@@ -351,3 +351,22 @@ def normal_half(normal: np.ndarray) -> np.ndarray:
     out = np.empty((normal.shape[0] // 2, normal.shape[1] // 2, 3), np.uint8)
     _normal_half(_planar(normal), out)
     return out
+
+
+@njit(cache=True, nogil=True)
+def _half_max(bits, table):
+    best = table[bits[0]]
+    for i in range(bits.size):
+        v = table[bits[i]]
+        if v != v:  # NaN wins, as in np.max
+            return v
+        if v > best:
+            best = v
+    return best
+
+
+def half_max(plane: np.ndarray) -> float:
+    """``float(np.max(plane))`` of a non-empty float16 plane (NaN if any), GIL released: numpy's
+    float16 reduction is scalar code, 20x slower on a 4096² map."""
+    table = np.arange(65536, dtype=np.uint16).view(np.float16).astype(np.float32)
+    return float(_half_max(np.ascontiguousarray(plane).view(np.uint16).reshape(-1), table))

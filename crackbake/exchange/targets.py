@@ -24,7 +24,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackbake.exchange.materials import ROUGHNESS_CRACK, ROUGHNESS_SURFACE, half_lut
-from crackbake.exchange.packing import SRC_A, SRC_B, SRC_CONST, data16, lut_planes, normal_q
+from crackbake.exchange.packing import (
+    SRC_A,
+    SRC_B,
+    SRC_CONST,
+    data16,
+    half_max,
+    lut_planes,
+    normal_q,
+)
 from crackbake.params import NORMAL_Y
 from crackbake.params import TARGETS as TARGET_NAMES
 
@@ -105,7 +113,13 @@ def normal_convention(target: str, normal_y: str | None = None) -> str:
 
 def data_scales(maps) -> dict[str, float]:
     """Divisors of the data map's G (width) and B (depth) channels, mesh units (1 when 0)."""
-    w = float(np.max(maps.width)) if maps.width.size else 0.0
+    width = maps.width
+    if not width.size:
+        w = 0.0
+    elif width.dtype == np.float16:
+        w = half_max(width)
+    else:
+        w = float(np.max(width))
     d = float(np.max(maps.depth)) if maps.depth.size else 0.0
     return {"width": w if w > 0 else 1.0, "depth": d if d > 0 else 1.0}
 
