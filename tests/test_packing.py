@@ -162,3 +162,21 @@ def test_half_max_equals_numpy():
     x[9, 9] = np.nan
     assert np.isnan(half_max(x)) and np.isnan(np.max(x))
     assert half_max(np.full((3, 3), -2.5, np.float16)) == -2.5
+
+
+def test_filtered_data_rows_give_the_same_png():
+    from crackbake.exchange.pngenc import png_bytes, png_rows
+
+    rng = np.random.default_rng(13)
+    depth = (rng.random((RES, RES)) * 0.02).astype(np.float32)
+    depth[3, :5] = [np.nan, -1.0, 0.0, 0.02, 1.0]  # NaN -> 0, clipped at both ends
+    m = SimpleNamespace(
+        mask=_halves(rng), width=(rng.random((RES, RES)) * 0.01).astype(np.float16),
+        time=_halves(rng), depth=depth, occlusion=None,
+    )  # fmt: skip
+    rows = targets.data16_filtered(m)
+    assert rows.shape == (RES, 1 + 8 * RES) and (rows[:, 0] == 2).all()
+    pixels = targets.pack("data", m, 16)
+    assert png_rows(rows, RES, 16, 4) == png_bytes(pixels)
+    # the unfiltered first row is the big-endian pixels themselves
+    assert rows[0, 1:].tobytes() == pixels[0].tobytes()

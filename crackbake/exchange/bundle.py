@@ -36,8 +36,8 @@ from crackbake.exchange.materials import (
 )
 from crackbake.exchange.output import OutputStage
 from crackbake.exchange.packing import base_color_half, normal_half
-from crackbake.exchange.pngenc import png_bytes, write_bytes
-from crackbake.exchange.targets import TARGETS, normal_convention, pack
+from crackbake.exchange.pngenc import png_bytes, png_rows, write_bytes
+from crackbake.exchange.targets import TARGETS, data16_filtered, normal_convention, pack
 from crackbake.io.mesh import Mesh
 from crackbake.io.obj_lines import write_obj
 from crackbake.io.sidecar import write_sidecar
@@ -107,9 +107,13 @@ class _Encoder:
     def _job(self, key: tuple, paths: list, keep: bool) -> bytes | None:
         content, bits, normal_y, size = key
         maps = _smaller(self.maps, size)
-        pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
-        data = png_bytes(pixels, srgb=content == "base_color")
-        del pixels
+        rows = data16_filtered(maps) if (content, bits) == ("data", 16) else None
+        if rows is not None:  # packed straight into filtered scanlines: one array less
+            data = png_rows(rows, rows.shape[1] // 8, 16, 4)
+        else:
+            pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
+            data = png_bytes(pixels, srgb=content == "base_color")
+        del rows
         for path in paths:
             write_bytes(path, data)
         return data if keep else None

@@ -34,6 +34,58 @@ def _data16(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain,
             out[i, j, 3] = (c >> 8) | (c << 8)
 
 
+@njit(cache=True, nogil=True)
+def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain, rows):
+    # The data texture already PNG-filtered ("Up": each byte minus the byte above), written
+    # straight into the scanline buffer: no (H, W, 4) pixel array, no second pass.
+    h, w = mask.shape
+    prev = np.zeros((w, 4), np.uint16)
+    cur = np.empty((w, 4), np.uint16)
+    for i in range(h):
+        rows[i, 0] = 2
+        for j in range(w):
+            d = depth[i, j] * depth_gain + np.float32(0.5)
+            q = np.uint16(0)
+            if d >= np.float32(65535.0):
+                q = np.uint16(65535)
+            elif d > np.float32(0.0):
+                q = np.uint16(d)
+            cur[j, 0] = lut_mask[mask[i, j]]
+            cur[j, 1] = lut_width[width[i, j]]
+            cur[j, 2] = q
+            cur[j, 3] = lut_time[time[i, j]]
+            for k in range(4):
+                v, u = cur[j, k], prev[j, k]
+                o = 1 + 8 * j + 2 * k
+                rows[i, o] = np.uint8(((v >> 8) - (u >> 8)) & 0xFF)  # big-endian: high first
+                rows[i, o + 1] = np.uint8(((v & 0xFF) - (u & 0xFF)) & 0xFF)
+        prev, cur = cur, prev
+
+
+def data16_rows(mask, width, time, depth, luts, depth_scale: float) -> np.ndarray:
+    """:func:`data16`'s texture as PNG scanlines with the "Up" filter applied, in one pass.
+
+    Returns
+    -------
+    (H, 1 + 8 W) uint8
+        Each row: the filter type byte (2), then the row's big-endian samples minus the row
+        above's (mod 256; the first row minus zeros), as :func:`~crackbake.exchange.pngenc.png_rows`
+        takes them.
+    """
+    h, w = mask.shape
+    rows = np.empty((h, 1 + 8 * w), np.uint8)
+    _data16_rows(
+        np.ascontiguousarray(mask).view(np.uint16),
+        np.ascontiguousarray(width).view(np.uint16),
+        np.ascontiguousarray(time).view(np.uint16),
+        np.ascontiguousarray(depth, dtype=np.float32),
+        *(np.ascontiguousarray(t, dtype=np.uint16) for t in luts),
+        np.float32(65535.0 / depth_scale),
+        rows,
+    )
+    return rows
+
+
 def data16(
     mask: np.ndarray,
     width: np.ndarray,

@@ -29,6 +29,7 @@ from crackbake.exchange.packing import (
     SRC_B,
     SRC_CONST,
     data16,
+    data16_rows,
     half_max,
     lut_planes,
     normal_q,
@@ -266,16 +267,31 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
     return np.stack(planes, axis=-1)
 
 
+def _data16_luts(maps) -> tuple:
+    scales = data_scales(maps)
+    return tuple(
+        half_lut(lambda x, s=s: np.clip(x / s * 65535 + 0.5, 0, 65535)).astype(np.uint16)
+        for s in (1.0, scales["width"], 1.0)
+    )
+
+
+def data16_filtered(maps) -> np.ndarray | None:
+    """The 16-bit data texture as PNG-filtered scanlines (:func:`packing.data16_rows`, for
+    :func:`~crackbake.exchange.pngenc.png_rows`); None unless mask, width, time are float16."""
+    if not all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.width, maps.time)):
+        return None
+    luts = _data16_luts(maps)
+    return data16_rows(maps.mask, maps.width, maps.time, maps.depth, luts,
+                       data_scales(maps)["depth"])  # fmt: skip
+
+
 def _data_planes(maps, bits: int):
     """R mask, G width, B depth, A time: one fused pass for the usual 16-bit float16 maps."""
     scales = data_scales(maps)
     halves = all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.width, maps.time))
     if bits == 16 and halves:
-        luts = tuple(
-            half_lut(lambda x, s=s: np.clip(x / s * 65535 + 0.5, 0, 65535)).astype(np.uint16)
-            for s in (1.0, scales["width"], 1.0)
-        )
-        return data16(maps.mask, maps.width, maps.time, maps.depth, luts, scales["depth"])
+        return data16(maps.mask, maps.width, maps.time, maps.depth, _data16_luts(maps),
+                      scales["depth"])  # fmt: skip
     return (
         quantise(maps.mask, bits), quantise(maps.width, bits, scales["width"]),
         quantise(maps.depth, bits, scales["depth"]), quantise(maps.time, bits),
