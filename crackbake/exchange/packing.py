@@ -39,10 +39,9 @@ def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_
     # The data texture already PNG-filtered ("Up": each byte minus the byte above), written
     # straight into the scanline buffer: no (H, W, 4) pixel array, no second pass.
     h, w = mask.shape
-    prev = np.zeros((w, 4), np.uint16)
-    cur = np.empty((w, 4), np.uint16)
+    prev = np.zeros(8 * w, np.uint8)
+    cur = np.empty(8 * w, np.uint8)
     for i in range(h):
-        rows[i, 0] = 2
         for j in range(w):
             d = depth[i, j] * depth_gain + np.float32(0.5)
             q = np.uint16(0)
@@ -50,15 +49,18 @@ def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_
                 q = np.uint16(65535)
             elif d > np.float32(0.0):
                 q = np.uint16(d)
-            cur[j, 0] = lut_mask[mask[i, j]]
-            cur[j, 1] = lut_width[width[i, j]]
-            cur[j, 2] = q
-            cur[j, 3] = lut_time[time[i, j]]
-            for k in range(4):
-                v, u = cur[j, k], prev[j, k]
-                o = 1 + 8 * j + 2 * k
-                rows[i, o] = np.uint8(((v >> 8) - (u >> 8)) & 0xFF)  # big-endian: high first
-                rows[i, o + 1] = np.uint8(((v & 0xFF) - (u & 0xFF)) & 0xFF)
+            a = lut_mask[mask[i, j]]
+            b = lut_width[width[i, j]]
+            c = lut_time[time[i, j]]
+            o = 8 * j  # big-endian samples: high byte first
+            cur[o], cur[o + 1] = a >> 8, a & 0xFF
+            cur[o + 2], cur[o + 3] = b >> 8, b & 0xFF
+            cur[o + 4], cur[o + 5] = q >> 8, q & 0xFF
+            cur[o + 6], cur[o + 7] = c >> 8, c & 0xFF
+        row = rows[i]
+        row[0] = 2
+        for k in range(8 * w):
+            row[k + 1] = cur[k] - prev[k]  # uint8 arithmetic wraps mod 256
         prev, cur = cur, prev
 
 
