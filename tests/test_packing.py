@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 
 from crackbake.exchange import bundle, materials, targets
+from crackbake.exchange.halving import base_color_half, normal_half
 from crackbake.exchange.packing import (
-    base_color_half,
     half_max,
     lut_planes,
-    normal_half,
     normal_q,
 )
 

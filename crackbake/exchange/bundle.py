@@ -22,6 +22,7 @@ from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.exchange.exr import write_exr
 from crackbake.exchange.glb import write_glb
+from crackbake.exchange.halving import base_color_half, normal_half
 from crackbake.exchange.layers import (
     crack_attributes,
     crack_planes,
@@ -35,7 +36,6 @@ from crackbake.exchange.materials import (
     downsample,
 )
 from crackbake.exchange.output import OutputStage
-from crackbake.exchange.packing import base_color_half, normal_half
 from crackbake.exchange.pngenc import png_bytes, png_rows, write_bytes
 from crackbake.exchange.targets import TARGETS, data16_filtered, normal_convention, pack
 from crackbake.io.mesh import Mesh
