@@ -136,3 +136,20 @@ def normal_half(normal: np.ndarray) -> np.ndarray:
     out = np.empty((normal.shape[0] // 2, normal.shape[1] // 2, 3), np.uint8)
     _normal_half(planar(normal), out)
     return out
+
+
+def warm() -> None:
+    """Compile (or load from numba's cache) the kernels a run at more than 2048² uses that
+    :mod:`crackbake.precompile`'s small runs never reach: these halving kernels and the
+    textured base colour, with the argument types real runs pass."""
+    from crackbake.exchange.materials import base_color_table
+    from crackbake.exchange.packing import base_color8
+
+    mask = np.zeros((4, 4), np.float16)
+    tex = np.zeros((4, 4, 3), np.uint8)
+    for textured in (False, True):
+        table = base_color_table(textured)
+        base_color_half(mask, mask, table, tex if textured else None)
+        base_color_half(mask, None, table, tex if textured else None)
+    base_color8(mask, mask, np.zeros(65536, np.uint8), base_color_table(True), tex)
+    normal_half(np.moveaxis(np.zeros((3, 4, 4), np.float32), 0, -1))
