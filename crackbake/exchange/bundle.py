@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,16 +22,22 @@ from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.exchange.exr import write_exr
 from crackbake.exchange.glb import write_glb
+from crackbake.exchange.halving import base_color_half, normal_half
 from crackbake.exchange.layers import (
     crack_attributes,
     crack_planes,
     stress_attributes,
     stress_planes,
 )
-from crackbake.exchange.materials import GLB_TEXTURE_MAX, base_color, downsample
+from crackbake.exchange.materials import (
+    GLB_TEXTURE_MAX,
+    base_color,
+    base_color_table,
+    downsample,
+)
 from crackbake.exchange.output import OutputStage
-from crackbake.exchange.pngenc import png_bytes, write_bytes
-from crackbake.exchange.targets import TARGETS, normal_convention, pack
+from crackbake.exchange.pngenc import png_bytes, png_rows, write_bytes
+from crackbake.exchange.targets import TARGETS, data16_filtered, normal_convention, pack
 from crackbake.io.mesh import Mesh
 from crackbake.io.obj_lines import write_obj
 from crackbake.io.sidecar import write_sidecar
@@ -41,9 +48,16 @@ from crackbake.params import RunParams
 #: Largest edge of the textures the preview samples (its picture is 1024 pixels wide).
 PREVIEW_TEXTURE_MAX = 2048
 #: Encoding threads.  More than cores on small machines: the jobs spend most of their time in
-#: zlib and OpenEXR with the GIL released, and short texture jobs should not wait behind the
-#: EXR; at most 6 (each holds a few full-size temporaries).
-WRITE_THREADS = max(4, min(6, os.cpu_count() or 1))
+#: zlib, OpenEXR and nogil kernels with the GIL released, and short texture jobs should not wait
+#: behind the EXR; at most 6 (each holds a few full-size temporaries).  On 2 cores 3 beat 4
+#: (warm write at 4096², median 1.56 s against 1.73 s): the jobs are bound by memory traffic,
+#: and fewer at once evict each other's data less.
+WRITE_THREADS = max(3, min(6, os.cpu_count() or 1))
+#: OpenEXR's compression threads while the crack master is written (the library default is
+#: none: the calling thread compresses alone).  The master is the longest job; with workers it
+#: takes the cores the texture jobs leave when they finish instead of ending alone on one
+#: (warm write at 4096² on 2 cores: best 1.6 s against 2.0 s, the same CPU seconds).
+EXR_THREADS = max(2, min(4, os.cpu_count() or 1))
 
 
 @dataclass(eq=False)
@@ -93,9 +107,13 @@ class _Encoder:
     def _job(self, key: tuple, paths: list, keep: bool) -> bytes | None:
         content, bits, normal_y, size = key
         maps = _smaller(self.maps, size)
-        pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
-        data = png_bytes(pixels, srgb=content == "base_color")
-        del pixels
+        rows = data16_filtered(maps) if (content, bits) == ("data", 16) else None
+        if rows is not None:  # packed straight into filtered scanlines: one array less
+            data = png_rows(rows, rows.shape[1] // 8, 16, 4)
+        else:
+            pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
+            data = png_bytes(pixels, srgb=content == "base_color")
+        del rows
         for path in paths:
             write_bytes(path, data)
         return data if keep else None
@@ -136,18 +154,38 @@ def write_outputs(
     stress : StressMaps, optional
         The baked stress fields: written as ``<stem>_stress.exr`` with the ``stress`` format.
     """
+    with _exr_threads(EXR_THREADS if {"exr", "stress"} & set(params.formats) else None):
+        _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress)
+
+
+@contextmanager
+def _exr_threads(n: int | None):
+    """OpenEXR's global worker count set to ``n`` for the write, then restored."""
+    import OpenEXR
+
+    before = OpenEXR.global_thread_count()
+    if n is not None:
+        OpenEXR.set_global_thread_count(n)
+    try:
+        yield
+    finally:
+        if n is not None:
+            OpenEXR.set_global_thread_count(before)
+
+
+def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) -> None:
     formats = params.formats
     texture = None
     if mesh.source and {"png", "glb", "preview"} & set(formats):
         texture = base_color_texture(mesh.source, maps.res)
-    planes = crack_planes(maps.channels(), float32=params.float32) if "exr" in formats else None
     with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
         jobs: list[Future] = []
-        if planes is not None:
-            # The longest job, so it starts first, with its planes ready: converting them in
-            # the job made it wait for the GIL behind every texture's numpy work.
+        if "exr" in formats:
+            # The longest job, so it starts first.  Its planes (the normal's float16 split) are
+            # converted in the job: numpy casts release the GIL, and the texture packs are
+            # nogil kernels, so the conversion no longer waits behind them.
             path = stage.path(f"{stem}_cracks.exr")
-            jobs.append(pool.submit(_write_exr, path, planes, maps))
+            jobs.append(pool.submit(_write_exr, path, maps, params.float32))
         if stress is not None and "stress" in formats:
             jobs.append(
                 pool.submit(_write_stress_exr, stage.path(f"{stem}_stress.exr"), stress)
@@ -178,7 +216,8 @@ def write_outputs(
             job.result()  # the first failure, in submission order
 
 
-def _write_exr(path, planes: dict, maps: CrackMaps) -> None:
+def _write_exr(path, maps: CrackMaps, float32: bool) -> None:
+    planes = crack_planes(maps.channels(), float32=float32)
     attributes = crack_attributes(
         __version__, maps.max_distance, maps.profile_shape, channels=planes
     )
@@ -211,16 +250,41 @@ def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict)
     )
 
 
-def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx) -> None:
-    small = _smaller(maps, PREVIEW_TEXTURE_MAX)
-    tex = texture
-    if tex is not None and tex.shape[0] > PREVIEW_TEXTURE_MAX:
-        tex = downsample(tex, PREVIEW_TEXTURE_MAX)
-    colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
-    tangents = getattr(uvmesh, "tangents", None)
+def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREVIEW_TEXTURE_MAX):
+    """The preview's base colour and 8-bit normal map (or None), at most ``size`` on an edge.
+
+    The last halving, the compositing and the quantisation run fused (one pass each, GIL
+    released, so the encoders keep both cores); the pictures are the ones the numpy path
+    (:func:`_smaller`, :func:`base_color`, :func:`pack`) gives, bit for bit.
+    """
+    n = maps.mask.shape[0]
+    fused = size < n <= 4 * size and n % 4 == 0  # one numpy halving at most, then the kernels
+    if fused and texture is not None and texture.shape[:2] != maps.mask.shape:
+        fused = False
+    if not fused:
+        small = _smaller(maps, size)
+        tex = texture
+        if tex is not None and tex.shape[0] > size:
+            tex = downsample(tex, size)
+        colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
+        normal = None
+        if with_normal and small.normal is not None:
+            normal = pack("normal", small, 8, "gl")
+        return colour, normal
+    half = 2 * size
+    mask, occ = downsample(maps.mask, half), maps.occlusion
+    occ = None if occ is None else downsample(occ, half)
+    tex = None if texture is None else downsample(texture, half)
+    colour = base_color_half(mask, occ, base_color_table(tex is not None), tex)
     normal = None
-    if tangents is not None and small.normal is not None:
-        normal = pack("normal", small, 8, "gl")
+    if with_normal and maps.normal is not None:
+        normal = normal_half(downsample(maps.normal, half))
+    return colour, normal
+
+
+def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx) -> None:
+    tangents = getattr(uvmesh, "tangents", None)
+    colour, normal = _preview_pages(maps, texture, tangents is not None)
     view_dir, up, target, distance = preview_camera(mesh, network)
     picture = render_preview(
         uvmesh.vertices,

@@ -55,8 +55,7 @@ def downsample(image: np.ndarray, max_size: int | None) -> np.ndarray:
 def unit_u8(plane: np.ndarray) -> np.ndarray:
     """A [0, 1] plane rounded to uint8 (clipped; NaN -> 0); float16 through one table gather."""
     if plane.dtype == np.float16:
-        lut = np.clip(half_lut(lambda x: x * 255 + 0.5), 0, 255).astype(np.uint8)
-        return np.take(lut, plane.view(np.uint16))
+        return np.take(_unit_lut(), plane.view(np.uint16))
     q = np.asarray(plane, np.float32) * np.float32(255)
     q += np.float32(0.5)
     np.clip(q, 0, 255, out=q)
@@ -68,6 +67,17 @@ def _factors() -> np.ndarray:
     m = np.repeat(np.arange(256) / 255.0, 256)[:, None]
     o = np.tile(np.arange(256) / 255.0, 256)[:, None]
     return (1.0 + m * (CRACK_RGB / SURFACE_RGB - 1.0)) * o ** (1 / 2.2)
+
+
+def base_color_table(textured: bool) -> np.ndarray:
+    """(65536, 3) table indexed by ``mask level << 8 | occlusion level`` (8-bit levels).
+
+    Without a texture: the uint8 sRGB colour over :data:`SURFACE_RGB`; with one: uint16
+    factors (256 = 1) that scale the texture's sRGB values, rounded as ``(t f + 128) >> 8``.
+    """
+    if textured:
+        return np.clip(_factors() * 256 + 0.5, 0, 256).astype(np.uint16)
+    return np.clip(_factors() * SURFACE_RGB + 0.5, 0, 255).astype(np.uint8)
 
 
 def base_color(
@@ -92,18 +102,39 @@ def base_color(
     texture : (H, W, 3) uint8, optional
         The asset's sRGB base colour at the mask's resolution; :data:`SURFACE_RGB` when absent.
     """
+    fused = _base_color_fused(mask, max_size, occlusion, texture)
+    if fused is not None:
+        return fused
     idx = unit_u8(downsample(mask, max_size)).astype(np.uint16) << 8
     if occlusion is None:
         idx |= 255
     else:
         idx |= unit_u8(downsample(occlusion, max_size))
+    table = base_color_table(texture is not None)
     if texture is None:
-        table = np.clip(_factors() * SURFACE_RGB + 0.5, 0, 255).astype(np.uint8)
         return np.take(table, idx, axis=0)  # 4x faster than table[idx] here
-    table = np.clip(_factors() * 256 + 0.5, 0, 256).astype(np.uint16)
     tex = downsample(texture, max_size)
     out = np.asarray(tex, np.uint16) if tex.dtype == np.uint8 else (tex + 0.5).astype(np.uint16)
     out *= np.take(table, idx, axis=0)
     out += 128
     out >>= 8
     return out.astype(np.uint8)
+
+
+def _unit_lut() -> np.ndarray:
+    """(65536,) uint8: :func:`unit_u8` of every float16 bit pattern."""
+    return np.clip(half_lut(lambda x: x * 255 + 0.5), 0, 255).astype(np.uint8)
+
+
+def _base_color_fused(mask, max_size, occlusion, texture) -> np.ndarray | None:
+    """:func:`base_color` in one pass (:func:`crackbake.exchange.packing.base_color8`) for the
+    usual full-size float16 maps and uint8 texture; None otherwise (the numpy path)."""
+    from crackbake.exchange.packing import base_color8
+
+    if max_size is not None and mask.shape[0] > max_size:
+        return None
+    if mask.dtype != np.float16 or (occlusion is not None and occlusion.dtype != np.float16):
+        return None
+    if texture is not None and (texture.dtype != np.uint8 or texture.shape[:2] != mask.shape):
+        return None
+    return base_color8(mask, occlusion, _unit_lut(), base_color_table(texture is not None), texture)

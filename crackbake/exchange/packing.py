@@ -34,6 +34,60 @@ def _data16(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain,
             out[i, j, 3] = (c >> 8) | (c << 8)
 
 
+@njit(cache=True, nogil=True)
+def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain, rows):
+    # The data texture already PNG-filtered ("Up": each byte minus the byte above), written
+    # straight into the scanline buffer: no (H, W, 4) pixel array, no second pass.
+    h, w = mask.shape
+    prev = np.zeros(8 * w, np.uint8)
+    cur = np.empty(8 * w, np.uint8)
+    for i in range(h):
+        for j in range(w):
+            d = depth[i, j] * depth_gain + np.float32(0.5)
+            q = np.uint16(0)
+            if d >= np.float32(65535.0):
+                q = np.uint16(65535)
+            elif d > np.float32(0.0):
+                q = np.uint16(d)
+            a = lut_mask[mask[i, j]]
+            b = lut_width[width[i, j]]
+            c = lut_time[time[i, j]]
+            o = 8 * j  # big-endian samples: high byte first
+            cur[o], cur[o + 1] = a >> 8, a & 0xFF
+            cur[o + 2], cur[o + 3] = b >> 8, b & 0xFF
+            cur[o + 4], cur[o + 5] = q >> 8, q & 0xFF
+            cur[o + 6], cur[o + 7] = c >> 8, c & 0xFF
+        row = rows[i]
+        row[0] = 2
+        for k in range(8 * w):
+            row[k + 1] = cur[k] - prev[k]  # uint8 arithmetic wraps mod 256
+        prev, cur = cur, prev
+
+
+def data16_rows(mask, width, time, depth, luts, depth_scale: float) -> np.ndarray:
+    """:func:`data16`'s texture as PNG scanlines with the "Up" filter applied, in one pass.
+
+    Returns
+    -------
+    (H, 1 + 8 W) uint8
+        Each row: the filter type byte (2), then the row's big-endian samples minus the row
+        above's (mod 256; the first row minus zeros), as :func:`~crackbake.exchange.pngenc.png_rows`
+        takes them.
+    """
+    h, w = mask.shape
+    rows = np.empty((h, 1 + 8 * w), np.uint8)
+    _data16_rows(
+        np.ascontiguousarray(mask).view(np.uint16),
+        np.ascontiguousarray(width).view(np.uint16),
+        np.ascontiguousarray(time).view(np.uint16),
+        np.ascontiguousarray(depth, dtype=np.float32),
+        *(np.ascontiguousarray(t, dtype=np.uint16) for t in luts),
+        np.float32(65535.0 / depth_scale),
+        rows,
+    )
+    return rows
+
+
 def data16(
     mask: np.ndarray,
     width: np.ndarray,
@@ -69,3 +123,180 @@ def data16(
         out,
     )
     return out.view(">u2")
+
+
+# Channel sources of :func:`lut_planes`: a texel of ``a``, of ``b``, or the table's first entry.
+SRC_A, SRC_B, SRC_CONST = 0, 1, 2
+
+
+@njit(cache=True, nogil=True)
+def _lut_planes(a, b, src, luts, out):
+    h, w = a.shape
+    c = out.shape[2]
+    for i in range(h):
+        for j in range(w):
+            x = a[i, j]
+            y = b[i, j]
+            for k in range(c):
+                s = src[k]
+                if s == 0:
+                    out[i, j, k] = luts[k, x]
+                elif s == 1:
+                    out[i, j, k] = luts[k, y]
+                else:
+                    out[i, j, k] = luts[k, 0]
+
+
+def lut_planes(a: np.ndarray, b: np.ndarray, channels: list) -> np.ndarray:
+    """Interleave channels looked up from two float16 planes, one pass, GIL released.
+
+    Parameters
+    ----------
+    a, b : (H, W) float16
+        The source planes (e.g. mask and occlusion); ``b`` may be ``a``.
+    channels : list of (source, table)
+        Per output channel: :data:`SRC_A`, :data:`SRC_B` or :data:`SRC_CONST`, and a (65536,)
+        table indexed by the float16 bit pattern (a constant channel takes entry 0).  All
+        tables share one dtype: uint8, or ``>u2`` for 16-bit PNG samples.
+
+    Returns
+    -------
+    (H, W, C) array of the tables' dtype
+    """
+    dtype = np.asarray(channels[0][1]).dtype  # np.stack would give '>u2' in native order
+    luts = np.stack([np.broadcast_to(t, (65536,)) for _, t in channels]).astype(dtype)
+    store = np.uint8 if dtype.itemsize == 1 else np.uint16  # '>u2' bytes, stored as they are
+    out = np.empty((*a.shape, len(channels)), store)
+    _lut_planes(
+        np.ascontiguousarray(a).view(np.uint16),
+        np.ascontiguousarray(b).view(np.uint16),
+        np.array([s for s, _ in channels], np.int64),
+        np.ascontiguousarray(luts).view(store),
+        out,
+    )
+    return out.view(dtype)
+
+
+def planar(normal: np.ndarray) -> np.ndarray:
+    """(3, H, W) float32 view of (H, W, 3) normals: free for the bake's planar storage
+    (``CrackMaps.normal`` is a view of it); interleaved arrays are copied once."""
+    return np.ascontiguousarray(np.moveaxis(np.asarray(normal, np.float32), -1, 0))
+
+
+@njit(cache=True, nogil=True)
+def _normal_q(n, half, offset, flip_y, top1, swap, out):
+    c, h, w = n.shape
+    for i in range(h):
+        for j in range(w):
+            for k in range(c):
+                q = n[k, i, j] * half
+                q = q + offset
+                if k == 1 and flip_y:
+                    q = top1 - q
+                # Unit vectors give [0.5, top + 0.5]: truncation is the rounding (NaN -> 0).
+                v = np.int64(q) if q >= 0 else np.int64(0)
+                if swap:  # big-endian samples, the byte order PNG stores
+                    v = ((v >> 8) | (v << 8)) & 0xFFFF
+                out[i, j, k] = v
+
+
+def normal_q(normal: np.ndarray, bits: int, flip_y: bool) -> np.ndarray:
+    """Unit tangent-space normals to ``n * 0.5 + 0.5`` in 8 or 16 bits, one pass, GIL released.
+
+    Parameters
+    ----------
+    normal : (H, W, 3) float32
+        Unit vectors.
+    bits : {8, 16}
+    flip_y : bool
+        DirectX convention: ``y -> -y``.
+
+    Returns
+    -------
+    (H, W, 3) uint8, or big-endian uint16 (``>u2``)
+    """
+    top = 255 if bits == 8 else 65535
+    half = np.float32(top / 2)
+    store = np.uint8 if bits == 8 else np.uint16
+    out = np.empty(normal.shape, store)
+    offset, top1 = half + np.float32(0.5), np.float32(top + 1)
+    _normal_q(planar(normal), half, offset, flip_y, top1, bits == 16, out)
+    return out.view(">u2") if bits == 16 else out
+
+
+@njit(cache=True, nogil=True)
+def _base_color(mask, occ, lut_m, lut_o, table, out):
+    h, w = mask.shape
+    for i in range(h):
+        for j in range(w):
+            idx = (np.int64(lut_m[mask[i, j]]) << 8) | lut_o[occ[i, j]]
+            for k in range(3):
+                out[i, j, k] = table[idx, k]
+
+
+@njit(cache=True, nogil=True)
+def _base_color_tex(mask, occ, lut_m, lut_o, table, tex, out):
+    h, w = mask.shape
+    for i in range(h):
+        for j in range(w):
+            idx = (np.int64(lut_m[mask[i, j]]) << 8) | lut_o[occ[i, j]]
+            for k in range(3):
+                out[i, j, k] = (np.uint32(tex[i, j, k]) * table[idx, k] + 128) >> 8
+
+
+def base_color8(
+    mask: np.ndarray,
+    occlusion: np.ndarray | None,
+    lut: np.ndarray,
+    table: np.ndarray,
+    texture: np.ndarray | None = None,
+) -> np.ndarray:
+    """The composited base colour in one pass (GIL released).
+
+    Parameters
+    ----------
+    mask, occlusion : (H, W) float16
+        ``occlusion`` None = open (index 255).
+    lut : (65536,) uint8
+        Float16 bit pattern -> 8-bit level.
+    table : (65536, 3)
+        Indexed by ``mask level << 8 | occlusion level``: uint8 colours without ``texture``,
+        else uint16 factors (256 = 1) that scale the texture, rounded.
+    texture : (H, W, 3) uint8 or uint16, optional
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    m = np.ascontiguousarray(mask).view(np.uint16)
+    lut_m = np.ascontiguousarray(lut, np.uint16)
+    if occlusion is None:
+        o, lut_o = m, np.full(65536, 255, np.uint16)
+    else:
+        o, lut_o = np.ascontiguousarray(occlusion).view(np.uint16), lut_m
+    out = np.empty((*mask.shape, 3), np.uint8)
+    if texture is None:
+        _base_color(m, o, lut_m, lut_o, np.ascontiguousarray(table), out)
+    else:
+        _base_color_tex(m, o, lut_m, lut_o, np.ascontiguousarray(table, np.uint32),
+                        np.ascontiguousarray(texture), out)  # fmt: skip
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _half_max(bits, table):
+    best = table[bits[0]]
+    for i in range(bits.size):
+        v = table[bits[i]]
+        if v != v:  # NaN wins, as in np.max
+            return v
+        if v > best:
+            best = v
+    return best
+
+
+def half_max(plane: np.ndarray) -> float:
+    """``float(np.max(plane))`` of a non-empty float16 plane (NaN if any), GIL released: numpy's
+    float16 reduction is scalar code, 20x slower on a 4096² map."""
+    table = np.arange(65536, dtype=np.uint16).view(np.float16).astype(np.float32)
+    return float(_half_max(np.ascontiguousarray(plane).view(np.uint16).reshape(-1), table))

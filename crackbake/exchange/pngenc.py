@@ -77,6 +77,16 @@ def png_bytes(pixels: np.ndarray, level: int = PNG_LEVEL, srgb: bool = False) ->
     rows[0, 1:] = raw[0]
     np.subtract(raw[1:], raw[:-1], out=rows[1:, 1:])  # uint8 arithmetic wraps mod 256
     del raw
+    return png_rows(rows, w, bits, c, level=level, srgb=srgb)
+
+
+def png_rows(
+    rows: np.ndarray, width: int, bits: int, channels: int, level: int = PNG_LEVEL,
+    srgb: bool = False,
+) -> bytes:
+    """PNG bytes from scanlines already filtered: (H, 1 + W C bits / 8) uint8, each row's
+    filter type byte first (what :func:`png_bytes` builds; fused packers write it directly)."""
+    h, w, c = rows.shape[0], width, channels
     ihdr = struct.pack(">IIBBBBB", w, h, bits, _COLOUR_TYPE[c], 0, 0, 0)
     parts = [_SIGNATURE, _chunk(b"IHDR", ihdr)]
     if srgb:

@@ -24,7 +24,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackbake.exchange.materials import ROUGHNESS_CRACK, ROUGHNESS_SURFACE, half_lut
-from crackbake.exchange.packing import data16
+from crackbake.exchange.packing import (
+    SRC_A,
+    SRC_B,
+    SRC_CONST,
+    data16,
+    data16_rows,
+    half_max,
+    lut_planes,
+    normal_q,
+)
 from crackbake.params import NORMAL_Y
 from crackbake.params import TARGETS as TARGET_NAMES
 
@@ -105,7 +114,13 @@ def normal_convention(target: str, normal_y: str | None = None) -> str:
 
 def data_scales(maps) -> dict[str, float]:
     """Divisors of the data map's G (width) and B (depth) channels, mesh units (1 when 0)."""
-    w = float(np.max(maps.width)) if maps.width.size else 0.0
+    width = maps.width
+    if not width.size:
+        w = 0.0
+    elif width.dtype == np.float16:
+        w = half_max(width)
+    else:
+        w = float(np.max(width))
     d = float(np.max(maps.depth)) if maps.depth.size else 0.0
     return {"width": w if w > 0 else 1.0, "depth": d if d > 0 else 1.0}
 
@@ -124,8 +139,7 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
     top = _full(bits)
     dtype = _dtype(bits)
     if plane.dtype == np.float16:  # one gather through a table of every half value
-        lut = half_lut(lambda x: np.clip(x / scale * top + 0.5, 0, top))
-        return np.take(lut.astype(dtype), plane.view(np.uint16))
+        return np.take(_quant_lut(bits, scale), plane.view(np.uint16))
     q = np.asarray(plane, np.float32) * np.float32(top / scale)
     q += np.float32(0.5)
     np.nan_to_num(q, copy=False, nan=0.0)
@@ -133,17 +147,45 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
     return q.astype(dtype)
 
 
+def _quant_lut(bits: int, scale: float = 1.0) -> np.ndarray:
+    """(65536,) table of :func:`quantise` over every float16 bit pattern."""
+    top = _full(bits)
+    return half_lut(lambda x: np.clip(x / scale * top + 0.5, 0, top)).astype(_dtype(bits))
+
+
 def _const(shape, value: float, bits: int) -> np.ndarray:
     return np.full(shape, int(round(value * _full(bits))), _dtype(bits))
 
 
-def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
+def _rough_lut(bits: int, smooth: bool = False) -> np.ndarray:
+    """(65536,) table: roughness (or smoothness) of every float16 mask value, quantised."""
     top = _full(bits)
     a, b = ROUGHNESS_SURFACE, ROUGHNESS_CRACK
     if smooth:
         a, b = 1 - a, 1 - b
     lut = half_lut(lambda x: np.clip((a + (b - a) * np.clip(x, 0, 1)) * top + 0.5, 0, top))
-    return np.take(lut.astype(_dtype(bits)), np.asarray(mask, np.float16).view(np.uint16))
+    return lut.astype(_dtype(bits))
+
+
+def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
+    return np.take(_rough_lut(bits, smooth), np.asarray(mask, np.float16).view(np.uint16))
+
+
+def _packed(content: str, maps, bits: int) -> np.ndarray | None:
+    """ORM / mask map / metallic-smoothness by :func:`lut_planes` (one pass over float16
+    mask and occlusion, GIL released); None when the maps are not float16."""
+    occ = maps.occlusion
+    if maps.mask.dtype != np.float16 or (occ is not None and occ.dtype != np.float16):
+        return None
+    const = {v: (SRC_CONST, _const((), v, bits)) for v in (0.0, 1.0)}
+    o = const[1.0] if occ is None else (SRC_B, _quant_lut(bits))
+    rough, smooth = (SRC_A, _rough_lut(bits)), (SRC_A, _rough_lut(bits, smooth=True))
+    channels = {
+        "orm": [o, rough, const[0.0]],
+        "mask_map": [const[0.0], o, const[1.0], smooth],
+        "metallic_smoothness": [const[0.0], const[0.0], const[0.0], smooth],
+    }[content]
+    return lut_planes(maps.mask, maps.mask if occ is None else occ, channels)
 
 
 def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
@@ -153,7 +195,12 @@ def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
         out[..., 0:2] = _const((), 0.5, bits)
         out[..., 2] = _full(bits)
         return out
-    n = np.asarray(maps.normal, np.float32)
+    return normal_q(maps.normal, bits, flip_y=normal_y == "dx")  # one pass, GIL released
+
+
+def _normal_numpy(normal: np.ndarray, bits: int, normal_y: str) -> np.ndarray:
+    """The reference for :func:`normal_q` (tests): ``n * h + h + 0.5`` truncated, h = top / 2."""
+    n = np.asarray(normal, np.float32)
     half = np.float32(_full(bits) / 2)
     q = n * half
     q += half + np.float32(0.5)
@@ -199,6 +246,10 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
         return occlusion()
     if content == "roughness":
         return _roughness(maps.mask, bits)
+    if content != "data":
+        fused = _packed(content, maps, bits)
+        if fused is not None:
+            return fused
     planes = {
         "orm": lambda: (occlusion(), _roughness(maps.mask, bits), _const(shape, 0.0, bits)),
         "mask_map": lambda: (
@@ -216,16 +267,31 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
     return np.stack(planes, axis=-1)
 
 
+def _data16_luts(maps) -> tuple:
+    scales = data_scales(maps)
+    return tuple(
+        half_lut(lambda x, s=s: np.clip(x / s * 65535 + 0.5, 0, 65535)).astype(np.uint16)
+        for s in (1.0, scales["width"], 1.0)
+    )
+
+
+def data16_filtered(maps) -> np.ndarray | None:
+    """The 16-bit data texture as PNG-filtered scanlines (:func:`packing.data16_rows`, for
+    :func:`~crackbake.exchange.pngenc.png_rows`); None unless mask, width, time are float16."""
+    if not all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.width, maps.time)):
+        return None
+    luts = _data16_luts(maps)
+    return data16_rows(maps.mask, maps.width, maps.time, maps.depth, luts,
+                       data_scales(maps)["depth"])  # fmt: skip
+
+
 def _data_planes(maps, bits: int):
     """R mask, G width, B depth, A time: one fused pass for the usual 16-bit float16 maps."""
     scales = data_scales(maps)
     halves = all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.width, maps.time))
     if bits == 16 and halves:
-        luts = tuple(
-            half_lut(lambda x, s=s: np.clip(x / s * 65535 + 0.5, 0, 65535)).astype(np.uint16)
-            for s in (1.0, scales["width"], 1.0)
-        )
-        return data16(maps.mask, maps.width, maps.time, maps.depth, luts, scales["depth"])
+        return data16(maps.mask, maps.width, maps.time, maps.depth, _data16_luts(maps),
+                      scales["depth"])  # fmt: skip
     return (
         quantise(maps.mask, bits), quantise(maps.width, bits, scales["width"]),
         quantise(maps.depth, bits, scales["depth"]), quantise(maps.time, bits),

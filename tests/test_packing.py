@@ -1,0 +1,181 @@
+"""The fused nogil packing kernels equal the numpy paths they replace, texel for texel.
+
+Inputs cover every float16 class the maps can hold (0, 1, fractions, out-of-range, NaN where
+the path defines it) and unit normals along the axes (the truncation edges 0.5 and top + 0.5).
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from crackbake.exchange import bundle, materials, targets
+from crackbake.exchange.halving import base_color_half, normal_half
+from crackbake.exchange.packing import (
+    half_max,
+    lut_planes,
+    normal_q,
+)
+
+RES = 96
+
+
+def _halves(rng, nan: bool = True) -> np.ndarray:
+    x = rng.random((RES, RES)).astype(np.float16)
+    x[:8] = 0
+    x[8:12] = 1
+    x[12:14] = 1.7  # over range: clipped
+    x[14:16] = -0.3
+    if nan:
+        x[16:18] = np.nan
+    return x
+
+
+def _unit_normals(rng) -> np.ndarray:
+    n = rng.normal(size=(RES, RES, 3)).astype(np.float32)
+    axes = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0)]
+    n[:6] = np.array(axes, np.float32)[:, None, :]
+    return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+@pytest.fixture(scope="module")
+def maps():
+    rng = np.random.default_rng(7)
+    return SimpleNamespace(
+        mask=_halves(rng), occlusion=_halves(rng), normal=_unit_normals(rng),
+        texture=rng.integers(0, 256, (RES, RES, 3)).astype(np.uint8),
+    )  # fmt: skip
+
+
+def _numpy_stack(content, m, bits):
+    """The per-plane numpy quantisation stacked: the path :func:`targets._packed` replaces."""
+    shape = m.mask.shape
+    c0, c1 = targets._const(shape, 0.0, bits), targets._const(shape, 1.0, bits)
+    occ = c1 if m.occlusion is None else targets.quantise(m.occlusion, bits)
+    planes = {
+        "orm": (occ, targets._roughness(m.mask, bits), c0),
+        "mask_map": (c0, occ, c1, targets._roughness(m.mask, bits, smooth=True)),
+        "metallic_smoothness": (c0, c0, c0, targets._roughness(m.mask, bits, smooth=True)),
+    }[content]
+    return np.stack(planes, axis=-1)
+
+
+@pytest.mark.parametrize("content", ["orm", "mask_map", "metallic_smoothness"])
+@pytest.mark.parametrize("bits", [8, 16])
+@pytest.mark.parametrize("occluded", [True, False])
+def test_lut_planes_pack_equals_numpy_stack(maps, content, bits, occluded):
+    m = SimpleNamespace(mask=maps.mask, occlusion=maps.occlusion if occluded else None)
+    got = targets.pack(content, m, bits)
+    want = _numpy_stack(content, m, bits)
+    assert got.dtype == (np.uint8 if bits == 8 else np.dtype(">u2"))  # PNG's byte order
+    np.testing.assert_array_equal(got, want)
+
+
+def test_lut_planes_sources_and_constants():
+    a = np.array([[0.0, 1.0]], np.float16)
+    b = np.array([[0.5, 0.25]], np.float16)
+    ident = np.arange(65536, dtype=np.uint16).astype(">u2")  # the bit pattern itself
+    out = lut_planes(a, b, [(0, ident), (1, ident), (2, np.full(65536, 7, ">u2"))])
+    assert out.dtype == np.dtype(">u2") and out.shape == (1, 2, 3)
+    np.testing.assert_array_equal(out[..., 0], a.view(np.uint16))
+    np.testing.assert_array_equal(out[..., 1], b.view(np.uint16))
+    np.testing.assert_array_equal(out[..., 2], 7)
+    assert out.tobytes()[:2] == a.view(np.uint16)[0, 0].astype(">u2").tobytes()
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+@pytest.mark.parametrize("normal_y", ["gl", "dx"])
+def test_normal_kernel_equals_numpy(maps, bits, normal_y):
+    got = normal_q(maps.normal, bits, flip_y=normal_y == "dx")
+    want = targets._normal_numpy(maps.normal, bits, normal_y)
+    assert got.dtype == want.dtype
+    np.testing.assert_array_equal(got, want)
+    # the bake's planar storage (CrackMaps.normal is a (H, W, 3) view of (3, H, W))
+    planar = np.moveaxis(np.ascontiguousarray(np.moveaxis(maps.normal, -1, 0)), 0, -1)
+    np.testing.assert_array_equal(normal_q(planar, bits, flip_y=normal_y == "dx"), want)
+    top = 255 if bits == 8 else 65535
+    # (0, 0, 1) -> (half, half, top) whatever the convention; +y flips under dx.
+    assert got[0, 0].tolist() == [top // 2 + 1, top // 2 + 1, top]
+    assert got[4, 0, 1] == (top if normal_y == "gl" else 0)  # (top + 1) - (top + 0.5)
+
+
+@pytest.mark.parametrize("occluded", [True, False])
+@pytest.mark.parametrize("textured", [True, False])
+def test_base_color_kernel_equals_numpy(maps, occluded, textured):
+    occ = maps.occlusion if occluded else None
+    tex = maps.texture if textured else None
+    assert materials._base_color_fused(maps.mask, None, occ, tex) is not None
+    got = materials.base_color(maps.mask, occlusion=occ, texture=tex)
+    # float32 inputs take the numpy path (unit_u8's arithmetic, the table gather)
+    occ32 = None if occ is None else occ.astype(np.float32)
+    with np.errstate(invalid="ignore"):  # NaN -> 0 in both paths
+        want = materials.base_color(maps.mask.astype(np.float32), occlusion=occ32, texture=tex)
+    assert got.dtype == np.uint8
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("occluded", [True, False])
+@pytest.mark.parametrize("textured", [True, False])
+@pytest.mark.parametrize("levels", [1, 2])
+def test_preview_pages_equal_numpy(occluded, textured, levels):
+    rng = np.random.default_rng(3)
+    m = SimpleNamespace(
+        mask=_halves(rng, nan=False), occlusion=_halves(rng, nan=False) if occluded else None,
+        normal=_unit_normals(rng),
+    )  # fmt: skip
+    tex = rng.integers(0, 256, (RES, RES, 3)).astype(np.uint8) if textured else None
+    size = RES >> levels
+    colour, normal = bundle._preview_pages(m, tex, True, size=size)
+    # the numpy path: float box filter, base colour, renormalised normal quantised
+    small = bundle._smaller(m, size)
+    want_colour = materials.base_color(
+        small.mask, occlusion=small.occlusion,
+        texture=None if tex is None else materials.downsample(tex, size),
+    )  # fmt: skip
+    assert colour.shape == (size, size, 3) and normal.shape == (size, size, 3)
+    np.testing.assert_array_equal(colour, want_colour)
+    np.testing.assert_array_equal(normal, targets._normal_numpy(small.normal, 8, "gl"))
+
+
+def test_half_kernels_on_float32_and_half_agree():
+    rng = np.random.default_rng(5)
+    mask = _halves(rng, nan=False)
+    table = materials.base_color_table(False)
+    np.testing.assert_array_equal(
+        base_color_half(mask, None, table), base_color_half(mask.astype(np.float32), None, table)
+    )
+    n = _unit_normals(rng)
+    planar = np.moveaxis(np.ascontiguousarray(np.moveaxis(n, -1, 0)), 0, -1)
+    assert normal_half(n).shape == (RES // 2, RES // 2, 3)
+    np.testing.assert_array_equal(normal_half(planar), normal_half(n))
+
+
+def test_half_max_equals_numpy():
+    rng = np.random.default_rng(11)
+    x = (rng.random((64, 64)) * 300 - 100).astype(np.float16)
+    assert half_max(x) == float(np.max(x))
+    x[5, 7] = np.inf
+    assert half_max(x) == np.inf
+    x[9, 9] = np.nan
+    assert np.isnan(half_max(x)) and np.isnan(np.max(x))
+    assert half_max(np.full((3, 3), -2.5, np.float16)) == -2.5
+
+
+def test_filtered_data_rows_give_the_same_png():
+    from crackbake.exchange.pngenc import png_bytes, png_rows
+
+    rng = np.random.default_rng(13)
+    depth = (rng.random((RES, RES)) * 0.02).astype(np.float32)
+    depth[3, :5] = [np.nan, -1.0, 0.0, 0.02, 1.0]  # NaN -> 0, clipped at both ends
+    m = SimpleNamespace(
+        mask=_halves(rng), width=(rng.random((RES, RES)) * 0.01).astype(np.float16),
+        time=_halves(rng), depth=depth, occlusion=None,
+    )  # fmt: skip
+    rows = targets.data16_filtered(m)
+    assert rows.shape == (RES, 1 + 8 * RES) and (rows[:, 0] == 2).all()
+    pixels = targets.pack("data", m, 16)
+    assert png_rows(rows, RES, 16, 4) == png_bytes(pixels)
+    # the unfiltered first row is the big-endian pixels themselves
+    assert rows[0, 1:].tobytes() == pixels[0].tobytes()
