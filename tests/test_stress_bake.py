@@ -255,7 +255,10 @@ def test_initial_field_carried_onto_the_split_mesh_exactly(gl_ctx):
     unsplit = SimpleNamespace(vertices=sim.vertices, faces=sim.faces, asset_face=sim.asset_face,
                               stress_initial=result.stress_initial,
                               stress_final=result.stress_initial,
-                              separation=np.zeros(len(sim.vertices)), stats=result.stats)
+                              separation=np.zeros(len(sim.vertices)), stats=result.stats,
+                              separation_initial=result.separation_initial)
+    # iben reports the separation it started from (with its flaws), one value per initial node.
+    assert result.separation_initial.shape == (len(sim.vertices),)
     whole = bake_stress(uvmesh, unsplit, 192, tangents=tangents, ctx=gl_ctx)
     scale = float(np.abs(whole.stress0.p1).max())
     assert scale > 1.0  # the impact peaks at 2 x strength

@@ -139,6 +139,8 @@ class SolverResult:
         Stress per final sim face.
     separation : (N',) float64
         Largest separation eigenvalue per final node, relative to the toughness (>= 1 failed).
+    separation_initial : (N,) float64 or None
+        The same per *initial* node before any crack (the solver's own starting values).
     steps : int
         Solver steps taken.
     stats : dict
@@ -159,3 +161,4 @@ class SolverResult:
     steps: int
     stats: dict = field(default_factory=dict)
     origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    separation_initial: np.ndarray | None = None

@@ -89,6 +89,7 @@ def solve_iben(sim, field, params: SolverParams) -> SolverResult:
     t0 = time.perf_counter()
     s, mesh = _setup(sim, field, params)
     cal = _calibrate(s, mesh, params)
+    cal.sep0 = _relative(s.val[: mesh.n0], s.taun[: mesh.n0])  # before the loop changes them
     p = _loop_params(s, mesh, cal, params)
     t_loop = time.perf_counter()
     s = _run_chunks(s, p, mesh.has_growth) if cal.tau > 0 else s
@@ -259,6 +260,11 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
             return s
 
 
+def _relative(val: np.ndarray, taun: np.ndarray) -> np.ndarray:
+    """Separation per node relative to its toughness (0 where it has none)."""
+    return np.where(taun > 0, val / np.where(taun > 0, taun, 1.0), 0.0)
+
+
 def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: SolverParams,
             loop_seconds: float, t0: float) -> SolverResult:
     cnt = s.cnt
@@ -269,8 +275,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
     alive = s.seg_alive[:ns]
     cracks = chain(s.segp[:ns][alive], s.seg_info[:ns][alive], s.X, s.onb, steps, params,
                    mesh.X0, float(s.gp[5]))
-    taun, val = s.taun, s.val
-    sep = np.where(taun[:nn] > 0, val[:nn] / np.where(taun[:nn] > 0, taun[:nn], 1.0), 0.0)
+    sep = _relative(s.val[:nn], s.taun[:nn])
     pr = s.pr[:nf]
     # Effective stress (what the cracks left): l1 d1 d1^T + l2 d2 d2^T.
     s_final = (pr[:, 0, None, None] * np.einsum("ea,eb->eab", pr[:, 2:5], pr[:, 2:5])
@@ -279,7 +284,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
     return SolverResult(
         cracks=cracks, vertices=s.X[:nn].copy(), faces=s.F[:nf].copy(),
         asset_face=s.AF[:nf].copy(), stress_initial=mesh.S0.copy(), stress_final=s_final,
-        separation=sep, steps=steps,
+        separation=sep, separation_initial=cal.sep0, steps=steps,
         origins=np.column_stack([s.corig[:ncrack], s.clen[:ncrack]]),
         stats={
             "tau": float(cal.tau),

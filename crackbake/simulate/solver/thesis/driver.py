@@ -246,6 +246,7 @@ def solve_thesis(sim, field, params: SolverParams) -> SolverResult:
 
     t1 = _time.perf_counter()
     grown = _no_cracks()
+    sep_initial = value / tau if np.isfinite(tau) and tau > 0 else np.zeros(n)  # a copy
     if np.isfinite(tau) and params.max_cracks > 0 and n > 0:
         grown = grow(x, normal, ptr, nbr, edge_face, boundary, sep, value, vector, second,
                      float(tau), float(params.tip_factor), float(params.relax_share),
@@ -282,6 +283,7 @@ def solve_thesis(sim, field, params: SolverParams) -> SolverResult:
         stress_initial=stress,
         stress_final=stress,
         separation=sep_rel,
+        separation_initial=sep_initial,
         steps=int(total),
         stats=stats,
     )
