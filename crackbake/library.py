@@ -14,7 +14,6 @@ from __future__ import annotations
 import logging
 import math
 import numbers
-import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -234,23 +233,12 @@ def build_library(params: LibraryParams) -> dict:
     CrackbakeError
         Bad parameters or an unusable output folder (left unchanged).
     """
-    from crackbake.exchange.interrupt import RunInterrupted, interruptible, received
+    from crackbake.exchange.interrupt import run_staged
     from crackbake.exchange.output import OutputStage
 
     params = params.validate()
     stage = OutputStage(params.out)
-    try:
-        with interruptible(), stage:
-            return _build(params, stage)
-    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM: the folder keeps its previous set
-        signum = getattr(exc, "signum", signal.SIGINT)
-        raise RunInterrupted(stage.interrupted_message(), signum) from None
-    except Exception:
-        # A signal inside a C extension can surface as another error (as in pipeline.run).
-        signum = received()
-        if signum is None:
-            raise
-        raise RunInterrupted(stage.interrupted_message(), signum) from None
+    return run_staged(stage, lambda: _build(params, stage))
 
 
 def _build(params: LibraryParams, stage) -> dict:

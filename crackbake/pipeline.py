@@ -8,7 +8,6 @@ Progress is reported through :mod:`logging` (logger ``"crackbake.pipeline"``).
 from __future__ import annotations
 
 import logging
-import signal
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -21,7 +20,7 @@ from crackbake.bake.tangents import with_tangents
 from crackbake.bake.uv import UVMesh, prepare_uvs
 from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.bundle import write_outputs
-from crackbake.exchange.interrupt import RunInterrupted, interruptible, received
+from crackbake.exchange.interrupt import run_staged
 from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
@@ -115,19 +114,7 @@ def run(params: RunParams) -> RunResult:
     """
     params.validate()
     stage = OutputStage(params.out_dir)
-    try:
-        with interruptible(), stage:
-            return _run(params, stage)
-    except KeyboardInterrupt as exc:
-        signum = getattr(exc, "signum", signal.SIGINT)
-        raise RunInterrupted(stage.interrupted_message(), signum) from None
-    except Exception:
-        # A signal raised inside a C extension (an import, a callback) can surface as another
-        # error (ImportError "initialization failed"): the run was interrupted all the same.
-        signum = received()
-        if signum is None:
-            raise
-        raise RunInterrupted(stage.interrupted_message(), signum) from None
+    return run_staged(stage, lambda: _run(params, stage))
 
 
 def _run(params: RunParams, stage: OutputStage) -> RunResult:

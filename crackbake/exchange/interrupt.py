@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import TypeVar
 
 from crackbake.errors import CrackbakeError
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
+T = TypeVar("T")
 
 
 class Interrupt(KeyboardInterrupt):
@@ -102,6 +104,27 @@ def deferred() -> Iterator[None]:
 def received() -> int | None:
     """The signal that arrived under :func:`interruptible` (None if none did)."""
     return _state.received
+
+
+def run_staged(stage, body: Callable[[], T]) -> T:
+    """Run ``body()`` in ``with interruptible(), stage:``; an interrupt -> :class:`RunInterrupted`.
+
+    ``stage`` is the run's :class:`~crackbake.exchange.output.OutputStage`; its
+    ``interrupted_message()`` says what the output folder holds after the interrupt.
+    """
+    try:
+        with interruptible(), stage:
+            return body()
+    except KeyboardInterrupt as exc:  # the folder keeps its previous set
+        signum = getattr(exc, "signum", signal.SIGINT)
+        raise RunInterrupted(stage.interrupted_message(), signum) from None
+    except Exception:
+        # A signal raised inside a C extension (an import, a callback) can surface as another
+        # error (ImportError "initialization failed"): the run was interrupted all the same.
+        signum = received()
+        if signum is None:
+            raise
+        raise RunInterrupted(stage.interrupted_message(), signum) from None
 
 
 def raise_if_received() -> None:
