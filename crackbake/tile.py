@@ -332,14 +332,19 @@ def build_tile(params: TileParams) -> dict:
     CrackbakeError
         Bad parameters or an unusable output folder (left unchanged).
     """
+    from crackbake.exchange.interrupt import run_staged
     from crackbake.exchange.output import OutputStage
 
     params = params.validate()
     stage = OutputStage(params.out)
-    with stage:
+
+    def body() -> dict:
         manifest = _build(params, stage)
         stage.commit()
-    return manifest
+        return manifest
+
+    # SIGINT/SIGTERM leave the folder as it was and exit 128 + signal, like the other commands.
+    return run_staged(stage, body)
 
 
 def _build(params: TileParams, stage) -> dict:

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -224,3 +226,19 @@ def test_bake_is_shift_invariant(mud_tile, gl_ctx):
         assert off.mean() < 5e-4, (name, off.sum())
     na = np.roll(a.normal, (res // 2, res // 2), (0, 1))
     assert (np.abs(na - b.normal).max(axis=2) > 2e-3).mean() < 5e-4
+
+
+def test_sigterm_leaves_no_folder(tmp_path):
+    out = tmp_path / "tile"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "crackbake", "tile", "--preset", "mud", "--size", "2",
+         "--res", "2048", "-o", str(out)],
+        stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    time.sleep(2.5)  # inside the solve
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "error: interrupted; no outputs were written"
+    assert not out.exists() and not list(tmp_path.iterdir())
