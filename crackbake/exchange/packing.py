@@ -12,21 +12,26 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _texel16(i, j, mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain):
+    """The data texture's four 16-bit samples at texel (i, j): mask, width, depth, time."""
+    d = depth[i, j] * depth_gain + np.float32(0.5)
+    # NaN compares false both ways and lands on 0, like the numpy path.
+    q = np.uint16(0)
+    if d >= np.float32(65535.0):
+        q = np.uint16(65535)
+    elif d > np.float32(0.0):
+        q = np.uint16(d)
+    return lut_mask[mask[i, j]], lut_width[width[i, j]], q, lut_time[time[i, j]]
+
+
 @njit(cache=True, nogil=True)
 def _data16(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain, out):
     h, w = mask.shape
     for i in range(h):
         for j in range(w):
-            d = depth[i, j] * depth_gain + np.float32(0.5)
-            # NaN compares false both ways and lands on 0, like the numpy path.
-            q = np.uint16(0)
-            if d >= np.float32(65535.0):
-                q = np.uint16(65535)
-            elif d > np.float32(0.0):
-                q = np.uint16(d)
-            a = lut_mask[mask[i, j]]
-            b = lut_width[width[i, j]]
-            c = lut_time[time[i, j]]
+            a, b, q, c = _texel16(i, j, mask, width, time, depth, lut_mask, lut_width,
+                                  lut_time, depth_gain)
             # Big-endian samples, the byte order PNG stores.
             out[i, j, 0] = (a >> 8) | (a << 8)
             out[i, j, 1] = (b >> 8) | (b << 8)
@@ -43,15 +48,8 @@ def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_
     cur = np.empty(8 * w, np.uint8)
     for i in range(h):
         for j in range(w):
-            d = depth[i, j] * depth_gain + np.float32(0.5)
-            q = np.uint16(0)
-            if d >= np.float32(65535.0):
-                q = np.uint16(65535)
-            elif d > np.float32(0.0):
-                q = np.uint16(d)
-            a = lut_mask[mask[i, j]]
-            b = lut_width[width[i, j]]
-            c = lut_time[time[i, j]]
+            a, b, q, c = _texel16(i, j, mask, width, time, depth, lut_mask, lut_width,
+                                  lut_time, depth_gain)
             o = 8 * j  # big-endian samples: high byte first
             cur[o], cur[o + 1] = a >> 8, a & 0xFF
             cur[o + 2], cur[o + 3] = b >> 8, b & 0xFF
