@@ -6,7 +6,9 @@ import json
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import click
 
@@ -354,6 +356,26 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
 
 def _err(msg: str) -> None:
     click.echo(msg, err=True)
+
+
+T = TypeVar("T")
+
+def reported(run: Callable[[], T], quiet: bool) -> T:
+    """``run()`` as the subcommands report it: each CrackbakeWarning one ``warning:`` line
+    (none with ``quiet``), a CrackbakeError one ``error:`` line and its exit code."""
+
+    def show(message, *_args, **_kwargs) -> None:
+        if not quiet:
+            _err(f"warning: {message}")
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", CrackbakeWarning)
+            warnings.showwarning = show
+            return run()
+    except CrackbakeError as exc:
+        _err(f"error: {exc}")
+        sys.exit(exc.exit_code)
 
 
 def _run_params(mesh: Path, o: dict) -> RunParams:

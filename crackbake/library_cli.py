@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import json
-import sys
-import warnings
 from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err
-from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.cli import _Command, _err, reported
 from crackbake.params import preset_names
 
 EPILOG = """\b
@@ -63,21 +60,10 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 def decals(quiet: bool, as_json: bool, **options) -> None:
     """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
 
-    def show(message, *_args, **_kwargs) -> None:
-        if not quiet:
-            _err(f"warning: {message}")
+    from crackbake.library import LibraryParams, build_library
 
-    try:
-        from crackbake.library import LibraryParams, build_library
-
-        params = LibraryParams(**options).validate()
-        with warnings.catch_warnings():
-            warnings.simplefilter("always", CrackbakeWarning)
-            warnings.showwarning = show  # one line each, like the main command
-            doc = build_library(params)
-    except CrackbakeError as exc:
-        _err(f"error: {exc}")
-        sys.exit(exc.exit_code)
+    params = reported(lambda: LibraryParams(**options).validate(), quiet)
+    doc = reported(lambda: build_library(params), quiet)
     if as_json:
         click.echo(json.dumps(doc, indent=1))
     if not quiet:

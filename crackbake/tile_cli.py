@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import sys
-import warnings
 from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err
-from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.cli import _Command, _err, reported
 from crackbake.params import preset_names
 
 EPILOG = """\b
@@ -47,21 +44,10 @@ pieces and the period), manifest.json.
 def tile(quiet: bool, **options) -> None:
     """Grow cracks on a periodic plate and bake a texture set that tiles with no seam."""
 
-    def show(message, *_args, **_kwargs) -> None:
-        if not quiet:
-            _err(f"warning: {message}")
+    from crackbake.tile import TileParams, build_tile
 
-    try:
-        from crackbake.tile import TileParams, build_tile
-
-        params = TileParams(**options).validate()
-        with warnings.catch_warnings():
-            warnings.simplefilter("always", CrackbakeWarning)
-            warnings.showwarning = show
-            manifest = build_tile(params)
-    except CrackbakeError as exc:
-        _err(f"error: {exc}")
-        sys.exit(exc.exit_code)
+    params = reported(lambda: TileParams(**options).validate(), quiet)
+    manifest = reported(lambda: build_tile(params), quiet)
     if not quiet:
         s = manifest["solver"]
         _err(f"{params.preset} tile {params.size:g} x {params.size:g}, {s.get('cracks', 0)} "
