@@ -33,15 +33,14 @@ import dataclasses
 
 import numpy as np
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
+from crackbake.bake import tangent_kernels as kern
 from crackbake.bake.uv.uvmesh import UVMesh
 from crackbake.errors import CrackbakeError
 
 # MikkTSpace's "not zero": |x| > FLT_MIN (the smallest normal float32).
 _TINY = float(np.finfo(np.float32).tiny)
 _NEXT = np.array([1, 2, 0])
-_PREV = np.array([2, 0, 1])
 
 
 def corner_tangents(
@@ -71,32 +70,11 @@ def corner_tangents(
     if not len(faces):
         return np.zeros((0, 3, 4))
     weld = _weld(p, n, t)[faces]
-    pc, nc, tc = p[faces], n[faces], t[faces]
-    nondeg = ~(
-        (pc[:, 0] == pc[:, 1]).all(1) | (pc[:, 0] == pc[:, 2]).all(1)
-        | (pc[:, 1] == pc[:, 2]).all(1)
-    )
-    tangent, orient, good = _triangle_frames(pc, tc)
-    good &= nondeg
+    tangent, orient, good, nondeg = kern.face_frames(p, t, faces, _TINY)
     partner = _match_edges(weld, nondeg)
     label, group_orient = _corner_groups(partner, orient, good, nondeg)
-    n_groups = len(group_orient)
-
-    contrib = _corner_contributions(pc, nc, tangent) * good[:, None, None]
-    flat = contrib.reshape(-1, 3)
-    sums = np.stack([np.bincount(label, flat[:, k], n_groups) for k in range(3)], 1)
-    has_good = np.bincount(label, np.repeat(good, 3).astype(np.float64), n_groups) > 0
-    length = np.sqrt(_dot(sums, sums))
-    group_t = sums / np.where(length > 0, length, 1.0)[:, None]
-
-    out = np.empty((len(faces) * 3, 4))
-    take = has_good[label] & np.repeat(nondeg, 3)
-    # A group whose contributions cancel (Blender: a zero tangent) gets the fallback too.
-    full = take & (length[label] > 0)
-    out[full, :3] = group_t[label[full]]
-    out[~full, :3] = _fallback(nc.reshape(-1, 3)[~full])
-    out[:, 3] = -1.0
-    out[take, 3] = np.where(group_orient[label[take]], 1.0, -1.0)
+    sums, has_good = kern.group_sums(p, n, faces, tangent, good, label, len(group_orient))
+    out = kern.assemble(n, faces, label, sums, has_good, group_orient, nondeg)
     _copy_to_degenerate(out, weld.reshape(-1), np.repeat(nondeg, 3))
     return out.reshape(-1, 3, 4)
 
@@ -123,30 +101,17 @@ def with_tangents(uvmesh: UVMesh) -> UVMesh:
     """
     faces = np.asarray(uvmesh.faces, dtype=np.int64)
     tan = corner_tangents(uvmesh.vertices, faces, uvmesh.uv, uvmesh.normals).reshape(-1, 4)
-    n_vert = len(uvmesh.vertices)
-    corner_vertex = faces.reshape(-1)
-    variant, first = _exact_ids(np.column_stack([corner_vertex.astype(np.float64), tan]))
-    var_vertex = corner_vertex[first]
-    # Variants are numbered by first corner, so a vertex's first variant comes first.
-    _, primary = np.unique(var_vertex, return_index=True)
-    is_primary = np.zeros(len(first), dtype=bool)
-    is_primary[primary] = True
-    new_id = np.empty(len(first), dtype=np.int64)
-    new_id[is_primary] = var_vertex[is_primary]
-    new_id[~is_primary] = n_vert + np.arange(np.count_nonzero(~is_primary))
-    source = np.concatenate([np.arange(n_vert), var_vertex[~is_primary]])
-
+    new_vertex, source, first = kern.split_vertices(faces.reshape(-1), tan, len(uvmesh.vertices))
     normals = np.asarray(uvmesh.normals, dtype=np.float64)[source]
     tangents = np.empty((len(source), 4))
-    unused = np.ones(len(source), dtype=bool)
-    unused[new_id] = False
-    tangents[unused, :3] = _fallback(normals[unused])
+    unused = first < 0
+    tangents[unused, :3] = kern.fallback_rows(np.ascontiguousarray(normals[unused]))
     tangents[unused, 3] = -1.0
-    tangents[new_id] = tan[first]
+    tangents[~unused] = tan[first[~unused]]
     return dataclasses.replace(
         uvmesh,
         vertices=np.asarray(uvmesh.vertices, dtype=np.float64)[source],
-        faces=new_id[variant].reshape(-1, 3),
+        faces=new_vertex.reshape(-1, 3),
         uv=np.asarray(uvmesh.uv, dtype=np.float64)[source],
         normals=normals,
         vertex_map=np.asarray(uvmesh.vertex_map, dtype=np.int64)[source],
@@ -179,46 +144,10 @@ def _checked(vertices, faces, uv, normals):
     return out[0], out[1], out[2], f.astype(np.int64)
 
 
-def _exact_ids(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Ids of bit-identical rows, numbered by first occurrence, and each id's first row.
-
-    Hashes the rows' bits to one uint64 and sorts that (much faster than sorting rows); a hash
-    collision is detected and then the exact row sort is used.
-    """
-    r = np.ascontiguousarray(rows, dtype=np.float64) + 0.0
-    bits = r.view(np.uint64)
-    h = np.zeros(len(r), dtype=np.uint64)
-    for k in range(r.shape[1]):
-        h = (h ^ bits[:, k]) * np.uint64(0x9E3779B97F4A7C15)
-        h ^= h >> np.uint64(29)
-    _, first, inverse = np.unique(h, return_index=True, return_inverse=True)
-    if not np.array_equal(r, r[first[inverse]]):
-        _, first, inverse = np.unique(r, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    return rank[inverse], first[order]
-
-
 def _weld(p: np.ndarray, n: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(V,) welded-vertex id: equal for bit-identical position, normal and UV."""
-    return _exact_ids(np.column_stack([p, n, t]))[0]
-
-
-def _triangle_frames(pc: np.ndarray, tc: np.ndarray):
-    """Per triangle: unit ``dP/du`` (F, 3), orientation preserving (F,), good (F,)."""
-    d1, d2 = pc[:, 1] - pc[:, 0], pc[:, 2] - pc[:, 0]
-    t21, t31 = tc[:, 1] - tc[:, 0], tc[:, 2] - tc[:, 0]
-    area = t21[:, 0] * t31[:, 1] - t21[:, 1] * t31[:, 0]
-    v_os = t31[:, 1, None] * d1 - t21[:, 1, None] * d2
-    v_ot = -t31[:, 0, None] * d1 + t21[:, 0, None] * d2
-    len_os2 = _dot(v_os, v_os)
-    len_ot2 = _dot(v_ot, v_ot)
-    orient = area > 0
-    good = (np.abs(area) > _TINY) & (len_os2 > _TINY) & (len_ot2 > _TINY)
-    scale = np.where(good, np.where(orient, 1.0, -1.0) / np.sqrt(np.where(good, len_os2, 1.0)), 0)
-    return v_os * scale[:, None], orient, good
+    rows = np.ascontiguousarray(np.column_stack([p, n, t]), dtype=np.float64) + 0.0
+    return kern.exact_ids(rows.view(np.uint64))[0]
 
 
 def _match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
@@ -229,30 +158,7 @@ def _match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
     edge, the k-th edge one way (in face order) pairs with the k-th the other way, which is what
     MikkTSpace's greedy first-come pairing amounts to.
     """
-    a = weld.reshape(-1)
-    b = weld[:, _NEXT].reshape(-1)
-    edges = np.flatnonzero(np.repeat(nondeg, 3))
-    partner = np.full(len(a), -1, dtype=np.int64)
-    if not len(edges):
-        return partner
-    lo = np.minimum(a[edges], b[edges])
-    hi = np.maximum(a[edges], b[edges])
-    key = lo * np.int64(weld.max(initial=0) + 1) + hi
-    backwards = (a[edges] > b[edges]).astype(np.int64)
-    order = np.argsort(key * 2 + backwards, kind="stable")
-    s_key, s_back, s_edge = key[order], backwards[order], edges[order]
-    starts = np.flatnonzero(np.r_[True, s_key[1:] != s_key[:-1]])
-    sizes = np.diff(np.r_[starts, len(s_key)])
-    n_fwd = np.add.reduceat(1 - s_back, starts)
-    block_start = np.repeat(starts, sizes)
-    block_fwd = np.repeat(n_fwd, sizes)
-    pos = np.arange(len(s_key))
-    rank = pos - block_start - block_fwd  # rank among the backward edges of the block
-    ok = (s_back == 1) & (rank < block_fwd)
-    mate = s_edge[(block_start + rank)[ok]]
-    partner[s_edge[ok]] = mate
-    partner[mate] = s_edge[ok]
-    return partner
+    return kern.match_edges(np.ascontiguousarray(weld, dtype=np.int64), nondeg)
 
 
 def _corner_groups(partner, orient, good, nondeg) -> tuple[np.ndarray, np.ndarray]:
@@ -270,17 +176,10 @@ def _corner_groups(partner, orient, good, nondeg) -> tuple[np.ndarray, np.ndarra
     src, dst = np.concatenate([e, nxt(e)]), np.concatenate([nxt(m), m])
     good_c, orient_c = np.repeat(good, 3), np.repeat(orient, 3)
     plain = good_c[src] & good_c[dst] & (orient_c[src] == orient_c[dst])
-    n = len(partner)
-    graph = coo_matrix(
-        (np.ones(np.count_nonzero(plain), dtype=np.int8), (src[plain], dst[plain])), shape=(n, n)
-    ).tocsr()
-    n_comp, label = connected_components(graph, directed=False)
-    label = label.astype(np.int64)
-    # Each component's orientation and first corner (where MikkTSpace starts its group).
+    # Components, each with its first good corner (where MikkTSpace starts its group).
+    label, n_comp, start = kern.components(len(partner), src[plain], dst[plain], good_c)
     comp_orient = np.zeros(n_comp, dtype=bool)
     comp_orient[label] = orient_c
-    start = np.full(n_comp, n, dtype=np.int64)
-    np.minimum.at(start, label[good_c], np.flatnonzero(good_c))
     gwa_c = np.repeat(nondeg & ~good, 3)
     mixed = ~plain & (gwa_c[src] | gwa_c[dst])
     if mixed.any():
@@ -337,43 +236,6 @@ def _join_group_with_any(a, b, n_comp, start, comp_orient, gwa_c, label) -> np.n
     for y in np.flatnonzero(assigned & is_gwa).tolist():
         comp_orient[y] = comp_orient[root[y]]
     return root
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Dot product over the last axis (of length 3); faster than einsum on (..., 3) arrays."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-
-
-def _project(n: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``v`` projected onto the plane normal to ``n`` and normalised (zero stays zero)."""
-    w = v - n * _dot(n, v)[..., None]
-    length = np.sqrt(_dot(w, w))
-    return w / np.where(length > 0, length, 1.0)[..., None]
-
-
-def _corner_contributions(pc, nc, tangent) -> np.ndarray:
-    """(F, 3, 3) each corner's share: the face tangent in the corner's tangent plane times the
-    corner angle measured in that plane."""
-    e1 = _project(nc, pc[:, _NEXT] - pc)
-    e2 = _project(nc, pc[:, _PREV] - pc)
-    angle = np.arccos(np.clip(_dot(e1, e2), -1.0, 1.0))
-    return _project(nc, np.broadcast_to(tangent[:, None, :], pc.shape)) * angle[..., None]
-
-
-def _fallback(n: np.ndarray) -> np.ndarray:
-    """(N, 3) MikkTSpace's default tangent +X made orthogonal to ``n`` (+Y where n is +-X)."""
-    n = np.asarray(n, dtype=np.float64)
-    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-    t = np.zeros_like(n)
-    t[:, 0] = 1.0
-    t -= n * n[:, :1]
-    length = np.linalg.norm(t, axis=1)
-    weak = length < 1e-6
-    t[weak] = np.array([0.0, 1.0, 0.0]) - n[weak] * n[weak, 1:2]
-    length = np.linalg.norm(t, axis=1)
-    bad = length < 1e-6  # a zero or broken normal
-    t[bad], length[bad] = [1.0, 0.0, 0.0], 1.0
-    return t / length[:, None]
 
 
 def _copy_to_degenerate(out: np.ndarray, weld: np.ndarray, nondeg: np.ndarray) -> None:
