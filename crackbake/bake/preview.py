@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from crackbake.bake.context import GLScope, shader_source
+from crackbake.geometry import face_cross, unit_rows
 from crackbake.io.mesh import Mesh
 from crackbake.network import CrackNetwork
 
@@ -232,6 +233,11 @@ def preview_direction(
     when there are no cracks).
     """
     up = up_axis(mesh) if up is None else np.asarray(up, np.float64)
+    return _direction(face_cross(mesh.vertices, mesh.faces), network, up)
+
+
+def _direction(cross: np.ndarray, network: CrackNetwork, up: np.ndarray):
+    """:func:`preview_direction` from the faces' edge cross products (F, 3)."""
     cand = np.array(
         [
             (x, y, z)
@@ -246,18 +252,17 @@ def preview_direction(
     cand[:, 1] += np.tan(np.radians(20))
     cand /= np.linalg.norm(cand, axis=1, keepdims=True)
     cand = cand @ _frame(up).T
-    tri = mesh.vertices[mesh.faces]
-    area_normals = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    score = np.maximum(area_normals @ cand.T, 0).sum(axis=0)
+    # einsum, not matmul: a (F, 3) @ (3, 17) product goes to BLAS threads, which on a busy
+    # 2-core machine took 1.5 s at 1.5M faces instead of 0.1 s.
+    facing = np.einsum("fi,ci->fc", cross, cand)
+    score = 0.5 * np.maximum(facing, 0, out=facing).sum(axis=0)
     score = 1e-3 * score / max(score.max(), 1e-300)
     if network.cracks:
-        unit = area_normals / np.maximum(
-            np.linalg.norm(area_normals, axis=1, keepdims=True), 1e-300
-        )
-        for crack in network.cracks:
-            seg = np.linalg.norm(np.diff(crack.points, axis=0), axis=1)
-            n = unit[crack.faces[:-1]]
-            score += (seg[:, None] * np.maximum(n @ cand.T, 0)).sum(axis=0)
+        pts = [np.asarray(c.points, np.float64) for c in network.cracks]
+        seg = np.concatenate([np.linalg.norm(np.diff(p, axis=0), axis=1) for p in pts])
+        fcs = np.concatenate([np.asarray(c.faces)[:-1] for c in network.cracks])
+        n = unit_rows(cross[fcs])[0]
+        score += (seg[:, None] * np.maximum(np.einsum("si,ci->sc", n, cand), 0)).sum(axis=0)
     return tuple(float(x) for x in cand[int(np.argmax(score))])
 
 
@@ -270,12 +275,11 @@ def preview_camera(mesh: Mesh, network: CrackNetwork):
     keeps context) nor farther than framing the whole mesh.  Without cracks it frames the mesh.
     """
     up = up_axis(mesh)
-    view_dir = np.asarray(preview_direction(mesh, network, up))
+    an = face_cross(mesh.vertices, mesh.faces)
+    view_dir = np.asarray(_direction(an, network, up))
     lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
     if not network.cracks:
         return tuple(view_dir), tuple(up), None, None
-    tri = mesh.vertices[mesh.faces]
-    an = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     pts = np.concatenate([np.asarray(c.points) for c in network.cracks])
     fcs = np.concatenate([np.asarray(c.faces) for c in network.cracks])
     seen = an[fcs] @ view_dir > 0

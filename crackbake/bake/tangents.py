@@ -37,6 +37,7 @@ from scipy.sparse import coo_matrix
 from crackbake.bake import tangent_kernels as kern
 from crackbake.bake.uv.uvmesh import UVMesh
 from crackbake.errors import CrackbakeError
+from crackbake.grouping import first_ids
 
 # MikkTSpace's "not zero": |x| > FLT_MIN (the smallest normal float32).
 _TINY = float(np.finfo(np.float32).tiny)
@@ -147,7 +148,7 @@ def _checked(vertices, faces, uv, normals):
 def _weld(p: np.ndarray, n: np.ndarray, t: np.ndarray) -> np.ndarray:
     """(V,) welded-vertex id: equal for bit-identical position, normal and UV."""
     rows = np.ascontiguousarray(np.column_stack([p, n, t]), dtype=np.float64) + 0.0
-    return kern.exact_ids(rows.view(np.uint64))[0]
+    return first_ids(rows)[0]
 
 
 def _match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
