@@ -12,7 +12,6 @@ from __future__ import annotations
 import base64
 import io
 import json
-import re
 import struct
 import urllib.parse
 import warnings
@@ -89,9 +88,9 @@ def _resampled(source: bytes | Path, res: int, mesh_path: Path) -> np.ndarray | 
 
 
 def _obj_texture(path: Path) -> Path | None:
-    text = path.read_bytes().decode("utf-8", errors="replace")
-    libs = re.findall(r"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", text, re.MULTILINE)
-    used = set(re.findall(r"^[ \t]*usemtl[ \t]+(.+?)[ \t]*$", text, re.MULTILINE))
+    data = path.read_bytes()
+    libs = _directive(data, b"mtllib")
+    used = set(_directive(data, b"usemtl"))
     maps: dict[str, Path] = {}
     for lib in libs:
         mtl = path.parent / lib
@@ -100,6 +99,29 @@ def _obj_texture(path: Path) -> Path | None:
         maps.update(_mtl_maps(mtl))
     files = {maps[m] for m in (used or set(maps)) if m in maps}
     return _one(files, path)
+
+
+def _directive(data: bytes, word: bytes) -> list[str]:
+    """The values of the OBJ lines ``word value`` (leading blanks allowed), in file order.
+
+    Jumps between occurrences of ``word`` with ``bytes.find`` (memchr speed): a multi-line
+    regex over a 1.5M-face OBJ took 0.8 s per directive.
+    """
+    out = []
+    pos = data.find(word)
+    while pos >= 0:
+        start = pos
+        while start > 0 and data[start - 1] in b" \t":
+            start -= 1
+        end = data.find(b"\n", pos)
+        end = len(data) if end < 0 else end
+        line = data[pos + len(word):end]
+        if (start == 0 or data[start - 1] in b"\r\n") and line[:1] in (b" ", b"\t"):
+            value = line.decode("utf-8", errors="replace").strip(" \t\r")
+            if value:
+                out.append(value)
+        pos = data.find(word, end)
+    return out
 
 
 def _mtl_maps(mtl: Path) -> dict[str, Path]:
