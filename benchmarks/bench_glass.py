@@ -18,8 +18,13 @@ Impact points (vertices of the meshes, so they lie on the surface):
 The mesh cases read /work/shared/meshes (or ``--meshes DIR``) and are skipped when a mesh is
 missing.  Usage::
 
-    python benchmarks/bench_glass.py [--cases plate,spot-horn,...] [--sim-faces N]
-        [--json out.json]
+    python benchmarks/bench_glass.py [--cases plate-s0,spot-horn,...] [--sim-faces N]
+        [--json out.json] [--picture out.png]
+
+``--picture`` draws the cases side by side (docs/glass_plate.png, docs/glass_impacts.png): the
+sim mesh's faces towards the viewer shaded, seen along the mean normal round the impact, the
+crack polylines in red, the 0.3-reach and reach circles (straight radii: on a curved mesh the
+geodesic circles differ) in blue and green.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ import tempfile
 import time
 import warnings
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -65,7 +72,46 @@ def mesh_path(name: str, meshes: Path, tmp: Path) -> Path | None:
     return path if path.exists() else None
 
 
-def run_case(name: str, meshes: Path, tmp: Path, sim_faces: int | None) -> dict | None:
+def draw(name: str, network, centre: np.ndarray, reach: float, sim, size: int = 420):
+    """A PIL picture of one case (see the module docstring)."""
+    from PIL import Image, ImageDraw
+
+    from crackbake.geometry import face_normals
+    from crackbake.metrics.star import polylines
+
+    v, f = sim.vertices, sim.faces
+    fn = face_normals(v, f)
+    cen = v[f].mean(axis=1)
+    n = fn[np.linalg.norm(cen - centre, axis=1) < 0.3 * reach].mean(axis=0)
+    n /= np.linalg.norm(n)
+    u = np.cross(n, [0.0, 1.0, 0.0] if abs(n[1]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    w = np.cross(n, u)
+    scale = size / (2.4 * reach)
+
+    def xy(p):
+        d = p - centre
+        return np.stack([size / 2 + d @ u * scale, size / 2 - d @ w * scale], -1)
+
+    im = Image.new("RGB", (size, size), "white")
+    dr = ImageDraw.Draw(im)
+    order = np.argsort((cen - centre) @ n)
+    order = order[(fn[order] @ n) > 0]
+    tri = xy(v[f[order]])
+    shade = (120 + 120 * (fn[order] @ n)).astype(int)
+    for t, g in zip(tri, shade, strict=True):
+        dr.polygon([tuple(x) for x in t], fill=(g, g, g))
+    for p in polylines(network):
+        dr.line([tuple(x) for x in xy(p)], fill=(200, 0, 0), width=2)
+    for k, col in ((0.3, (0, 0, 255)), (1.0, (0, 150, 0))):
+        r = k * reach * scale
+        dr.ellipse([size / 2 - r, size / 2 - r, size / 2 + r, size / 2 + r], outline=col)
+    dr.text((6, 6), name, fill="black")
+    return im
+
+
+def run_case(name: str, meshes: Path, tmp: Path, sim_faces: int | None,
+             pictures: list | None = None) -> dict | None:
     """Solve one case with the glass preset and measure its star; None when skipped."""
     mesh_name, point, seed = CASES[name]
     path = mesh_path(mesh_name, meshes, tmp)
@@ -86,6 +132,8 @@ def run_case(name: str, meshes: Path, tmp: Path, sim_faces: int | None) -> dict 
     flat = mesh_name == "plate"
     m = star_metrics(network, imp["point"], reach,
                      None if flat else sim.vertices, None if flat else sim.faces)
+    if pictures is not None:
+        pictures.append(draw(name, network, np.asarray(imp["point"]), reach, sim))
     return {
         "case": name, "reach": reach, "cracks": len(network.cracks), "arms": m["arms"],
         "straight_median": m["straight_median"], "straight_min": m["straight_min"],
@@ -118,17 +166,27 @@ def main() -> None:
     ap.add_argument("--sim-faces", type=int, default=None)
     ap.add_argument("--meshes", type=Path, default=SHARED)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--picture", type=Path, default=None)
     args = ap.parse_args()
     rows = []
+    pictures: list | None = [] if args.picture is not None else None
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.cases.split(","):
-            row = run_case(name, args.meshes, Path(tmp), args.sim_faces)
+            row = run_case(name, args.meshes, Path(tmp), args.sim_faces, pictures)
             if row is None:
                 print(f"{name}: mesh missing, skipped", flush=True)
                 continue
             rows.append(row)
             print(table([row]).splitlines()[1], flush=True)
     print(table(rows))
+    if pictures:
+        from PIL import Image
+
+        size = pictures[0].size[0]
+        sheet = Image.new("RGB", (size * len(pictures), size), "white")
+        for i, im in enumerate(pictures):
+            sheet.paste(im, (i * size, 0))
+        sheet.save(args.picture, optimize=True)
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1, default=float))
 
