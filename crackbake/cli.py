@@ -154,7 +154,8 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     "impacts",
     multiple=True,
     metavar="X,Y,Z[:R[:S]]",
-    help="Impact point, optional radius (mesh units) and strength. Repeatable.",
+    help="Impact point, optional radius (mesh units, or a fraction of the bounding-box diagonal "
+    "with a d suffix: 0.2d) and strength. Repeatable.",
 )
 @click.option(
     "--cracks",

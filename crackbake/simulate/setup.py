@@ -56,9 +56,8 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
     diagonal = mesh.diagonal
     sources: list = []
     for imp in params.impacts:
-        radius = imp.radius
-        if radius is None:
-            radius = relative.get("impact_radius_rel", IMPACT_RADIUS_REL_DEFAULT) * diagonal
+        radius = imp.resolved_radius(
+            diagonal, relative.get("impact_radius_rel", IMPACT_RADIUS_REL_DEFAULT))
         sources.append(ImpactSource(imp.point, radius, imp.strength, hoop=params.hoop))
     if params.shrink:
         sources.append(ShrinkSource(params.shrink, params.shrink_rate or 0.0))

@@ -38,6 +38,12 @@ CURVATURE_CLIP = 5.0
 NOISE_SCALE_DIAGONAL = 0.02
 # Sinusoids summed per noise field (more is smoother-looking but slower).
 NOISE_WAVES = 8
+#: Shadow radius of an impact's cracks (``StressField.shadow_radius``), a fraction of its reach
+#: ``pi r / 2``.  The solver's own radius, 0.1 of the bounding-box diagonal, is 0.42 of the
+#: default glass reach on a plate and wider still relative to a small impact, so each radial crack
+#: released the hoop stress of a wide wedge and a star kept 4-7 arms; at 0.12 plates get 16-18
+#: (0.2: 10-13, 0.09: 18-21 with weaker links on spot's leg; benchmarks/bench_glass.py).
+IMPACT_SHADOW_REACH = 0.12
 
 
 @dataclass(eq=False)
@@ -54,12 +60,17 @@ class StressField:
         Painted-weight multiplier applied (ones without a weight source).
     impacts : list of dict
         ``{"point": [x, y, z] snapped, "radius": r, "strength": s}`` per impact, as used.
+    shadow_radius : float or None
+        Radius of a crack's world-scale stress shadow the solver should use, mesh units:
+        :data:`IMPACT_SHADOW_REACH` x the smallest impact reach when there are impacts (a star
+        scales with its impact), ``None`` (the solver's own, from the mesh size) otherwise.
     """
 
     stress: np.ndarray
     growth: np.ndarray
     weight: np.ndarray
     impacts: list[dict] = field(default_factory=list)
+    shadow_radius: float | None = None
 
 
 
@@ -391,4 +402,7 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
         growth = _project(growth, normal)
     stress[flat] = 0.0
     growth[flat] = 0.0
-    return StressField(stress=stress, growth=growth, weight=weight, impacts=impacts)
+    shadow = (IMPACT_SHADOW_REACH * 0.5 * np.pi * min(i["radius"] for i in impacts)
+              if impacts else None)
+    return StressField(stress=stress, growth=growth, weight=weight, impacts=impacts,
+                       shadow_radius=shadow)

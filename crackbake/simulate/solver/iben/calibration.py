@@ -103,9 +103,15 @@ def percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
     return float(np.percentile(pool, REF_PERCENTILE)) if len(pool) else 0.0
 
 
-def shadow_grid(X0: np.ndarray, period: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def shadow_grid(
+    X0: np.ndarray, period: float = 0.0, radius: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Empty shadow grid over the bounding box and its parameters ``origin (3), cell, radius,
     period x, period y`` (7,).
+
+    ``radius`` (mesh units) is the shadow radius a localized field asks for (an impact's
+    star scales with the impact, not with the mesh: ``StressField.shadow_radius``); ``None``
+    or a larger value gives ``SHADOW_REL`` x the bounding-box diagonal.
 
     With ``period`` > 0 (a square periodic plate ``[0, period)²``, docs/solver.md "Periodic
     plates") the grid spans exactly one period in x and y, so its cells wrap around.
@@ -114,7 +120,7 @@ def shadow_grid(X0: np.ndarray, period: float = 0.0) -> tuple[np.ndarray, np.nda
         return _periodic_grid(X0, period)
     lo, hi = X0.min(0), X0.max(0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
-    radius = SHADOW_REL * diag
+    radius = SHADOW_REL * diag if radius is None else min(float(radius), SHADOW_REL * diag)
     cell = radius / 3.0
     pad = 2
     while True:

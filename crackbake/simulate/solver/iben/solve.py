@@ -121,7 +121,7 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     hcnt = np.bincount(edge.ravel(), minlength=n0)
     h_node = hsum / np.maximum(hcnt, 1)
     width = int(np.bincount(F0.ravel(), minlength=n0).max()) + C.EXTRA_DEGREE
-    G, gp = shadow_grid(X0, period)
+    G, gp = shadow_grid(X0, period, getattr(field, "shadow_radius", None))
     clen = np.zeros(min(1024, room))
     cnt = np.zeros(N_COUNTERS, np.int64)
     cnt[FIRST_CRACK] = -1

@@ -1,0 +1,366 @@
+"""Measures of an impact's crack star, read from the network's polylines.
+
+Every measure works on the distance from the impact *over the surface* at each polyline point:
+the straight distance on a flat plate, and on a curved mesh the geodesic one from
+:func:`surface_distance` (fast marching on a triangle mesh of the surface, the solver's own
+:func:`crackbake.simulate.stress.impact_distance`, interpolated inside the face nearest each
+crack point).  Lengths along a crack are straight segments between its
+points (the solver writes one per sim edge crossed, so they are short).
+
+The impact's **reach** is where its stress field ends: ``pi * radius / 2`` for
+:class:`crackbake.simulate.stress.ImpactSource` (:func:`impact_reach`).  Distances below are
+fractions of it.
+
+* :func:`radial_arms`: arms crossing the circle at 0.3 reach, running within 45 degrees of the
+  radial direction;
+* :func:`arm_straightness`: chord / arc length of each arm inside 0.6 reach;
+* :func:`tangential_share`: share of the crack length between 0.35 and 0.65 reach running more
+  than 45 degrees off radial (the concentric links);
+* :func:`annulus_density`: crack length per unit area in annuli of the reach;
+* :func:`length_beyond`: crack length past the reach.
+
+The radial direction of a segment needs no vector field: along a surface path the distance
+changes at most as fast as the arc (``|grad d| = 1``), so ``|d_b - d_a| / |b - a|`` is the
+cosine of the angle between the segment and the radial direction.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "annulus_areas",
+    "annulus_density",
+    "arm_straightness",
+    "impact_reach",
+    "length_beyond",
+    "polylines",
+    "radial_arms",
+    "star_metrics",
+    "surface_distance",
+    "tangential_share",
+]
+
+#: A segment counts as radial when it runs within this angle of the radial direction (degrees).
+RADIAL_DEG = 45.0
+
+
+def impact_reach(radius: float) -> float:
+    """Distance where an :class:`ImpactSource` of ``radius`` ends: ``pi * radius / 2``."""
+    return 0.5 * np.pi * float(radius)
+
+
+def polylines(network: Any) -> list[np.ndarray]:
+    """The (N, 3) point arrays of a :class:`CrackNetwork`, a ``cracks.json`` dict or a list."""
+    if isinstance(network, dict):
+        cracks = [c["points"] for c in network["cracks"]]
+    elif hasattr(network, "cracks"):
+        cracks = [c.points for c in network.cracks]
+    else:
+        cracks = list(network)
+    return [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in cracks if len(p) >= 2]
+
+
+def _interpolated(tri: np.ndarray, d: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Barycentric interpolation of corner values ``d`` (K, 3) of faces ``tri`` (K, 3, 3) at
+    the points ``q`` (K, 3) projected on each face's plane.
+
+    Linear interpolation of a cone field errs by about ``h^2 / (8 d)`` on a face of size ``h``
+    at distance ``d``: negligible on a fine mesh except at the impact itself, where the straight
+    distance (the caller's lower bound) takes over.
+    """
+    from crackbake.geometry import barycentric
+
+    w = barycentric(tri, q)
+    return np.einsum("kc,kc->k", w, d)
+
+
+def surface_distance(
+    points: np.ndarray,
+    impact: np.ndarray,
+    vertices: np.ndarray | None = None,
+    faces: np.ndarray | None = None,
+    max_distance: float | None = None,
+) -> np.ndarray:
+    """Distance over the surface from ``impact`` to each of ``points``.
+
+    Parameters
+    ----------
+    points : (P, 3) array_like
+        Points on the surface, mesh units.
+    impact : (3,) array_like
+        The impact point, mesh units (snapped to the surface when a mesh is given).
+    vertices, faces : (N, 3) float and (M, 3) int, optional
+        A triangle mesh of the surface; the finer, the closer the geodesic (the solver's sim
+        mesh is a good choice).  Without it the straight distance is used (right on a plate).
+    max_distance : float, optional
+        Only distances up to this need be right; points farther get ``inf``.
+
+    Returns
+    -------
+    (P,) float64
+        Mesh units: the geodesic distance (fast marching on the mesh, interpolated inside the
+        face nearest each point), never below the straight distance.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    imp = np.asarray(impact, dtype=np.float64).reshape(3)
+    straight = np.linalg.norm(pts - imp, axis=1)
+    if vertices is None or faces is None or len(pts) == 0:
+        return straight
+    from scipy.spatial import cKDTree
+
+    from crackbake.simulate.stress.geodesic import impact_distance
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    node, snapped, _ = impact_distance(SimpleNamespace(vertices=v, faces=f), imp, max_distance)
+    tri = v[f]
+    _, nearest = cKDTree(tri.mean(axis=1)).query(pts)
+    d = node[f[nearest]]
+    out = np.full(len(pts), np.inf)
+    ok = np.isfinite(d).all(axis=1)
+    out[ok] = _interpolated(tri[nearest[ok]], d[ok], pts[ok])
+    return np.maximum(out, np.linalg.norm(pts - snapped, axis=1))
+
+
+def _segments(polys: list[np.ndarray], dists: list[np.ndarray]):
+    """Flat segment arrays: start/end points, distances, lengths, polyline and index."""
+    a = np.concatenate([p[:-1] for p in polys]) if polys else np.zeros((0, 3))
+    b = np.concatenate([p[1:] for p in polys]) if polys else np.zeros((0, 3))
+    da = np.concatenate([d[:-1] for d in dists]) if polys else np.zeros(0)
+    db = np.concatenate([d[1:] for d in dists]) if polys else np.zeros(0)
+    return a, b, da, db, np.linalg.norm(b - a, axis=1)
+
+
+def _band_length(da, db, length, lo: float, hi: float) -> np.ndarray:
+    """Per segment, the length whose (linearly interpolated) distance lies in ``[lo, hi)``;
+    unreached points (``inf``) count as lying beyond every finite distance."""
+    finite = [abs(x) for x in (lo, hi) if np.isfinite(x)]
+    finite += [float(np.abs(x[np.isfinite(x)]).max()) for x in (da, db) if np.isfinite(x).any()]
+    big = 10.0 * max(finite + [1.0])
+    da = np.where(np.isfinite(da), da, big)
+    db = np.where(np.isfinite(db), db, big)
+    lo_d, hi_d = np.minimum(da, db), np.maximum(da, db)
+    span = hi_d - lo_d
+    inside = np.clip(np.minimum(hi_d, hi) - np.maximum(lo_d, lo), 0.0, None)
+    frac = np.where(span > 0, inside / np.where(span > 0, span, 1.0),
+                    ((lo_d >= lo) & (lo_d < hi)).astype(float))
+    return length * frac
+
+
+def _radial_cos(da, db, length) -> np.ndarray:
+    """|cos| of the angle between each segment and the radial direction (0 when unknown)."""
+    ok = (length > 0) & np.isfinite(da) & np.isfinite(db)
+    step = np.abs(np.where(ok, db, 0.0) - np.where(ok, da, 0.0))
+    return np.clip(step / np.where(ok, length, 1.0), 0.0, 1.0)
+
+
+def radial_arms(
+    polys: list[np.ndarray], dists: list[np.ndarray], reach: float, at: float = 0.3
+) -> list[tuple[int, int, np.ndarray]]:
+    """Radial arms crossing the circle ``d = at * reach``.
+
+    A crossing counts when its segment runs within :data:`RADIAL_DEG` of the radial direction;
+    crossings closer than 5 % of the circle's radius to one already counted are the same arm
+    (a crack zig-zagging over the circle).
+
+    Parameters
+    ----------
+    polys : list of (N_i, 3) float arrays
+        Crack polylines, mesh units.
+    dists : list of (N_i,) float arrays
+        Surface distance of each point from the impact (:func:`surface_distance`).
+    reach : float
+        The impact's reach, mesh units (:func:`impact_reach`).
+    at : float
+        Circle radius, a fraction of ``reach``.
+
+    Returns
+    -------
+    list of (polyline index, segment index, crossing point (3,))
+    """
+    c = at * reach
+    arms: list[tuple[int, int, np.ndarray]] = []
+    cos_max = np.cos(np.radians(RADIAL_DEG))
+    for i, (p, d) in enumerate(zip(polys, dists, strict=True)):
+        da, db = d[:-1], d[1:]
+        length = np.linalg.norm(p[1:] - p[:-1], axis=1)
+        cross = ((da - c) * (db - c) < 0) | ((da == c) & (db != c))
+        cross &= _radial_cos(da, db, length) >= cos_max
+        for k in np.flatnonzero(cross):
+            t = (c - da[k]) / (db[k] - da[k])
+            x = p[k] + t * (p[k + 1] - p[k])
+            if all(np.linalg.norm(x - y) >= 0.05 * c for _, _, y in arms):
+                arms.append((i, int(k), x))
+    return arms
+
+
+def _arms_inside(polys, dists, reach: float, at: float, inside: float):
+    """Per radial arm, its points and distances from the innermost point out to ``inside``
+    reach (the last point cut on that circle)."""
+    lim = inside * reach
+    for i, k, _ in radial_arms(polys, dists, reach, at):
+        p, d = polys[i], dists[i]
+        lo, hi = k, k + 1  # the crossing segment's point indices
+        while lo > 0 and d[lo - 1] <= lim:
+            lo -= 1
+        while hi < len(d) - 1 and d[hi + 1] <= lim:
+            hi += 1
+        inner = lo + int(np.argmin(d[lo:hi + 1]))
+        if inner <= k:  # the arm runs from `inner` forward, out past the crossing
+            idx, nxt = np.arange(inner, hi + 1), hi + 1
+        else:
+            idx, nxt = np.arange(inner, lo - 1, -1), lo - 1
+        seg, ds = p[idx], d[idx]
+        if 0 <= nxt < len(d) and np.isfinite(d[nxt]) and d[nxt] > lim > ds[-1]:
+            t = (lim - ds[-1]) / (d[nxt] - ds[-1])
+            seg = np.vstack([seg, seg[-1] + t * (p[nxt] - seg[-1])])
+            ds = np.append(ds, lim)
+        yield seg, ds
+
+
+def arm_straightness(
+    polys: list[np.ndarray],
+    dists: list[np.ndarray],
+    reach: float,
+    at: float = 0.3,
+    inside: float = 0.6,
+    geodesic: bool = False,
+) -> np.ndarray:
+    """Chord / arc length of each radial arm (:func:`radial_arms`) inside ``inside * reach``.
+
+    An arm is the run of its polyline around its crossing whose points lie within ``inside``
+    reach (cut on that circle), from the run's point nearest the impact outward, so two arms
+    one polyline joins through the impact are measured apart.  The chord is the straight 3-D
+    one, so on a curved surface even a geodesic arm scores below 1 (an arm folding round an
+    ear's rim scores ~0.3); ``geodesic=True`` uses the gain in surface distance from the
+    impact instead (``(d_end - d_start) / arc``: 1 for a geodesic radial arm on any surface).
+
+    Returns
+    -------
+    (A,) float64
+        One value per arm, in (0, 1].
+    """
+    out = []
+    for seg, ds in _arms_inside(polys, dists, reach, at, inside):
+        arc = np.linalg.norm(np.diff(seg, axis=0), axis=1).sum()
+        if arc > 0:
+            chord = ds[-1] - ds[0] if geodesic else np.linalg.norm(seg[-1] - seg[0])
+            out.append(min(chord / arc, 1.0))
+    return np.asarray(out, dtype=np.float64)
+
+
+def tangential_share(
+    polys: list[np.ndarray], dists: list[np.ndarray], reach: float,
+    band: tuple[float, float] = (0.35, 0.65),
+) -> float:
+    """Share of the crack length in ``band`` (fractions of ``reach``) running more than
+    :data:`RADIAL_DEG` off the radial direction; ``nan`` without crack length there."""
+    _, _, da, db, length = _segments(polys, dists)
+    part = _band_length(da, db, length, band[0] * reach, band[1] * reach)
+    total = part.sum()
+    if not total > 0:
+        return float("nan")
+    tangential = _radial_cos(da, db, length) < np.cos(np.radians(RADIAL_DEG))
+    return float(part[tangential].sum() / total)
+
+
+def annulus_areas(reach: float, bins: int = 5, vertices=None, faces=None, node_distance=None):
+    """Surface area of the annuli ``[k, k + 1) * reach / bins``, (bins,), mesh units squared.
+
+    Without a mesh: the plane's ``pi (r_1^2 - r_0^2)``.  With a (fine) mesh and the distance
+    at its nodes: the area of the faces whose mean corner distance falls in each annulus.
+    """
+    edges = np.linspace(0.0, reach, bins + 1)
+    if vertices is None:
+        return np.pi * np.diff(edges**2)
+    from crackbake.geometry import face_areas
+
+    f = np.asarray(faces, dtype=np.int64)
+    d = np.asarray(node_distance, dtype=np.float64)[f].mean(axis=1)
+    ok = np.isfinite(d) & (d < reach)
+    idx = np.minimum((d[ok] / reach * bins).astype(np.int64), bins - 1)
+    return np.bincount(idx, face_areas(np.asarray(vertices, float), f)[ok], minlength=bins)
+
+
+def annulus_density(
+    polys: list[np.ndarray], dists: list[np.ndarray], reach: float, bins: int = 5,
+    areas: np.ndarray | None = None,
+) -> np.ndarray:
+    """Crack length per unit area in ``bins`` annuli of width ``reach / bins``, (bins,).
+
+    ``areas`` (bins,) default to plane annuli (:func:`annulus_areas`); units 1 / mesh unit.
+    """
+    _, _, da, db, length = _segments(polys, dists)
+    edges = np.linspace(0.0, reach, bins + 1)
+    lengths = np.array([_band_length(da, db, length, lo, hi).sum()
+                        for lo, hi in zip(edges[:-1], edges[1:], strict=True)])
+    areas = annulus_areas(reach, bins) if areas is None else np.asarray(areas, float)
+    return lengths / np.where(areas > 0, areas, np.inf)
+
+
+def length_beyond(polys: list[np.ndarray], dists: list[np.ndarray], reach: float) -> float:
+    """Crack length farther than ``reach`` from the impact (unreached points count), mesh units."""
+    _, _, da, db, length = _segments(polys, dists)
+    return float(_band_length(da, db, length, reach, np.inf).sum())
+
+
+def star_metrics(
+    network: Any,
+    impact: np.ndarray,
+    reach: float,
+    vertices: np.ndarray | None = None,
+    faces: np.ndarray | None = None,
+    bins: int = 5,
+) -> dict:
+    """Every star measure of one impact.
+
+    Parameters
+    ----------
+    network : CrackNetwork, cracks.json dict or list of (N, 3) arrays
+    impact : (3,) array_like
+        Impact point, mesh units.
+    reach : float
+        The impact's reach, mesh units (:func:`impact_reach` of its radius).
+    vertices, faces : optional
+        A fine triangle mesh of the surface for geodesic distances (see
+        :func:`surface_distance`); without it distances are straight (a plate).
+    bins : int
+        Annuli of the density profile.
+
+    Returns
+    -------
+    dict
+        ``arms`` (int), ``straightness`` (per-arm array), ``straight_median``,
+        ``straight_min``, ``radial_median`` (median geodesic straightness,
+        :func:`arm_straightness`), ``tangential`` (float), ``density`` (bins,) 1 / mesh unit,
+        ``falling`` (bool: every annulus at most as dense as the one inside it),
+        ``beyond`` (mesh units), ``length`` (total, mesh units).
+    """
+    polys = polylines(network)
+    flat = np.concatenate(polys) if polys else np.zeros((0, 3))
+    d_all = surface_distance(flat, impact, vertices, faces, max_distance=2.0 * reach)
+    split = np.cumsum([len(p) for p in polys])[:-1]
+    dists = np.split(d_all, split) if polys else []
+    areas = None
+    if vertices is not None and faces is not None:
+        node = surface_distance(vertices, impact, vertices, faces, max_distance=2.0 * reach)
+        areas = annulus_areas(reach, bins, vertices, faces, node)
+    straight = arm_straightness(polys, dists, reach)
+    radial = arm_straightness(polys, dists, reach, geodesic=True)
+    density = annulus_density(polys, dists, reach, bins, areas)
+    return {
+        "arms": len(radial_arms(polys, dists, reach)),
+        "straightness": straight,
+        "straight_median": float(np.median(straight)) if len(straight) else float("nan"),
+        "straight_min": float(straight.min()) if len(straight) else float("nan"),
+        "radial_median": float(np.median(radial)) if len(radial) else float("nan"),
+        "tangential": tangential_share(polys, dists, reach),
+        "density": density,
+        "falling": bool(np.all(np.diff(density) <= 0)),
+        "beyond": length_beyond(polys, dists, reach),
+        "length": float(sum(np.linalg.norm(np.diff(p, axis=0), axis=1).sum() for p in polys)),
+    }
