@@ -132,7 +132,8 @@ def test_plate_impact_grows_connected_and_points_unchanged(tmp_path):
     network, _stats, solved = solve(mesh, run, relative, {})
     raw = from_solver(solved.result.cracks, mesh, impacts=solved.field.impacts)
     before, after = growth_curve(raw), growth_curve(network)
-    assert after.min_after(0.1) >= 0.9  # measured 1.0 (0.75 before)
+    # The solver's own order leaves pieces mid-air (measured 0.77); the re-timed one none.
+    assert before.min_after(0.1) < 0.9 <= after.min_after(0.1)
     assert after.weighted_mean >= before.weighted_mean
     for c_raw, c in zip(raw.cracks, network.cracks, strict=True):
         np.testing.assert_array_equal(c_raw.points, c.points)
