@@ -290,6 +290,12 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     help=f"Stress map size in texels [min(--res, {STRESS_RES_DEFAULT})].",
 )
 @click.option(
+    "--frames",
+    type=int,
+    metavar="N",
+    help="Also write N PNG frames of the cracks growing (<stem>_growth_0000.png ...), N >= 2.",
+)
+@click.option(
     "--target",
     type=click.Choice(TARGETS),
     default="gltf",

@@ -21,6 +21,8 @@ FORMATS = ("exr", "png", "glb", "preview", "stress")
 STRESS_RES_DEFAULT = 1024
 #: Default decal texture edge: min(--res, this).
 DECAL_RES_DEFAULT = 1024
+#: Most ``--frames`` (the frame number has four digits).
+FRAMES_MAX = 10_000
 UV_MODES = ("auto", "keep", "unwrap")
 #: Engine profiles (``--target``; the table is :data:`crackbake.exchange.targets.TARGETS`).
 TARGETS = ("gltf", "unity", "unity-hdrp", "unreal", "godot", "blender")
@@ -291,6 +293,8 @@ class RunParams:
         Decal texture edge in texels; ``None`` = ``min(res, DECAL_RES_DEFAULT)``.
     stress_res : int or None
         Edge of the stress maps in texels; ``None`` = ``min(res, STRESS_RES_DEFAULT)``.
+    frames : int or None
+        Growth frames ``<stem>_growth_NNNN.png`` (2..:data:`FRAMES_MAX`); ``None``: none.
     float32 : bool
         Write every EXR channel as 32-bit float.
     target : str
@@ -332,6 +336,7 @@ class RunParams:
     seed: int = 0
     formats: tuple[str, ...] = FORMATS
     stress_res: int | None = None
+    frames: int | None = None
     decal: float | None = None
     decal_res: int | None = None
     float32: bool = False
@@ -384,6 +389,7 @@ class RunParams:
             raise CrackbakeError(f"--uv '{self.uv}' is unknown; use one of {', '.join(UV_MODES)}")
         _check_range("--padding", self.padding, 0, RES_MAX, " texels")
         _check_range("--stress-res", self.stress_res, RES_MIN, RES_MAX, " texels")
+        _check_range("--frames", self.frames, 2, FRAMES_MAX, " frames")
         _check_range("--decal", self.decal, 0.0, LENGTH_MAX, " mesh units", True)
         _check_range("--decal-res", self.decal_res, RES_MIN, RES_MAX, " texels")
         if (self.decal is not None or self.decal_res is not None) and not self.impacts:

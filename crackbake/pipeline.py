@@ -28,6 +28,7 @@ from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import DECAL_RES_DEFAULT, STRESS_RES_DEFAULT, RunParams
 from crackbake.simulate.setup import check_scale, sidecar_params, solver_params, stress_sources
+from crackbake.simulate.timing import grow_from_impacts
 
 logger = logging.getLogger(__name__)
 
@@ -327,6 +328,7 @@ def solve(
         impacts=field.impacts,
         solver_steps=result.steps,
     )
+    network = grow_from_impacts(network)  # crack.time grows out of the impact (timing.py)
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
     return network, jsonable(stats), Solved(sim=sim, field=field, result=result)

@@ -21,6 +21,7 @@ from crackbake.bake.raster import CrackMaps
 from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.exchange.exr import write_exr
+from crackbake.exchange.frames import submit_frames
 from crackbake.exchange.glb import write_glb
 from crackbake.exchange.halving import base_color_half, normal_half
 from crackbake.exchange.layers import (
@@ -202,6 +203,7 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) ->
             glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal", "orm")}
         encoded = enc.start(set(glb_keys.values()))
         jobs.extend(encoded.values())
+        jobs.extend(submit_frames(pool, stage.path, stem, maps, params.frames))
         try:
             if "preview" in formats:
                 _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx)

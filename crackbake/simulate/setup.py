@@ -121,6 +121,7 @@ def sidecar_params(effective: dict) -> dict:
         "max_distance",
         "profile",
         "cracks",
+        "frames",
     }
     return jsonable({k: v for k, v in effective.items() if k not in drop})
 
