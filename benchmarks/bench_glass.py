@@ -23,8 +23,9 @@ missing.  Usage::
 
 ``--picture`` draws the cases side by side (docs/glass_plate.png, docs/glass_impacts.png): the
 sim mesh's faces towards the viewer shaded, seen along the mean normal round the impact (across
-the thinnest principal axis near it for ``SIDE_VIEW`` cases: the bunny's ear), the crack polylines in red, the 0.3-reach and reach circles (straight radii: on a curved mesh the
-geodesic circles differ) in blue and green.
+the thinnest principal axis near it for ``SIDE_VIEW`` cases: the bunny's ear), the crack
+polylines in red, the 0.3-reach and reach circles (straight radii: on a curved mesh the geodesic
+circles differ) in blue and green.
 """
 
 from __future__ import annotations
