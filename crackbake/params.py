@@ -451,7 +451,8 @@ class RunParams:
         relative : dict
             Preset settings relative to the mesh size (``crack_width_rel``,
             ``impact_radius_rel``: fractions of the bounding-box diagonal), used where the
-            absolute option is unset.
+            absolute option is unset; ``sim_size_set``: the user gave ``detail`` or
+            ``sim_faces`` (else an impact on a thin feature may refine the sim mesh).
         """
         preset = load_preset(self.preset) if self.preset else {}
         names = {f.name for f in fields(self)}
@@ -465,6 +466,7 @@ class RunParams:
             raise CrackbakeError(f"preset '{self.preset}' has unknown keys {sorted(unknown)}")
         relative = {k: preset[k] for k in ("crack_width_rel", "impact_radius_rel") if k in preset}
         relative["needs_impact"] = bool(preset.get("needs_impact", False))
+        relative["sim_size_set"] = self.detail is not None or self.sim_faces is not None
         return replace(self, **changes), relative
 
     def to_dict(self) -> dict:

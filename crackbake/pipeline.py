@@ -289,7 +289,7 @@ def solve(
         Sim mesh, stress field and the solver's full result.
     """
     from crackbake.simulate.simmesh import build_simmesh
-    from crackbake.simulate.stress import stress_field
+    from crackbake.simulate.stress import impact_detail, stress_field
 
     if sources is None:
         sources = stress_sources(params, mesh, relative)
@@ -300,6 +300,11 @@ def solve(
     logger.info("stress field on %d simulation faces", len(sim.faces))
     t = time.perf_counter()
     field = stress_field(sim, mesh, sources, seed=params.seed)
+    finer = None if relative.get("sim_size_set") else impact_detail(field, sim.edge_length)
+    if finer is not None:  # an impact on a thin feature: its star needs a finer sim mesh
+        logger.info("impact on a thin feature: sim edge %.4g -> %.4g", sim.edge_length, finer)
+        sim = build_simmesh(mesh, detail=finer, seed=params.seed)
+        field = stress_field(sim, mesh, sources, seed=params.seed)
     timings["stress"] = time.perf_counter() - t
     sp = solver_params(params, mesh, relative)
     logger.info("growing cracks (%s)", sp.method)

@@ -14,9 +14,10 @@ from crackbake.simulate.stress.fields import (
     NOISE_SCALE_DIAGONAL,
     NOISE_WAVES,
     StressField,
+    impact_detail,
     stress_field,
 )
-from crackbake.simulate.stress.geodesic import impact_distance
+from crackbake.simulate.stress.geodesic import impact_distance, iso_length
 from crackbake.simulate.stress.sources import (
     CurvatureSource,
     DirectionalSource,
@@ -39,7 +40,9 @@ __all__ = [
     "ShrinkSource",
     "StressField",
     "WeightSource",
+    "impact_detail",
     "impact_distance",
+    "iso_length",
     "load_weight_map",
     "stress_field",
     "vertex_weights",

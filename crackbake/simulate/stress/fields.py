@@ -20,7 +20,7 @@ from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import unit_rows, vertex_normals
 from crackbake.io.mesh import Mesh
 from crackbake.simulate.solver.fem import face_frames, face_geometry
-from crackbake.simulate.stress.geodesic import impact_distance
+from crackbake.simulate.stress.geodesic import impact_distance, iso_length
 from crackbake.simulate.stress.sources import (
     CurvatureSource,
     DirectionalSource,
@@ -44,6 +44,20 @@ NOISE_WAVES = 8
 #: released the hoop stress of a wide wedge and a star kept 4-7 arms; at 0.12 plates get 16-18
 #: (0.2: 10-13, 0.09: 18-21 with weaker links on spot's leg; benchmarks/bench_glass.py).
 IMPACT_SHADOW_REACH = 0.12
+#: The shadow radius is also at most the length of the geodesic circle at 0.3 reach (the circle
+#: the arms are counted on) over this: on a flat mesh that circle is ``0.6 pi`` reach, so 15
+#: leaves :data:`IMPACT_SHADOW_REACH` in charge (0.126 reach), while round a thin feature (spot's
+#: horn: 0.4 of the flat length) the spacing shrinks with the circumference and as many arms fit.
+IMPACT_SHADOW_ARMS = 15.0
+#: ... and at least this many sim edge lengths (a finer shadow than the mesh resolves only
+#: splits one crack's release into grid noise).
+IMPACT_SHADOW_EDGES = 2.0
+#: Below this many sim edge lengths per shadow radius (spot's horn at the default 100k faces:
+#: 2.7, 9 arms) a run whose sim size the user left to the default is rebuilt finer
+#: (:func:`impact_detail`; the horn at 4: 13 arms).  Broad impacts sit at 5.5-8.
+IMPACT_SHADOW_MIN_EDGES = 4.0
+#: ... by at most this factor in edge length (2: up to 4x the sim faces).
+IMPACT_REFINE_MAX = 2.0
 
 
 @dataclass(eq=False)
@@ -61,9 +75,12 @@ class StressField:
     impacts : list of dict
         ``{"point": [x, y, z] snapped, "radius": r, "strength": s}`` per impact, as used.
     shadow_radius : float or None
-        Radius of a crack's world-scale stress shadow the solver should use, mesh units:
-        :data:`IMPACT_SHADOW_REACH` x the smallest impact reach when there are impacts (a star
-        scales with its impact), ``None`` (the solver's own, from the mesh size) otherwise.
+        Radius of a crack's world-scale stress shadow the solver should use, mesh units, when
+        there are impacts (a star scales with its impact): the smallest over the impacts of
+        :data:`IMPACT_SHADOW_REACH` x the reach, or the length of the geodesic circle at 0.3
+        reach / :data:`IMPACT_SHADOW_ARMS` where that is less (a thin feature), but at least
+        :data:`IMPACT_SHADOW_EDGES` sim edge lengths.  ``None`` (the solver's own, from the
+        mesh size) without impacts.
     """
 
     stress: np.ndarray
@@ -147,7 +164,36 @@ def _impact_radius(radius: float, sim) -> float:
     return radius
 
 
-def _impact_field(sim, geo: _Geometry, src: ImpactSource, radius: float) -> tuple[np.ndarray, dict]:
+def impact_detail(field: StressField, edge_length: float) -> float | None:
+    """The finer sim edge length an impact's star needs, or None when ``edge_length`` will do.
+
+    The shadow radius (:class:`StressField`) is what spaces a star's arms; round a thin feature
+    it shrinks with the feature's circumference and may span too few sim edges to resolve them.
+    Then the edge length that gives :data:`IMPACT_SHADOW_MIN_EDGES` per shadow radius, at most
+    :data:`IMPACT_REFINE_MAX` times finer, mesh units.
+    """
+    if field.shadow_radius is None or not field.impacts or edge_length <= 0.0:
+        return None
+    want = field.shadow_radius / IMPACT_SHADOW_MIN_EDGES
+    if want >= edge_length * (1.0 - 1e-9):
+        return None
+    return max(want, edge_length / IMPACT_REFINE_MAX)
+
+
+def _impact_shadow(geo: _Geometry, dist: np.ndarray, radius: float, edge: float) -> float:
+    """The shadow radius an impact of ``radius`` asks for (``StressField.shadow_radius``), mesh
+    units; ``dist`` (N,) its geodesic distance, ``edge`` the sim edge length."""
+    flat = IMPACT_SHADOW_REACH * 0.5 * np.pi * radius
+    circle = iso_length(geo.vertices, geo.faces, dist, 0.3 * 0.5 * np.pi * radius)
+    # No circle at all: the source face's own neighbourhood holds it, and the flat value stands.
+    if circle <= 0.0:
+        return flat
+    return max(min(flat, circle / IMPACT_SHADOW_ARMS), min(IMPACT_SHADOW_EDGES * edge, flat))
+
+
+def _impact_field(
+    sim, geo: _Geometry, src: ImpactSource, radius: float
+) -> tuple[np.ndarray, dict, float]:
     _check_impact_near(src.point, geo)
     radius = _impact_radius(radius, sim)
     reach = 0.5 * np.pi * radius
@@ -199,7 +245,8 @@ def _impact_field(sim, geo: _Geometry, src: ImpactSource, radius: float) -> tupl
         "radius": float(radius),
         "strength": float(src.strength),
     }
-    return stress, info
+    edge = float(getattr(sim, "edge_length", 0.0) or 0.0)
+    return stress, info, _impact_shadow(geo, dist, radius, edge)
 
 
 def _directional_field(geo: _Geometry, src: DirectionalSource) -> np.ndarray:
@@ -364,14 +411,16 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
     growth = np.zeros((m, 3, 3))
     weight = np.ones(m)
     impacts: list[dict] = []
+    shadows: list[float] = []
     noises: list[NoiseSource] = []
     bary_cache: list = []
     for src in sources:
         if isinstance(src, ImpactSource):
             radius = 0.15 * mesh.diagonal if src.radius is None else float(src.radius)
-            s, info = _impact_field(sim, geo, src, radius)
+            s, info, shadow = _impact_field(sim, geo, src, radius)
             stress += s
             impacts.append(info)
+            shadows.append(shadow)
         elif isinstance(src, ShrinkSource):
             plane = _plane_identity(normal)
             stress += src.strength * plane
@@ -402,7 +451,5 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
         growth = _project(growth, normal)
     stress[flat] = 0.0
     growth[flat] = 0.0
-    shadow = (IMPACT_SHADOW_REACH * 0.5 * np.pi * min(i["radius"] for i in impacts)
-              if impacts else None)
     return StressField(stress=stress, growth=growth, weight=weight, impacts=impacts,
-                       shadow_radius=shadow)
+                       shadow_radius=min(shadows) if shadows else None)

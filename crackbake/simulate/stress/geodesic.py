@@ -135,3 +135,44 @@ def impact_distance(
     distance[nodes] = d_sub
     distance[~np.isfinite(distance)] = np.inf
     return distance, snapped, face
+
+
+def iso_length(
+    vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray, level: float
+) -> float:
+    """Length of the contour ``distance == level`` over the mesh (linear inside each face).
+
+    Parameters
+    ----------
+    vertices : (N, 3) float64
+    faces : (M, 3) int
+    distance : (N,) float64
+        Per-node field; faces with an ``inf`` corner are left out (a node the distance did not
+        reach lies far past any level the callers ask about).
+    level : float
+        Same units as ``distance``.
+
+    Returns
+    -------
+    float
+        Summed length of the contour's segments, mesh units (``2 pi level`` for a geodesic
+        circle on a flat, fine mesh; less round a thin feature).
+    """
+    d = distance[faces]  # (M, 3)
+    below = d < level
+    cut = below.sum(axis=1)
+    cut = ((cut == 1) | (cut == 2)) & np.isfinite(d).all(axis=1)
+    d, tri = d[cut], faces[cut]
+    # The two points where the contour crosses a face's edges: the lone corner (the one on
+    # its own side of the level) to each of the other two.
+    b = below[cut]
+    lone = np.where(b.sum(axis=1) == 1, np.argmax(b, axis=1), np.argmin(b, axis=1))
+    rows = np.arange(len(tri))
+    ends = []
+    for step in (1, 2):
+        other = (lone + step) % 3
+        d0, d1 = d[rows, lone], d[rows, other]
+        t = ((level - d0) / (d1 - d0))[:, None]  # d0, d1 on either side: never equal
+        p0, p1 = vertices[tri[rows, lone]], vertices[tri[rows, other]]
+        ends.append(p0 + t * (p1 - p0))
+    return float(np.linalg.norm(ends[1] - ends[0], axis=1).sum())
