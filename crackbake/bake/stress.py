@@ -198,10 +198,10 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     final = nodal_values(v1, f1, np.asarray(result.stress_final, np.float64),
                          np.asarray(result.separation, np.float64))
     first = on_final_mesh(v0, f0, nodal_values(v0, f0, s0, sep0), v1)
-    data, index = draw_data(uvmesh, tan, v1, f1, result.asset_face,
+    data = draw_data(uvmesh, tan, v1, f1, result.asset_face,
                             np.concatenate([first, final], axis=1))
     timings["prepare"] = time.perf_counter() - t0
-    planes = _render(ctx, data, index, res, tile, timings)
+    planes = _render(ctx, data, res, tile, timings)
     t1 = time.perf_counter()
     inside = planes.pop("inside")
     source = _sources(inside, dilate_px)
@@ -220,7 +220,7 @@ _OUT = ("xx", "yy", "xy", "sep")
 _BAND_TEXELS = 1 << 20
 
 
-def _render(ctx, data: np.ndarray, index: np.ndarray, res: int, tile: int,
+def _render(ctx, data: np.ndarray, res: int, tile: int,
             timings: dict[str, float]) -> dict[str, np.ndarray]:
     """Draw both fields in one pass, band by band; planar images
     ``<field>.<xx|yy|xy|sep>`` and ``inside``.
@@ -236,11 +236,9 @@ def _render(ctx, data: np.ndarray, index: np.ndarray, res: int, tile: int,
                                       fragment_shader=shader_source("stress_bake.frag")))
         prog["u_res"].value = float(res)
         vbo = gl.keep(gl.ctx.buffer(data))
-        ibo = gl.keep(gl.ctx.buffer(index))
         vao = gl.keep(gl.ctx.vertex_array(
             prog, [(vbo, "2f 3f 1f 3f 3f 3f 1f 3f 3f 1f", "in_uv", "in_t", "in_w", "in_n",
-                    "in_sd0", "in_so0", "in_sep0", "in_sd", "in_so", "in_sep")],
-            index_buffer=ibo, index_element_size=4))
+                    "in_sd0", "in_so0", "in_sep0", "in_sd", "in_so", "in_sep")]))
         band = max(1, min(res, min(tile * tile, _BAND_TEXELS) // res))
         names = [f"{f}.{c}" for f in FIELDS for c in _OUT]
         images = {n: np.empty((res, res), np.float32) for n in names}
