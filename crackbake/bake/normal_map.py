@@ -128,12 +128,15 @@ class NormalPass:
         The bake's scope (objects kept there are released with it).
     profile_shape : float
         Depth profile exponent.
+    min_px : float
+        Least drawn crack width, texels (as the crack pass draws it).
     """
 
-    def __init__(self, gl, profile_shape: float) -> None:
+    def __init__(self, gl, profile_shape: float, min_px: float = 0.0) -> None:
         self.gl = gl
         self.prog = gl.keep(gl.ctx.compute_shader(shader_variant("crack_normal.comp", True)))
         self.prog["u_shape"].value = float(profile_shape)
+        self.prog["u_min_px"].value = float(min_px)
 
     def run(self, code: np.ndarray, planes: list[np.ndarray], y0: int) -> None:
         """Compute the crack texels of one band into ``planes`` (normal x, y, z, occlusion).
