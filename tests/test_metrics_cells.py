@@ -96,3 +96,17 @@ def test_cells_on_a_closed_surface_a_sphere_cut_at_the_equator():
     assert len(areas) == 2
     np.testing.assert_allclose(areas, sphere.area / 2, rtol=0.02)
     assert len(cell_areas(sphere.vertices, sphere.faces, [ring[:200]])) == 1
+
+
+def test_geodesic_straightness_on_a_sphere():
+    """With surface normals the chord is taken on the unrolled polyline: half a great circle is
+    straight (1, its 3D chord / arc is 2 / pi); half the 60-degree latitude circle unrolls to a
+    circular arc of radius tan 60 and angle pi cos 60 = pi / 2: chord / arc 2 sqrt(2) / pi."""
+    t = np.linspace(0, np.pi, 4001)
+    great = np.c_[np.cos(t), np.sin(t), np.zeros_like(t)]
+    assert straightness([great])[0, 0] == pytest.approx(2 / np.pi, rel=1e-5)
+    assert straightness([great], normals=[great])[0, 0] == pytest.approx(1.0, abs=1e-9)
+    polar = np.radians(60)
+    lat = np.c_[np.sin(polar) * np.cos(t), np.sin(polar) * np.sin(t), np.full_like(t, 0.5)]
+    got = straightness([lat], normals=[lat])[0, 0]
+    assert got == pytest.approx(2 * np.sqrt(2) / np.pi, rel=1e-4)

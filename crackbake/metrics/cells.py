@@ -7,7 +7,8 @@ lie on:
   another meets it) and total length (mesh units);
 * ``mean_width``: length-weighted mean opening width (mesh units);
 * ``straightness``: chord / arc of each polyline piece between junctions (a polyline is also cut
-  where another crack ends on its inside), length-weighted mean; 1 for straight cracks;
+  where another crack ends on its inside), length-weighted mean; 1 for straight cracks; given
+  the faces the points lie on, geodesic (the chord of the polyline unrolled into the plane);
 * ``stem_angle``: mean over the T-junctions (:func:`junctions`: three polyline ends at one point,
   or an end on another polyline's inside) of the angle in degrees between the stem and the
   through-crack, each direction taken over ``scale`` of arc length; 90 for a perpendicular T;
@@ -36,7 +37,7 @@ from scipy.spatial import cKDTree
 
 from crackbake.geometry import face_areas, face_normals
 
-__all__ = ["NetworkStats", "cell_areas", "junctions", "network_stats", "straightness"]
+__all__ = ["NetworkStats", "cell_areas", "developed", "junctions", "network_stats", "straightness"]
 
 #: Cells with fewer samples than this are fragments of the removal band, not cells.
 MIN_CELL_POINTS = 30
@@ -175,8 +176,35 @@ def junctions(polylines: Sequence[np.ndarray], tol: float | None = None,
     return np.array(angles, np.float64), cuts
 
 
-def straightness(polylines: Sequence[np.ndarray], cuts: dict[int, list[float]] | None = None
-                 ) -> np.ndarray:
+def developed(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """The polyline unrolled into the plane: same segment lengths, turning only by its geodesic
+    turning angles (the turn measured in the tangent plane of the surface normal at each point),
+    so a crack that runs straight over a curved surface unrolls to a straight line.
+
+    Parameters
+    ----------
+    points : (N, 3) float
+    normals : (N, 3) float
+        Unit surface normal at each point.
+
+    Returns
+    -------
+    (N, 2) float
+    """
+    d = np.diff(points, axis=0)
+    seg = np.linalg.norm(d, axis=1)
+    d = d / np.maximum(seg, 1e-300)[:, None]
+    n = normals[1:-1]
+    a = d[:-1] - np.einsum("ij,ij->i", d[:-1], n)[:, None] * n
+    b = d[1:] - np.einsum("ij,ij->i", d[1:], n)[:, None] * n
+    turn = np.arctan2(np.einsum("ij,ij->i", np.cross(a, b), n), np.einsum("ij,ij->i", a, b))
+    heading = np.r_[0.0, np.cumsum(turn)]
+    step = seg[:, None] * np.c_[np.cos(heading), np.sin(heading)]
+    return np.vstack([np.zeros((1, 2)), np.cumsum(step, axis=0)])
+
+
+def straightness(polylines: Sequence[np.ndarray], cuts: dict[int, list[float]] | None = None,
+                 normals: Sequence[np.ndarray] | None = None) -> np.ndarray:
     """Chord / arc and arc length of each polyline piece between cuts.
 
     Parameters
@@ -184,6 +212,10 @@ def straightness(polylines: Sequence[np.ndarray], cuts: dict[int, list[float]] |
     polylines : sequence of (N_i, 3) float
     cuts : dict, optional
         Polyline index -> arc lengths where it is cut (its T-junctions).
+    normals : sequence of (N_i, 3) float, optional
+        Unit surface normals at the points: the chord is then taken on the :func:`developed`
+        polyline (geodesic straightness), so the curvature of the surface itself does not count
+        as wandering; without, the chord is the straight 3D distance (exact on a plane).
 
     Returns
     -------
@@ -194,6 +226,8 @@ def straightness(polylines: Sequence[np.ndarray], cuts: dict[int, list[float]] |
     for i, p in enumerate(polylines):
         p = np.asarray(p, np.float64)
         arc = _arc(p)
+        if normals is not None and len(p) > 2:
+            p = developed(p, np.asarray(normals[i], np.float64))
         marks = np.unique(np.r_[0.0, sorted((cuts or {}).get(i, [])), arc[-1]])
         for s0, s1 in zip(marks[:-1], marks[1:], strict=True):
             if s1 - s0 <= 0:
@@ -284,8 +318,8 @@ def cell_areas(vertices: np.ndarray, faces: np.ndarray, polylines: Sequence[np.n
 
 def network_stats(polylines: Sequence[np.ndarray], widths: Sequence[np.ndarray] | None = None,
                   vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
-                  scale: float | None = None, spacing: float | None = None,
-                  seed: int = 0) -> NetworkStats:
+                  point_faces: Sequence[np.ndarray] | None = None, scale: float | None = None,
+                  spacing: float | None = None, seed: int = 0) -> NetworkStats:
     """Every measure of the module docstring for one network.
 
     Parameters
@@ -296,6 +330,9 @@ def network_stats(polylines: Sequence[np.ndarray], widths: Sequence[np.ndarray] 
         Width at each point (``Crack.width``); NaN mean width without.
     vertices, faces : optional
         The surface, for the cells (NaN cell area without).
+    point_faces : sequence of (N_i,) int, optional
+        Face of ``faces`` holding each point (``Crack.faces``): straightness is then geodesic
+        (:func:`straightness` with those faces' normals).
     scale : float, optional
         Arc length over which stem and through directions are taken; default 5 median segment
         lengths (a few simulation edges: the direction the crack takes, not its last zig-zag).
@@ -316,7 +353,11 @@ def network_stats(polylines: Sequence[np.ndarray], widths: Sequence[np.ndarray] 
         mid = np.concatenate([0.5 * (x[:-1] + x[1:]) for x in w])
         mean_width = float((mid * seg).sum() / max(length, 1e-300))
     angles, cuts = junctions(polylines, scale=scale)
-    pieces = straightness(polylines, cuts)
+    normals = None
+    if point_faces is not None and vertices is not None and faces is not None:
+        fn = face_normals(np.asarray(vertices, np.float64), np.asarray(faces, np.int64))
+        normals = [fn[np.asarray(point_faces[i], np.int64)] for i in good]
+    pieces = straightness(polylines, cuts, normals)
     straight = float((pieces[:, 0] * pieces[:, 1]).sum() / pieces[:, 1].sum())
     cells = np.zeros(0)
     if vertices is not None and faces is not None:
