@@ -99,13 +99,17 @@ void main() {
         float c;
         float dd;
         float depth_here = mix(s.dt.x, s.dt.y, t);
-        if (w >= fw) {
+        // A crack drawn exactly one footprint wide by the floor keeps the filtered (thin)
+        // form: same mask as a one-texel V, but a two-texel tent of depth whose normal does not
+        // alias; wider floors draw the V.  With u_min_px = 0 this is the physical test w >= fw.
+        if (w_phys >= fw || w > fw) {
             c = clamp((hw - d) / fw + 0.5, 0.0, 1.0);
             float u = d / max(hw, 1e-30);
             dd = u < 1.0 ? depth_here * pow(1.0 - u, u_shape) : 0.0;
         } else {
             // Thinner than a texel: draw it one texel wide and weight by the covered fraction,
-            // so the mask and the depth keep the crack's area-averaged value.
+            // so the mask and the depth keep the crack's area-averaged value (of the drawn
+            // width: at least u_min_px footprints).
             float frac = w / fw;
             c = clamp((0.5 * fw - d) / fw + 0.5, 0.0, 1.0) * frac;
             dd = depth_here * c / (u_shape + 1.0);

@@ -89,7 +89,7 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
     if (w > w_phys) dw = 0.0;
     float hw = 0.5 * w;
     occ = 1.0;
-    if (w >= fw) {
+    if (w_phys >= fw || w > fw) {  // the branch crack_bake.frag takes
         float u = d / max(hw, 1e-30);
         if (u >= 1.0) return vec3(0.0);
         float q = max(1.0 - u, 1e-6);  // U profiles (shape < 1) have vertical walls at the rim

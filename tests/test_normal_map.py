@@ -375,11 +375,12 @@ def test_sub_texel_crack_normal_is_the_slope_of_its_area_average(gl_ctx):
         assert float(maps.depth[row, col]) == pytest.approx(depth * w * ramp / (2 * fw), rel=1e-4)
 
 
-def test_min_px_crack_normal_is_the_drawn_v(gl_ctx):
-    """The same 0.4-texel crack drawn at min_px = 1: a V of half width fw / 2 and the crack's
-    depth D, so inside it the normal leans by the slope D / (fw / 2) towards the axis, and the
-    occlusion is the V's groove visibility (cos^2 of the wall angle on the axis)."""
-    res = 128
+def test_min_px_crack_normal_is_the_filtered_one_texel_crack(gl_ctx):
+    """The same 0.4-texel crack drawn at min_px = 1: baked as a crack exactly one footprint fw
+    wide in the filtered form (no one-texel V to alias): the tent D fw / ((shape + 1) fw) *
+    (1 - d / fw), its slope D / ((shape + 1) fw) in the normal, the occlusion the full ramp times
+    the one-texel groove's wall shade; the width channel keeps the physical width."""
+    res, shape = 128, 1.0
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     f = np.array([[0, 1, 2], [0, 2, 3]])
     tan = np.tile([1.0, 0, 0, 1], (4, 1))
@@ -388,20 +389,19 @@ def test_min_px_crack_normal_is_the_drawn_v(gl_ctx):
     maps = bake_cracks(v, f, v[:, :2], segs, res, max_distance=0.05, tangents=tan, ctx=gl_ctx,
                        min_px=1.0)
     col, fw = res // 2, 1.0 / res
-    hw = 0.5 * fw
-    # Row res/2 - 1's centre lies 0.3 texel above the axis (inside the V), row res/2's 0.7
-    # texel below it (outside: flat, no depth, though the anti-aliased mask reaches it).
-    row = res // 2 - 1
-    d = 1 - (row + 0.5) / res - y
-    assert 0 < d < hw
-    expected = np.array([0.0, -depth / hw, 1.0])
-    np.testing.assert_allclose(maps.normal[row, col], expected / np.linalg.norm(expected),
-                               atol=1e-4)
-    assert float(maps.depth[row, col]) == pytest.approx(depth * (1 - d / hw), rel=1e-4)
-    np.testing.assert_allclose(maps.normal[row + 1, col], [0, 0, 1], atol=1e-6)
-    assert float(maps.depth[row + 1, col]) == 0.0
-    assert float(maps.mask[row + 1, col]) == pytest.approx(0.3, abs=2e-3)
-    assert float(maps.width[row, col]) == pytest.approx(w, rel=2e-3)
+    cos_a = (fw / 2) / np.hypot(fw / 2, depth)
+    for row in range(res // 2 - 2, res // 2 + 2):
+        yc = 1 - (row + 0.5) / res
+        ramp = max(1 - abs(yc - y) / fw, 0.0)
+        slope = depth / ((shape + 1) * fw) if ramp > 0 else 0.0
+        expected = np.array([0.0, -np.sign(yc - y) * slope, 1.0])
+        np.testing.assert_allclose(maps.normal[row, col], expected / np.linalg.norm(expected),
+                                   atol=1e-4)
+        assert float(maps.mask[row, col]) == pytest.approx(ramp, abs=2e-3)
+        assert float(maps.depth[row, col]) == pytest.approx(depth * ramp / 2, rel=1e-4, abs=1e-9)
+        occ = 1 - ramp * (1 - cos_a)
+        assert float(maps.occlusion[row, col]) == pytest.approx(occ, abs=2e-3)
+    assert float(maps.width[res // 2, col]) == pytest.approx(w, rel=2e-3)
 
 
 def test_normals_leave_the_other_channels_bit_identical_and_tile(gl_ctx, monkeypatch):
