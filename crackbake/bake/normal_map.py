@@ -15,7 +15,9 @@ per texel:
 2. Sub-texel cracks (width below the texel footprint ``fw`` across the crack) are baked as their
    area average, a tent ``D w / ((shape + 1) fw) * (1 - d / fw)``; their normal is the slope of
    that filtered height field, i.e. of the profile averaged over the texel footprint (a thin crack
-   fades out of the normal map as it fades out of the mask, instead of aliasing).
+   fades out of the normal map as it fades out of the mask, instead of aliasing).  Here ``w``
+   is the drawn width ``max(w, min_px fw)`` (``--min-px``; the default 1 draws a hairline as
+   a crack exactly one footprint wide, in this filtered form).
 3. ``n' = normalize(N + P(grad depth))``, ``N`` the interpolated vertex normal, ``P`` the
    projection onto the plane normal to ``N`` (a height field over the shading normal).
 4. Tangent space exactly as engines decode (MikkTSpace): ``n = normalize(x T + y B + z N)`` with
