@@ -19,6 +19,7 @@ from crackbake.params import (
     DECAL_RES_DEFAULT,
     FORMATS,
     METHODS,
+    MIN_PX_DEFAULT,
     NORMAL_Y,
     RES_MAX,
     RES_MIN,
@@ -264,6 +265,14 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     default=1.0,
     show_default=True,
     help="Crack depth profile exponent: 1 = V, 0.5 = rounded U, 2 = sharp slot.",
+)
+@click.option(
+    "--min-px",
+    type=float,
+    default=MIN_PX_DEFAULT,
+    show_default=True,
+    help="Least drawn crack width in texels (mask, depth, normal); crack.width keeps the "
+    "physical width. 0 = physical only.",
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option(

@@ -19,6 +19,10 @@ FORMATS = ("exr", "png", "glb", "preview", "stress")
 #: Default edge of the stress maps: the stress lives on the simulation mesh (about 100k faces, a
 #: few hundred triangles across), so 1024 texels already give each sim triangle several texels.
 STRESS_RES_DEFAULT = 1024
+#: Default least drawn crack width in texels (``--min-px``): the drawn maps show every crack at
+#: least this wide so a hairline still reaches full mask at the chosen resolution; ``crack.width``
+#: keeps the physical width.
+MIN_PX_DEFAULT = 1.0
 #: Default decal texture edge: min(--res, this).
 DECAL_RES_DEFAULT = 1024
 #: Most ``--frames`` (the frame number has four digits).
@@ -54,6 +58,7 @@ UNWRAP_TIMEOUT_RANGE = (1e-3, 1e6)
 #: Ints include both ends.
 RANGES: dict[str, tuple[float, float, str, bool]] = {
     "profile": (0.01, 100.0, " (1 = V-shaped crack)", False),
+    "min_px": (0.0, 1000.0, " texels (0 = the physical width only)", False),
     "max_distance": (0.0, LENGTH_MAX, " mesh units", True),
     "detail": (0.0, LENGTH_MAX, " mesh units", True),
     "max_crack_length": (0.0, LENGTH_MAX, " mesh units", True),
@@ -282,6 +287,9 @@ class RunParams:
         Clamp of the distance channel, mesh units; ``None`` = 2 % of the bounding-box diagonal.
     profile : float
         Depth profile exponent across a crack (1 = V).
+    min_px : float
+        Least drawn crack width in texels (mask, depth, normal, occlusion, decals); the width
+        channel keeps the physical width.  0 = the physical width only.
     seed : int
         Random seed.
     formats : tuple of str
@@ -333,6 +341,7 @@ class RunParams:
     dilate: int | None = None
     max_distance: float | None = None
     profile: float = 1.0
+    min_px: float = MIN_PX_DEFAULT
     seed: int = 0
     formats: tuple[str, ...] = FORMATS
     stress_res: int | None = None

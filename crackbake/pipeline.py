@@ -218,6 +218,7 @@ def _bake(
         params.res,
         max_distance=params.max_distance,
         profile_shape=params.profile,
+        min_px=params.min_px,
         dilate_px=params.dilate,
         tile=params.tile,
         ctx=ctx,

@@ -23,6 +23,7 @@ layout(std430, binding = 4) readonly buffer Bounds { float cand_bound[]; };  // 
 uniform float u_max_distance;   // distance channel clamp, mesh units
 uniform float u_half_width;     // half the widest crack's width, mesh units
 uniform float u_shape;          // depth profile exponent: 1 = V, < 1 fuller (U-like), > 1 sharper
+uniform float u_min_px;         // least drawn width, texels (0 = the physical width only)
 
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
@@ -63,7 +64,9 @@ void main() {
 
     // Farther than this a segment adds no coverage or depth: the ramp ends within half a width
     // plus one footprint, and the footprint along any direction is at most |(|dpx|, |dpy|)|.
-    float cover_reach = u_half_width + length(vec2(length(dpx), length(dpy)));
+    // A crack drawn wider than it is (u_min_px) reaches min_px / 2 footprints.
+    float foot = length(vec2(length(dpx), length(dpy)));
+    float cover_reach = max(u_half_width, 0.5 * u_min_px * foot) + foot;
     int best_seg = -1;
 #ifdef CRACK_NORMALS
     int deepest_seg = -1;  // the segment whose depth term wins (the normal's profile)
@@ -78,8 +81,7 @@ void main() {
         float t = len2 > 0.0 ? clamp(dot(p - s.a.xyz, ab) / len2, 0.0, 1.0) : 0.0;
         vec3 g = p - (s.a.xyz + t * ab);
         float d = length(g);
-        float w = mix(s.a.w, s.b.w, t);
-        float hw = 0.5 * w;
+        float w_phys = mix(s.a.w, s.b.w, t);
 
         // Texel size measured along the direction in which the distance grows, so the
         // anti-aliasing ramp is one texel wide whatever the UV stretch.
@@ -89,17 +91,25 @@ void main() {
             fw = length(vec2(dot(gn, dpx), dot(gn, dpy)));
         }
         fw = max(fw, 1e-30);
+        // The drawn maps show at least u_min_px texels across (so a hairline still reads at
+        // this resolution); the width channel keeps the physical width.
+        float w = max(w_phys, u_min_px * fw);
+        float hw = 0.5 * w;
 
         float c;
         float dd;
         float depth_here = mix(s.dt.x, s.dt.y, t);
-        if (w >= fw) {
+        // A crack drawn exactly one footprint wide by the floor keeps the filtered (thin)
+        // form: same mask as a one-texel V, but a two-texel tent of depth whose normal does not
+        // alias; wider floors draw the V.  With u_min_px = 0 this is the physical test w >= fw.
+        if (w_phys >= fw || w > fw) {
             c = clamp((hw - d) / fw + 0.5, 0.0, 1.0);
             float u = d / max(hw, 1e-30);
             dd = u < 1.0 ? depth_here * pow(1.0 - u, u_shape) : 0.0;
         } else {
             // Thinner than a texel: draw it one texel wide and weight by the covered fraction,
-            // so the mask and the depth keep the crack's area-averaged value.
+            // so the mask and the depth keep the crack's area-averaged value (of the drawn
+            // width: at least u_min_px footprints).
             float frac = w / fw;
             c = clamp((0.5 * fw - d) / fw + 0.5, 0.0, 1.0) * frac;
             dd = depth_here * c / (u_shape + 1.0);
@@ -113,7 +123,7 @@ void main() {
         if (d < best_d || (d == best_d && best_seg >= 0 && int(si) < best_seg)) {
             best_seg = int(si);
             best_d = d;
-            best_w = w;
+            best_w = w_phys;
             best_time = mix(s.dt.z, s.dt.w, t);
             best_id = s.id.x;
         }

@@ -25,6 +25,7 @@ layout(std430, binding = 7) readonly buffer Texels { ivec4 job[]; };  // x, y in
 layout(std430, binding = 8) writeonly buffer Result { vec4 result[]; };  // normal xyz, occlusion
 
 uniform float u_shape;   // depth profile exponent: 1 = V
+uniform float u_min_px;  // least drawn width, texels (as crack_bake.frag)
 uniform uint u_count;    // texels listed
 
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin

@@ -71,8 +71,7 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
     vec3 grad_t = (t_raw > 0.0 && t_raw < 1.0) ? ab / len2 : vec3(0.0);
     vec3 g = p - (s.a.xyz + t * ab);
     float d = length(g);
-    float w = mix(s.a.w, s.b.w, t);
-    float hw = 0.5 * w;
+    float w_phys = mix(s.a.w, s.b.w, t);
     float dw = s.b.w - s.a.w;         // d(width)/dt
     float depth = mix(s.dt.x, s.dt.y, t);
     float ddepth = s.dt.y - s.dt.x;   // d(depth)/dt
@@ -84,8 +83,13 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
         fw = length(vec2(dot(gn, dpx), dot(gn, dpy)));
     }
     fw = max(fw, 1e-30);
+    // The drawn width, as crack_bake.frag draws it: at least u_min_px footprints; where that
+    // floor holds, the width no longer varies along the segment.
+    float w = max(w_phys, u_min_px * fw);
+    if (w > w_phys) dw = 0.0;
+    float hw = 0.5 * w;
     occ = 1.0;
-    if (w >= fw) {
+    if (w_phys >= fw || w > fw) {  // the branch crack_bake.frag takes
         float u = d / max(hw, 1e-30);
         if (u >= 1.0) return vec3(0.0);
         float q = max(1.0 - u, 1e-6);  // U profiles (shape < 1) have vertical walls at the rim

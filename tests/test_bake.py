@@ -85,10 +85,49 @@ def test_thin_crack_keeps_its_area(gl_ctx):
     v, f, uv = plate(lambda x, y: (x, y))
     w = 0.3 / res
     segs = make_segments([[0.1, 0.5013, 0]], [[0.9, 0.5013, 0]], width=w)
-    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=gl_ctx)
+    # min_px=0: the physical width only, so the sub-texel crack fades to its area average.
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=gl_ctx, min_px=0.0)
     column = m.mask[:, res // 2].astype(np.float64)
     assert column.sum() == pytest.approx(0.3, abs=0.02)
     assert column.max() < 0.35
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.3])
+def test_min_px_draws_a_thin_crack_one_texel_wide(gl_ctx, offset):
+    """A crack 0.2 texel wide drawn at min_px = 1: the drawn half width is half a texel, so the
+    one-texel anti-aliasing ramp gives coverage 1 - |d| / texel at a texel centre |d| texels from
+    the axis: 1 on the axis, (1 - offset, offset) on the two rows it falls between, summing to
+    one texel; the width channel keeps the physical 0.2 texel."""
+    res = 256
+    v, f, uv = plate(lambda x, y: (x, y))
+    w = 0.2 / res
+    y = 1.0 - (res // 2 + 0.5 + offset) / res  # `offset` texels below row res/2's centre
+    segs = make_segments([[0.1, y, 0]], [[0.9, y, 0]], width=w)
+    m = bake_cracks(v, f, uv, segs, res, max_distance=0.05, ctx=gl_ctx, min_px=1.0)
+    column = m.mask[:, res // 2].astype(np.float64)
+    assert column.sum() == pytest.approx(1.0, abs=0.01)
+    assert column[res // 2] == pytest.approx(1.0 - offset, abs=2e-3)
+    assert column[res // 2 + 1] == pytest.approx(offset, abs=2e-3)
+    if offset == 0.0:
+        assert np.round(255 * column.max()) == 255  # full in the 8-bit mask
+    assert float(m.width[res // 2, res // 2]) == pytest.approx(w, rel=2e-3)
+    assert m.min_px == 1.0
+    # Depth: the area average of a V one texel wide, D / 2 on the axis (D = w / 2 here).
+    if offset == 0.0:
+        assert float(m.depth[res // 2, res // 2]) == pytest.approx(w / 4, rel=1e-3)
+    # min_px below the physical width changes nothing: 3-texel cracks at min_px 0 and 2.
+    wide = make_segments([[0.1, y, 0]], [[0.9, y, 0]], width=3.0 / res)
+    a = bake_cracks(v, f, uv, wide, res, max_distance=0.05, ctx=gl_ctx, min_px=0.0)
+    b = bake_cracks(v, f, uv, wide, res, max_distance=0.05, ctx=gl_ctx, min_px=2.0)
+    np.testing.assert_array_equal(a.mask, b.mask)
+    np.testing.assert_array_equal(a.depth, b.depth)
+
+
+def test_min_px_must_not_be_negative(gl_ctx):
+    v, f, uv = plate(lambda x, y: (x, y))
+    segs = make_segments([[0.1, 0.5, 0]], [[0.9, 0.5, 0]], width=0.01)
+    with pytest.raises(CrackbakeError, match="--min-px"):
+        bake_cracks(v, f, uv, segs, 64, ctx=gl_ctx, min_px=-1.0)
 
 
 def test_channels_values(gl_ctx):

@@ -356,7 +356,8 @@ def test_sub_texel_crack_normal_is_the_slope_of_its_area_average(gl_ctx):
     tan = np.tile([1.0, 0, 0, 1], (4, 1))
     w, depth, y = 0.4 / res, 0.3 / res, 0.5 + 0.2 / res
     segs = make_segments([[0.05, y, 0]], [[0.95, y, 0]], width=w, depth=depth)
-    maps = bake_cracks(v, f, v[:, :2], segs, res, max_distance=0.05, tangents=tan, ctx=gl_ctx)
+    maps = bake_cracks(v, f, v[:, :2], segs, res, max_distance=0.05, tangents=tan, ctx=gl_ctx,
+                       min_px=0.0)  # the physical width only
     col = res // 2
     fw = 1.0 / res
     for row in range(res // 2 - 2, res // 2 + 2):
@@ -372,6 +373,35 @@ def test_sub_texel_crack_normal_is_the_slope_of_its_area_average(gl_ctx):
         occ = 1 - ramp * (w / fw) * (1 - cos_a)
         assert float(maps.occlusion[row, col]) == pytest.approx(occ, abs=2e-3)
         assert float(maps.depth[row, col]) == pytest.approx(depth * w * ramp / (2 * fw), rel=1e-4)
+
+
+def test_min_px_crack_normal_is_the_filtered_one_texel_crack(gl_ctx):
+    """The same 0.4-texel crack drawn at min_px = 1: baked as a crack exactly one footprint fw
+    wide in the filtered form (no one-texel V to alias): the tent D fw / ((shape + 1) fw) *
+    (1 - d / fw), its slope D / ((shape + 1) fw) in the normal, the occlusion the full ramp times
+    the one-texel groove's wall shade; the width channel keeps the physical width."""
+    res, shape = 128, 1.0
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    tan = np.tile([1.0, 0, 0, 1], (4, 1))
+    w, depth, y = 0.4 / res, 0.3 / res, 0.5 + 0.2 / res
+    segs = make_segments([[0.05, y, 0]], [[0.95, y, 0]], width=w, depth=depth)
+    maps = bake_cracks(v, f, v[:, :2], segs, res, max_distance=0.05, tangents=tan, ctx=gl_ctx,
+                       min_px=1.0)
+    col, fw = res // 2, 1.0 / res
+    cos_a = (fw / 2) / np.hypot(fw / 2, depth)
+    for row in range(res // 2 - 2, res // 2 + 2):
+        yc = 1 - (row + 0.5) / res
+        ramp = max(1 - abs(yc - y) / fw, 0.0)
+        slope = depth / ((shape + 1) * fw) if ramp > 0 else 0.0
+        expected = np.array([0.0, -np.sign(yc - y) * slope, 1.0])
+        np.testing.assert_allclose(maps.normal[row, col], expected / np.linalg.norm(expected),
+                                   atol=1e-4)
+        assert float(maps.mask[row, col]) == pytest.approx(ramp, abs=2e-3)
+        assert float(maps.depth[row, col]) == pytest.approx(depth * ramp / 2, rel=1e-4, abs=1e-9)
+        occ = 1 - ramp * (1 - cos_a)
+        assert float(maps.occlusion[row, col]) == pytest.approx(occ, abs=2e-3)
+    assert float(maps.width[res // 2, col]) == pytest.approx(w, rel=2e-3)
 
 
 def test_normals_leave_the_other_channels_bit_identical_and_tile(gl_ctx, monkeypatch):

@@ -24,6 +24,7 @@ from crackbake.bake.raster import CrackMaps, bake_cracks
 from crackbake.errors import CrackbakeError
 from crackbake.geometry import closest_on_triangles, face_areas, face_normals
 from crackbake.network import Segments
+from crackbake.params import MIN_PX_DEFAULT
 
 #: Depth margin on each side of the measured surface, as a fraction of the decal size.
 DEPTH_MARGIN = 0.025
@@ -181,6 +182,7 @@ def bake_decal(
     profile_shape: float = 1.0,
     tile: int | None = None,
     ctx=None,
+    min_px: float = MIN_PX_DEFAULT,
 ) -> CrackMaps:
     """Bake the crack network as the projector sees it: the decal texture set.
 
@@ -200,6 +202,8 @@ def bake_decal(
     tile : int, optional
         Largest framebuffer edge (default the bake's).
     ctx : moderngl.Context, optional
+    min_px : float
+        Least drawn crack width in decal texels (``bake_cracks``).
 
     Returns
     -------
@@ -223,7 +227,7 @@ def bake_decal(
     return bake_cracks(
         vertices, sub, placement, segments, res, max_distance=max_distance,
         profile_shape=profile_shape, dilate_px=DECAL_DILATE_PX, ctx=ctx, normals=normals,
-        tangents=tangents, projection=clip, **extra,
+        tangents=tangents, projection=clip, min_px=min_px, **extra,
     )  # fmt: skip
 
 
@@ -231,13 +235,13 @@ def bake_decals(uvmesh, segs: Segments, maps: CrackMaps, impacts, size: float, r
                 tile: int | None = None, ctx=None) -> list[tuple[Projector, CrackMaps, dict]]:
     """One decal per impact on the baked mesh: ``(projector, maps, impact dict)`` each.
 
-    ``maps`` is the run's UV bake: its distance clamp and profile are reused, so the decal
-    measures exactly what the UV bake measured.
+    ``maps`` is the run's UV bake: its distance clamp, profile and least drawn width (in the
+    decal's texels) are reused, so the decal measures what the UV bake measured.
     """
     out = []
     for imp in impacts:
         proj = make_projector(uvmesh.vertices, uvmesh.faces, imp.point, size)
         dec = bake_decal(uvmesh.vertices, uvmesh.faces, segs, proj, res, maps.max_distance,
-                         maps.profile_shape, tile, ctx)  # fmt: skip
+                         maps.profile_shape, tile, ctx, min_px=maps.min_px)  # fmt: skip
         out.append((proj, dec, imp.to_dict()))
     return out

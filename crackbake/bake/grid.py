@@ -57,16 +57,16 @@ class FaceBins:
 
 def face_reach(
     vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, res: int, max_distance: float,
-    half_width: float,
+    half_width: float, min_px: float = 0.0,
 ) -> np.ndarray:  # fmt: skip
     """Distance within which a segment can change a texel of each face, mesh units.
 
     Returns
     -------
     (F,) float64
-        ``max(max_distance, half_width + footprint)``, footprint the Frobenius norm of the face's
-        texel-to-world Jacobian (0 for faces of no UV area: they draw no texels), plus a small
-        slack.
+        ``max(max_distance, max(half_width, min_px / 2 * footprint) + footprint)``, footprint the
+        Frobenius norm of the face's texel-to-world Jacobian (0 for faces of no UV area: they
+        draw no texels), plus a small slack; ``min_px`` is the bake's least drawn width in texels.
     """
     # Corner columns, not (F, 3, 3) gathers: numpy reduces those slowly along the short axis.
     p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
@@ -82,7 +82,8 @@ def face_reach(
         foot = np.sqrt(np.einsum("ij,ij->i", dpx, dpx) + np.einsum("ij,ij->i", dpy, dpy))
     # A face with no UV area draws no texels: its reach never matters.
     foot = np.where(np.isfinite(foot), foot, 0.0)
-    return np.maximum(max_distance, half_width + foot) * (1 + _SLACK)
+    drawn = np.maximum(half_width, 0.5 * min_px * foot)
+    return np.maximum(max_distance, drawn + foot) * (1 + _SLACK)
 
 
 def bin_faces(lo: np.ndarray, hi: np.ndarray, cell: float, size: np.ndarray) -> np.ndarray:
@@ -113,6 +114,7 @@ def face_bins(
     segments: Segments,
     res: int,
     max_distance: float,
+    min_px: float = 0.0,
 ) -> FaceBins:
     """Bins of faces and the crack segments each bin's texels must measure.
 
@@ -126,6 +128,8 @@ def face_bins(
         Texels along the image edge.
     max_distance : float
         Distance clamp of the bake, mesh units.
+    min_px : float
+        Least drawn crack width of the bake, texels (widens the reach on coarse faces).
 
     Returns
     -------
@@ -136,7 +140,7 @@ def face_bins(
         return FaceBins(np.zeros(n_faces, np.uint32), np.zeros(2, np.uint32),
                         np.zeros(1, np.uint32), np.zeros(1, np.float32))  # fmt: skip
     half_width = 0.5 * float(segments.width.max())
-    reach = face_reach(vertices, faces, uv, res, max_distance, half_width)
+    reach = face_reach(vertices, faces, uv, res, max_distance, half_width, min_px)
     extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
     cell = max(BIN_PER_REACH * max(max_distance, half_width), extent / 2**16, 1e-30)
     # A face's bin grows with its extent and with the part of its reach above the clamp (a face

@@ -15,7 +15,9 @@ per texel:
 2. Sub-texel cracks (width below the texel footprint ``fw`` across the crack) are baked as their
    area average, a tent ``D w / ((shape + 1) fw) * (1 - d / fw)``; their normal is the slope of
    that filtered height field, i.e. of the profile averaged over the texel footprint (a thin crack
-   fades out of the normal map as it fades out of the mask, instead of aliasing).
+   fades out of the normal map as it fades out of the mask, instead of aliasing).  Here ``w``
+   is the drawn width ``max(w, min_px fw)`` (``--min-px``; the default 1 draws a hairline as
+   a crack exactly one footprint wide, in this filtered form).
 3. ``n' = normalize(N + P(grad depth))``, ``N`` the interpolated vertex normal, ``P`` the
    projection onto the plane normal to ``N`` (a height field over the shading normal).
 4. Tangent space exactly as engines decode (MikkTSpace): ``n = normalize(x T + y B + z N)`` with
@@ -128,12 +130,15 @@ class NormalPass:
         The bake's scope (objects kept there are released with it).
     profile_shape : float
         Depth profile exponent.
+    min_px : float
+        Least drawn crack width, texels (as the crack pass draws it).
     """
 
-    def __init__(self, gl, profile_shape: float) -> None:
+    def __init__(self, gl, profile_shape: float, min_px: float = 0.0) -> None:
         self.gl = gl
         self.prog = gl.keep(gl.ctx.compute_shader(shader_variant("crack_normal.comp", True)))
         self.prog["u_shape"].value = float(profile_shape)
+        self.prog["u_min_px"].value = float(min_px)
 
     def run(self, code: np.ndarray, planes: list[np.ndarray], y0: int) -> None:
         """Compute the crack texels of one band into ``planes`` (normal x, y, z, occlusion).

@@ -27,7 +27,7 @@ from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
-from crackbake.params import TILE_DEFAULT
+from crackbake.params import MIN_PX_DEFAULT, TILE_DEFAULT
 
 #: Default clamp of the distance channel, as a fraction of the bounding-box diagonal.
 DEFAULT_MAX_DISTANCE_FRACTION = 0.02
@@ -61,6 +61,9 @@ class CrackMaps:
         A view of planar storage: each ``normal[..., k]`` is C-contiguous.
     occlusion : (res, res) float16 or None
         Sky visibility 0..1 (1 = open, crack interiors dark); ``None`` without tangents.
+    min_px : float
+        Least drawn crack width in texels the mask, depth, normal and occlusion were drawn with
+        (``width`` holds the physical width).
     """
 
     res: int
@@ -75,6 +78,7 @@ class CrackMaps:
     profile_shape: float
     normal: np.ndarray | None = None
     occlusion: np.ndarray | None = None
+    min_px: float = 0.0
     timings: dict[str, float] = field(default_factory=dict)
 
     def channels(self) -> dict[str, np.ndarray]:
@@ -121,6 +125,7 @@ def bake_cracks(
     normals: np.ndarray | None = None,
     tangents: np.ndarray | None = None,
     projection: np.ndarray | None = None,
+    min_px: float = MIN_PX_DEFAULT,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
 
@@ -161,6 +166,12 @@ def bake_cracks(
         them through that camera, depth-tested (``shaders/decal_project.vert``: the decal bake
         of :mod:`crackbake.bake.decal`).  ``uv`` must then hold the same placement in [0, 1]
         (``0.5 + 0.5 * clip.xy``), which the candidate bins use for the texel footprint.
+    min_px : float
+        Least drawn width in texels, >= 0: the mask, depth, normal and occlusion draw each crack
+        at least this many texel footprints across (measured across the crack), so a crack
+        thinner than a texel still reads at this resolution; the ``width`` channel keeps the
+        physical width.  0 draws the physical width only (sub-texel cracks fade to their
+        area-averaged coverage).
 
     Returns
     -------
@@ -176,18 +187,22 @@ def bake_cracks(
         raise ValueError(f"res must be a positive texel count, got {res}")
     if profile_shape <= 0:
         raise CrackbakeError(f"profile shape {profile_shape} must be > 0 (1 = V profile)")
+    if not (np.isfinite(min_px) and min_px >= 0):
+        raise CrackbakeError(f"--min-px {min_px} must be a number >= 0 (texels; 0 = physical)")
     max_distance = _max_distance(vertices, segments, max_distance)
     frames = None if tangents is None else frame_attributes(vertices, faces, normals, tangents)
 
-    bins = face_bins(vertices, faces, uv, segments, res, max_distance)
+    bins = face_bins(vertices, faces, uv, segments, res, max_distance, float(min_px))
     timings["candidates"] = time.perf_counter() - t0
 
     images = _render(
         ctx, vertices, faces, uv, segments, res, tile, bins,
-        float(max_distance), float(profile_shape), timings, frames, projection,
+        float(max_distance), float(profile_shape), timings, frames, projection, float(min_px),
     )  # fmt: skip
 
-    return _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
+    maps = _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
+    maps.min_px = float(min_px)
+    return maps
 
 
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
@@ -197,7 +212,7 @@ _NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
               max_distance: float, profile_shape: float, frames: np.ndarray | None,
-              projection: np.ndarray | None = None):
+              projection: np.ndarray | None = None, min_px: float = 0.0):
     """The surface pass (faces at their placement -> world position, footprint, bin per texel;
     with ``frames``, the face too) and the crack pass (one full-screen triangle measuring the
     cracks per texel; with ``frames``, reading the faces' vertex frames), with their buffers.
@@ -244,6 +259,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     prog["u_max_distance"].value = max_distance
     prog["u_half_width"].value = 0.5 * float(segments.width.max()) if len(segments.a) else 0.0
     prog["u_shape"].value = profile_shape
+    prog["u_min_px"].value = min_px
     return surface, vao, screen
 
 
@@ -279,6 +295,7 @@ def _render(
     timings: dict[str, float],
     frames: np.ndarray | None = None,
     projection: np.ndarray | None = None,
+    min_px: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Draw the faces at their placement band by band; the planar channel images (row 0 = top)."""
     import moderngl
@@ -287,7 +304,7 @@ def _render(
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
         surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
-                                         max_distance, profile_shape, frames, projection)
+                                         max_distance, profile_shape, frames, projection, min_px)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
         # (67 bytes a texel: 48 for the surface pass, 19 for the maps; 70 with the normal map,
@@ -297,7 +314,7 @@ def _render(
         dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
         images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
         if with_normals:
-            normal_pass = NormalPass(gl, profile_shape)
+            normal_pass = NormalPass(gl, profile_shape, min_px)
             # Flat and open wherever no crack's depth reaches.  Planar storage: each component
             # dilates as its own image and EXR writers take the planes without a copy.
             images["normal"] = np.zeros((3, res, res), np.float32)
