@@ -204,6 +204,12 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("--noise", type=float, help="Seeded random perturbation of the field (0.1 = 10%).")
 @click.option("--hoop", type=float, help="Impact hoop/radial tension ratio [1.25].")
 @click.option(
+    "--spacing",
+    type=float,
+    help="Crack spacing: each crack's stress-shadow radius as a fraction of the bounding-box "
+    "diagonal; smaller gives smaller cells [0.1; crackle 0.03].",
+)
+@click.option(
     "--toughness", type=float, help=f"Failure threshold relative to the field [{D['toughness']}]."
 )
 @click.option(

@@ -69,6 +69,7 @@ RANGES: dict[str, tuple[float, float, str, bool]] = {
     "depth_ratio": (0.0, 1000.0, "", False),
     "shrink_rate": (0.0, 100.0, "", False),
     "noise": (0.0, 10.0, "", False),
+    "spacing": (0.0, 1.0, " of the bounding-box diagonal", True),
     "shrink": (-STRESS_MAX, STRESS_MAX, "", False),
     "curvature_bias": (-100.0, 100.0, "", False),
     "curvature_density": (-100.0, 100.0, "", False),
@@ -136,6 +137,7 @@ SOLVER_DEFAULTS: dict = {
     "shrink_rate": 0.0,
     "hoop": 1.25,
     "noise": 0.0,
+    "spacing": None,
     "curvature_bias": None,
     "curvature_density": None,
     "sim_faces": SIM_FACES_DEFAULT,
@@ -329,6 +331,10 @@ class RunParams:
     shrink, shrink_rate, directions, curvature_bias, curvature_density, weight_map,
     weight_attribute, weight_invert, noise, hoop
         Stress sources (:mod:`crackbake.simulate.stress`); ``directions`` holds (x, y, z, strength).
+    spacing : float or None
+        Radius of each crack's stress shadow, a fraction of the bounding-box diagonal (the
+        solver's own 0.1 when unset): how close parallel cracks may run, so smaller gives
+        smaller cells.  Impacts narrow it further near their star.
     """
 
     mesh: Path
@@ -380,6 +386,7 @@ class RunParams:
     weight_invert: bool = False
     noise: float | None = None
     hoop: float | None = None
+    spacing: float | None = None
     extra: dict = field(default_factory=dict)
 
     @property

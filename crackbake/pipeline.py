@@ -27,7 +27,13 @@ from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import DECAL_RES_DEFAULT, STRESS_RES_DEFAULT, RunParams
-from crackbake.simulate.setup import check_scale, sidecar_params, solver_params, stress_sources
+from crackbake.simulate.setup import (
+    check_scale,
+    sidecar_params,
+    solver_params,
+    stress_sources,
+    with_spacing,
+)
 from crackbake.simulate.timing import grow_from_impacts
 
 logger = logging.getLogger(__name__)
@@ -306,6 +312,7 @@ def solve(
         logger.info("impact on a thin feature: sim edge %.4g -> %.4g", sim.edge_length, finer)
         sim = build_simmesh(mesh, detail=finer, seed=params.seed)
         field = stress_field(sim, mesh, sources, seed=params.seed)
+    field = with_spacing(field, params, mesh.diagonal)
     timings["stress"] = time.perf_counter() - t
     sp = solver_params(params, mesh, relative)
     logger.info("growing cracks (%s)", sp.method)

@@ -299,7 +299,7 @@ def split_at_border(points: np.ndarray, values: np.ndarray, period: float) -> li
 
 def solve_tile(params: TileParams, mesh, cells: int, timings: dict) -> SimpleNamespace:
     """Periodic sim mesh, field and the iben solver: the tile's pieces and figures."""
-    from crackbake.simulate.setup import solver_params
+    from crackbake.simulate.setup import solver_params, with_spacing
     from crackbake.simulate.solver.iben import solve_iben
 
     run = RunParams(mesh=Path(mesh.source), preset=params.preset, seed=params.seed,
@@ -307,7 +307,8 @@ def solve_tile(params: TileParams, mesh, cells: int, timings: dict) -> SimpleNam
     run, relative = run.resolved()
     t = time.perf_counter()
     sim = periodic_simmesh(params.size, params.sim_faces or TILE_SIM_FACES, params.seed, cells)
-    field = tile_field(sim, run, relative, params)
+    field = with_spacing(tile_field(sim, run, relative, params), run, np.hypot(params.size,
+                                                                               params.size))
     timings["stress"] = time.perf_counter() - t
     sp = solver_params(run, mesh, relative)
     t = time.perf_counter()

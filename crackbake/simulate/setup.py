@@ -163,3 +163,20 @@ def check_scale(mesh: Mesh) -> None:
             f"own size (limit {MAX_OFFSET_DIAGONALS:g}); 32-bit GPU math cannot resolve its "
             "cracks there: move the mesh near the origin"
         )
+
+
+def with_spacing(field, params: RunParams, diagonal: float):
+    """``field`` with the run's ``--spacing`` applied to its shadow radius (mesh units).
+
+    The solver's shadow radius is the field's (an impact's) where given, else
+    ``SHADOW_REL`` x the diagonal; ``spacing`` x ``diagonal`` caps either, so a preset or the
+    user can ask for a finer network without changing the stress itself.
+    """
+    if params.spacing is None:
+        return field
+    radius = float(params.spacing) * float(diagonal)
+    current = getattr(field, "shadow_radius", None)
+    if current is not None:
+        radius = min(radius, float(current))
+    field.shadow_radius = radius
+    return field

@@ -117,7 +117,7 @@ def shadow_grid(
     plates") the grid spans exactly one period in x and y, so its cells wrap around.
     """
     if period > 0.0:
-        return _periodic_grid(X0, period)
+        return _periodic_grid(X0, period, radius)
     lo, hi = X0.min(0), X0.max(0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
     radius = SHADOW_REL * diag if radius is None else min(float(radius), SHADOW_REL * diag)
@@ -133,9 +133,13 @@ def shadow_grid(
     return G, np.array([origin[0], origin[1], origin[2], cell, radius, 0.0, 0.0])
 
 
-def _periodic_grid(X0: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
-    """The shadow grid of a periodic plate: radius from the period's diagonal, as on a plate."""
-    radius = SHADOW_REL * float(np.hypot(period, period))
+def _periodic_grid(
+    X0: np.ndarray, period: float, radius: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The shadow grid of a periodic plate: radius from the period's diagonal, as on a plate
+    (or ``radius`` where that is smaller)."""
+    full = SHADOW_REL * float(np.hypot(period, period))
+    radius = full if radius is None else min(float(radius), full)
     n = max(int(np.ceil(period / (radius / 3.0))), 4)
     while n * n * 5 > SHADOW_MAX_CELLS:
         n = int(n / 1.25)
