@@ -207,7 +207,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     "--spacing",
     type=float,
     help="Crack spacing: each crack's stress-shadow radius as a fraction of the bounding-box "
-    "diagonal; smaller gives smaller cells [0.1; crackle 0.02].",
+    "diagonal; smaller gives smaller cells [0.1; crackle 0.025].",
 )
 @click.option(
     "--toughness", type=float, help=f"Failure threshold relative to the field [{D['toughness']}]."

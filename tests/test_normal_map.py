@@ -347,15 +347,22 @@ def test_occlusion_is_open_away_from_cracks_and_darkest_on_the_axis(gl_ctx):
     assert d[darkest] < texel
 
 
-def test_sub_texel_crack_normal_is_the_slope_of_its_area_average(gl_ctx):
-    """A crack 0.4 texel wide: the bake stores the area-averaged depth, a tent one footprint
-    wide; its normal is that tent's slope and its occlusion the covered fraction of cos(alpha)."""
-    res, shape = 128, 1.0
+def _thin_crack(res: int):
+    """A unit quad (UVs = xy, tangent +x) and a straight crack 0.4 texel wide along x, 0.2
+    texel off a texel row: ``v, f, tan, w, depth, y, segs``."""
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     f = np.array([[0, 1, 2], [0, 2, 3]])
     tan = np.tile([1.0, 0, 0, 1], (4, 1))
     w, depth, y = 0.4 / res, 0.3 / res, 0.5 + 0.2 / res
     segs = make_segments([[0.05, y, 0]], [[0.95, y, 0]], width=w, depth=depth)
+    return v, f, tan, w, depth, y, segs
+
+
+def test_sub_texel_crack_normal_is_the_slope_of_its_area_average(gl_ctx):
+    """A crack 0.4 texel wide: the bake stores the area-averaged depth, a tent one footprint
+    wide; its normal is that tent's slope and its occlusion the covered fraction of cos(alpha)."""
+    res, shape = 128, 1.0
+    v, f, tan, w, depth, y, segs = _thin_crack(res)
     maps = bake_cracks(v, f, v[:, :2], segs, res, max_distance=0.05, tangents=tan, ctx=gl_ctx,
                        min_px=0.0)  # the physical width only
     col = res // 2
@@ -381,11 +388,7 @@ def test_min_px_crack_normal_is_the_filtered_one_texel_crack(gl_ctx):
     (1 - d / fw), its slope D / ((shape + 1) fw) in the normal, the occlusion the full ramp times
     the one-texel groove's wall shade; the width channel keeps the physical width."""
     res, shape = 128, 1.0
-    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
-    f = np.array([[0, 1, 2], [0, 2, 3]])
-    tan = np.tile([1.0, 0, 0, 1], (4, 1))
-    w, depth, y = 0.4 / res, 0.3 / res, 0.5 + 0.2 / res
-    segs = make_segments([[0.05, y, 0]], [[0.95, y, 0]], width=w, depth=depth)
+    v, f, tan, w, depth, y, segs = _thin_crack(res)
     maps = bake_cracks(v, f, v[:, :2], segs, res, max_distance=0.05, tangents=tan, ctx=gl_ctx,
                        min_px=1.0)
     col, fw = res // 2, 1.0 / res

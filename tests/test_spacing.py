@@ -48,7 +48,7 @@ def test_smaller_spacing_gives_smaller_cells(tmp_path):
 
 def test_spacing_is_recorded_and_the_preset_sets_it(tmp_path):
     run = RunParams(mesh=tmp_path / "m.obj", preset="crackle")
-    assert run.resolved()[0].spacing == pytest.approx(0.02)
+    assert run.resolved()[0].spacing == pytest.approx(0.025)
     assert RunParams(mesh=tmp_path / "m.obj", preset="mud").resolved()[0].spacing is None
     doc = _run(tmp_path, "rec", "--spacing", "0.05")
     assert doc["params"]["spacing"] == pytest.approx(0.05)
