@@ -59,7 +59,14 @@ def test_scales_the_bake_resolves_give_the_same_network_and_mask(tmp_path):
             assert pa.shape == np.asarray(b["points"]).shape
             assert np.abs(pa - b["points"]).max() < 1e-9
             assert np.allclose(np.asarray(a["width"]) / scale, b["width"], rtol=1e-9)
-        assert np.array_equal(mask, ref_mask)
+        # The positions reach the GPU as float32 in a frame normalised by the mesh size, so a
+        # scaled mesh differs from the reference by float rounding: a texel sitting exactly on an
+        # 8-bit step may land one level apart (1-2 of 65,536 texels since --min-px measures the
+        # drawn width from the texel footprint).  Anything an unresolved scale breaks (an empty
+        # mask, zero width) moves whole cracks, far beyond this.
+        diff = np.abs(mask.astype(int) - ref_mask.astype(int))
+        assert diff.max() <= 1
+        assert np.count_nonzero(diff) <= 1e-3 * diff.size
 
 
 @pytest.mark.parametrize(("scale", "offset", "match"), [
