@@ -1,7 +1,7 @@
 """Group equal keys in one linear pass (a hash table in numba) instead of a sort.
 
-``np.unique`` sorts: at a few million keys that is most of a second on 2 cores, and several
-stages group keys that size (welding corners, pairing edges, the stress bake's vertex table).
+``np.unique`` sorts: at a few million keys that is most of a second on 2 cores.  The tangent
+frames weld every output vertex this way (:mod:`crackbake.bake.tangents`).
 """
 
 from __future__ import annotations

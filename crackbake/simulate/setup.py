@@ -166,7 +166,8 @@ def check_scale(mesh: Mesh) -> None:
 
 
 def with_spacing(field, params: RunParams, diagonal: float):
-    """``field`` with the run's ``--spacing`` applied to its shadow radius (mesh units).
+    """``field`` with the run's ``--spacing`` applied to its shadow radius (mesh units), set
+    in place (``field.shadow_radius``) and returned.
 
     The solver's shadow radius is the field's (an impact's) where given, else
     ``SHADOW_REL`` x the diagonal; ``spacing`` x ``diagonal`` caps either, so a preset or the
