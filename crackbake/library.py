@@ -26,9 +26,10 @@ from crackbake.params import (
     LENGTH_MAX,
     NORMAL_Y,
     RES_MIN,
-    SIM_FACES_MAX,
     Impact,
     RunParams,
+    check_seed,
+    check_sim_faces,
     load_preset,
 )
 
@@ -105,12 +106,8 @@ class LibraryParams:
             raise CrackbakeError(f"--normal-y '{self.normal_y}' is unknown; use gl or dx")
         if self.depth is not None and not _positive(self.depth):
             raise CrackbakeError(f"--depth {self.depth} must be a number above 0 (mesh units)")
-        if self.sim_faces is not None and not 100 <= self.sim_faces <= SIM_FACES_MAX:
-            raise CrackbakeError(
-                f"--sim-faces {self.sim_faces} is out of range; use 100 to {SIM_FACES_MAX}"
-            )
-        if not 0 <= self.seed < 2**63:
-            raise CrackbakeError(f"--seed {self.seed} must be a non-negative 64-bit integer")
+        check_sim_faces(self.sim_faces)
+        check_seed(self.seed)
         from crackbake.exchange.library import atlas_layout
 
         atlas_layout(self.n, self.res)  # refuses an atlas too big to write

@@ -82,6 +82,20 @@ RANGES: dict[str, tuple[float, float, str, bool]] = {
 }
 
 
+def check_seed(seed: int) -> None:
+    """Refuse a ``--seed`` outside the non-negative 64-bit integers (one-line error)."""
+    if not 0 <= seed < 2**63:
+        raise CrackbakeError(f"--seed {seed} must be a non-negative 64-bit integer")
+
+
+def check_sim_faces(sim_faces: int | None) -> None:
+    """Refuse a ``--sim-faces`` outside 100..:data:`SIM_FACES_MAX` (``None``: the default)."""
+    if sim_faces is not None and not 100 <= sim_faces <= SIM_FACES_MAX:
+        raise CrackbakeError(
+            f"--sim-faces {sim_faces} is out of range; use 100 to {SIM_FACES_MAX}"
+        )
+
+
 def _check_range(
     flag: str, value, low: float, high: float, unit: str = "", low_open: bool = False
 ) -> None:
@@ -434,8 +448,7 @@ class RunParams:
             raise CrackbakeError(
                 f"tile size {self.tile} is out of range; use {TILE_MIN}..{TILE_MAX}"
             )
-        if self.seed < 0 or self.seed >= 2**63:
-            raise CrackbakeError(f"--seed {self.seed} must be a non-negative 64-bit integer")
+        check_seed(self.seed)
         if self.preset is not None:
             load_preset(self.preset)
         if self.method is not None and self.method not in METHODS:

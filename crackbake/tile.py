@@ -25,7 +25,14 @@ from types import SimpleNamespace
 import numpy as np
 
 from crackbake.errors import CrackbakeError
-from crackbake.params import LENGTH_MAX, RES_MIN, SIM_FACES_MAX, RunParams, load_preset
+from crackbake.params import (
+    LENGTH_MAX,
+    RES_MIN,
+    RunParams,
+    check_seed,
+    check_sim_faces,
+    load_preset,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -100,12 +107,8 @@ class TileParams:
             raise CrackbakeError(
                 f"--impacts is for impact presets (glass); preset {self.preset} has none"
             )
-        if self.sim_faces is not None and not 100 <= self.sim_faces <= SIM_FACES_MAX:
-            raise CrackbakeError(
-                f"--sim-faces {self.sim_faces} is out of range; use 100 to {SIM_FACES_MAX}"
-            )
-        if not 0 <= self.seed < 2**63:
-            raise CrackbakeError(f"--seed {self.seed} must be a non-negative 64-bit integer")
+        check_sim_faces(self.sim_faces)
+        check_seed(self.seed)
         return self
 
 

@@ -74,15 +74,7 @@ def data16_rows(mask, width, time, depth, luts, depth_scale: float) -> np.ndarra
     """
     h, w = mask.shape
     rows = np.empty((h, 1 + 8 * w), np.uint8)
-    _data16_rows(
-        np.ascontiguousarray(mask).view(np.uint16),
-        np.ascontiguousarray(width).view(np.uint16),
-        np.ascontiguousarray(time).view(np.uint16),
-        np.ascontiguousarray(depth, dtype=np.float32),
-        *(np.ascontiguousarray(t, dtype=np.uint16) for t in luts),
-        np.float32(65535.0 / depth_scale),
-        rows,
-    )
+    _data16_rows(*_data16_inputs(mask, width, time, depth, luts, depth_scale), rows)
     return rows
 
 
@@ -111,16 +103,21 @@ def data16(
     (H, W, 4) big-endian uint16 (``>u2``)
     """
     out = np.empty((*mask.shape, 4), np.uint16)
-    _data16(
+    _data16(*_data16_inputs(mask, width, time, depth, luts, depth_scale), out)
+    return out.view(">u2")
+
+
+def _data16_inputs(mask, width, time, depth, luts, depth_scale: float) -> tuple:
+    """The data-texture kernels' inputs: the float16 planes as their uint16 bit patterns, depth
+    as float32, the three tables, and the depth gain."""
+    return (
         np.ascontiguousarray(mask).view(np.uint16),
         np.ascontiguousarray(width).view(np.uint16),
         np.ascontiguousarray(time).view(np.uint16),
         np.ascontiguousarray(depth, dtype=np.float32),
         *(np.ascontiguousarray(t, dtype=np.uint16) for t in luts),
         np.float32(65535.0 / depth_scale),
-        out,
     )
-    return out.view(">u2")
 
 
 # Channel sources of :func:`lut_planes`: a texel of ``a``, of ``b``, or the table's first entry.
