@@ -86,3 +86,31 @@ def exact_ids(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ids, first[:count]
 
 
+
+
+@njit(cache=True, nogil=True)
+def find_root(parent: np.ndarray, i: int) -> int:
+    """Union-find root of ``i`` in ``parent``, halving the path on the way."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True, nogil=True)
+def number_roots(parent: np.ndarray, n: int, label: np.ndarray) -> int:
+    """Label the first ``n`` union-find nodes by component (into ``label``); the count.
+
+    Components are numbered in order of their roots, which must be their own smallest member
+    (join by ``parent[max(ra, rb)] = min(ra, rb)``), so a root is labelled before its members
+    and the numbering follows each component's lowest node.
+    """
+    count = 0
+    for i in range(n):
+        r = find_root(parent, i)
+        if r == i:
+            label[i] = count
+            count += 1
+        else:
+            label[i] = label[r]
+    return count

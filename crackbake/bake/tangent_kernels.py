@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from crackbake.grouping import find_root, number_roots
+
 
 @njit(cache=True, nogil=True)
 def match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
@@ -63,14 +65,6 @@ def match_edges(weld: np.ndarray, nondeg: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _root(parent: np.ndarray, x: int) -> int:
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]
-        x = parent[x]
-    return x
-
-
-@njit(cache=True, nogil=True)
 def components(
     n: int, src: np.ndarray, dst: np.ndarray, good: np.ndarray
 ) -> tuple[np.ndarray, int, np.ndarray]:
@@ -86,21 +80,14 @@ def components(
     """
     parent = np.arange(n)
     for i in range(len(src)):
-        a, b = _root(parent, src[i]), _root(parent, dst[i])
+        a, b = find_root(parent, src[i]), find_root(parent, dst[i])
         if a != b:
             if a < b:
                 parent[b] = a
             else:
                 parent[a] = b
     label = np.empty(n, np.int64)
-    count = 0
-    for x in range(n):  # a root is its component's lowest node, so it is numbered first
-        r = _root(parent, x)
-        if r == x:
-            label[x] = count
-            count += 1
-        else:
-            label[x] = label[r]
+    count = number_roots(parent, n, label)
     start = np.full(count, n, np.int64)
     for x in range(n):
         if good[x] and x < start[label[x]]:

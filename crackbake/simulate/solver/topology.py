@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from crackbake.grouping import find_root, number_roots
+
 
 @njit(cache=True)
 def nf_remove(NF, NFc, n, f):
@@ -50,12 +52,6 @@ def on_boundary(F, NF, NFc, c):
     return False
 
 
-@njit(cache=True)
-def _find(par, i):
-    while par[i] != i:
-        par[i] = par[par[i]]
-        i = par[i]
-    return i
 
 
 @njit(cache=True)
@@ -183,19 +179,11 @@ def separate(c, cut1, cut2, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of, nv
                 if x == c or x == cut1 or x == cut2:
                     continue
                 if F[fj, 0] == x or F[fj, 1] == x or F[fj, 2] == x:
-                    ri = _find(par, i)
-                    rj = _find(par, j)
+                    ri = find_root(par, i)
+                    rj = find_root(par, j)
                     if ri != rj:
                         par[max(ri, rj)] = min(ri, rj)
-    ncomp = 0
-    # Roots are their own smallest member, so a root's label is assigned before its members'.
-    for i in range(k):
-        r = _find(par, i)
-        if r == i:
-            comp[i] = ncomp
-            ncomp += 1
-        else:
-            comp[i] = comp[r]
+    ncomp = number_roots(par, k, comp)
     if ncomp <= 1:
         return 0
     for i in range(k):
