@@ -156,6 +156,49 @@ def closest_on_triangles(
     return best, bary
 
 
+class SurfaceIndex:
+    """Closest points on one triangle mesh: libigl's AABB tree, built once, queried many times.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+        Mesh units.
+    faces : (F, 3) int64
+        At least one face.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        import igl  # only the simulation proxy and its stress bake need it
+
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+        if not len(self.faces):
+            raise ValueError("a surface index needs at least one face")
+        self._tree = igl.AABB()
+        self._tree.init(self.vertices, self.faces)
+
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The closest surface point to each of ``points`` (K, 3).
+
+        Returns
+        -------
+        face : (K,) int64
+            Row of ``faces`` holding the closest point (ties go to one of them, always the same).
+        bary : (K, 3) float64
+            Its barycentric coordinates in that face, each in [0, 1], rows summing to 1.
+        position : (K, 3) float64
+            The closest point, mesh units.
+        """
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        if not len(p):
+            return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
+        _, face, position = self._tree.squared_distance(self.vertices, self.faces, p)
+        face = np.asarray(face, dtype=np.int64)
+        bary = np.clip(barycentric(self.vertices[self.faces[face]], position), 0.0, None)
+        bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
+        return face, bary, np.asarray(position, dtype=np.float64)
+
+
 def edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """Unique undirected edges (E, 2), sorted, low index first, and how many faces use each (E,)."""
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])

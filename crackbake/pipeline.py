@@ -295,7 +295,7 @@ def solve(
     solved : Solved
         Sim mesh, stress field and the solver's full result.
     """
-    from crackbake.simulate.simmesh import build_simmesh
+    from crackbake.simulate.simmesh import build_simmesh, onto_asset
     from crackbake.simulate.stress import impact_detail, stress_field
 
     if sources is None:
@@ -310,7 +310,7 @@ def solve(
     finer = None if relative.get("sim_size_set") else impact_detail(field, sim.edge_length)
     if finer is not None:  # an impact on a thin feature: its star needs a finer sim mesh
         logger.info("impact on a thin feature: sim edge %.4g -> %.4g", sim.edge_length, finer)
-        sim = build_simmesh(mesh, detail=finer, seed=params.seed)
+        sim = build_simmesh(mesh, detail=finer, seed=params.seed, proxy=sim.proxy)
         field = stress_field(sim, mesh, sources, seed=params.seed)
     field = with_spacing(field, params, mesh.diagonal)
     timings["stress"] = time.perf_counter() - t
@@ -332,10 +332,11 @@ def solve(
             "crack_width": sp.crack_width,
             "sim_faces_built": int(len(sim.faces)),
             "sim_edge_length": float(sim.edge_length),
+            "sim_proxy_faces": 0 if sim.proxy is None else int(len(sim.proxy.faces)),
         }
     )
     network = from_solver(
-        result.cracks,
+        onto_asset(result.cracks, sim.proxy),  # cracks grown on a proxy move onto the asset
         mesh,
         params=sidecar_params(effective),
         impacts=field.impacts,

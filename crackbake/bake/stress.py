@@ -8,7 +8,10 @@ each side's own value, so the maps stay discontinuous exactly across cracks) and
 interpolated per texel.  Both fields go through one draw of the final (split) sim mesh: the
 initial field's node values are carried onto it (:func:`crackbake.bake.stress_fields.on_final_mesh`,
 exact because the split mesh refines the initial one).  Per texel the tensors are expressed in
-the texel's tangent frame::
+the texel's tangent frame.  A simulation grown on a decimated proxy
+(:mod:`crackbake.simulate.simmesh.proxy`) has nodes near the asset, not in its faces: there the
+asset's own faces are drawn, each UV-mesh vertex taking the values at its closest point on the
+final sim mesh (:func:`at_points`).  Per texel::
 
     N  = normalize(interpolated shading normal)
     e1 = normalize(T - N (N . T))       tangent, along +u
@@ -43,6 +46,7 @@ from crackbake.bake.stress_fields import (
     on_final_mesh,
 )
 from crackbake.errors import CrackbakeError
+from crackbake.geometry import SurfaceIndex
 from crackbake.params import TILE_DEFAULT
 
 __all__ = ["FIELDS", "FRAME", "STRESS_UNITS", "StressMaps", "TensorMaps", "bake_stress",
@@ -154,6 +158,14 @@ def _initial_mesh(result, initial):
     return verts, faces
 
 
+def at_points(vertices: np.ndarray, faces: np.ndarray, nodal: np.ndarray,
+              points: np.ndarray) -> np.ndarray:
+    """Nodal values (N, C) of a mesh interpolated at the closest mesh point to each of
+    ``points`` (K, 3): (K, C).  On a cracked mesh a point takes the side of the crack it is on."""
+    face, bary, _ = SurfaceIndex(vertices, faces).closest(points)
+    return np.einsum("kc,kcn->kn", bary, nodal[faces[face]])
+
+
 def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, initial=None,
                 dilate_px: int | None = None, tile: int = TILE_DEFAULT, ctx=None) -> StressMaps:
     """Bake the solver's initial and final stress into tangent-frame maps.
@@ -198,8 +210,12 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     final = nodal_values(v1, f1, np.asarray(result.stress_final, np.float64),
                          np.asarray(result.separation, np.float64))
     first = on_final_mesh(v0, f0, nodal_values(v0, f0, s0, sep0), v1)
-    data = draw_data(uvmesh, tan, v1, f1, result.asset_face,
-                            np.concatenate([first, final], axis=1))
+    nodal = np.concatenate([first, final], axis=1)
+    if getattr(initial, "proxy", None) is None:
+        data = draw_data(uvmesh, tan, v1, f1, result.asset_face, nodal)
+    else:  # sim nodes lie near the asset, not in its faces: draw the asset at its own vertices
+        data = draw_data(uvmesh, tan, uvmesh.vertices, uvmesh.faces,
+                         np.arange(len(uvmesh.faces)), at_points(v1, f1, nodal, uvmesh.vertices))
     timings["prepare"] = time.perf_counter() - t0
     planes = _render(ctx, data, res, tile, timings)
     t1 = time.perf_counter()

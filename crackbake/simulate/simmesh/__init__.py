@@ -18,6 +18,11 @@ target edge length (DESIGN.md §2).  It is built per asset face:
 
 Every sim triangle lies inside exactly one asset triangle, so every sim node maps exactly to
 (asset face, barycentric) and every sim triangle maps affinely into the asset's UV space.
+
+An asset far denser than the wanted face count (over twice it, and over 200k faces) is first
+decimated to a proxy surface and refined inside the proxy's faces instead (:mod:`.proxy`): the
+mapping back to the asset is then the closest asset point, and crack points are projected onto
+the asset after the solve.
 """
 
 from crackbake.simulate.simmesh.build import (
@@ -27,5 +32,14 @@ from crackbake.simulate.simmesh.build import (
     build_simmesh,
     target_edge_length,
 )
+from crackbake.simulate.simmesh.proxy import Proxy, onto_asset
 
-__all__ = ["MAX_SIM_FACES", "SimMesh", "asset_barycentric", "build_simmesh", "target_edge_length"]
+__all__ = [
+    "MAX_SIM_FACES",
+    "Proxy",
+    "SimMesh",
+    "asset_barycentric",
+    "build_simmesh",
+    "onto_asset",
+    "target_edge_length",
+]

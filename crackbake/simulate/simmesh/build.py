@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -14,6 +14,7 @@ from crackbake.params import SIM_FACES_DEFAULT
 from crackbake.params import SIM_FACES_MAX as MAX_SIM_FACES
 from crackbake.simulate.simmesh.layout import edge_point_counts, face_frames_2d, lattice_points
 from crackbake.simulate.simmesh.manifold import duplicate_faces, split_nonmanifold
+from crackbake.simulate.simmesh.proxy import Proxy, decimate, proxy_limit
 from crackbake.simulate.simmesh.triangulate import FaceSet, Refined, refine_faces
 
 # Area of an equilateral triangle of unit side: a triangular lattice of spacing h holds
@@ -46,6 +47,11 @@ class SimMesh:
         Node lies on an open boundary of the welded asset surface.
     edge_length : float
         Target edge length used, mesh units.
+    proxy : Proxy or None
+        The decimated surface the mesh was refined in (:mod:`.proxy`), None when it was
+        refined in the asset's own faces.  With a proxy the nodes lie near the asset surface,
+        ``node_face``/``node_bary`` give the closest asset point and ``asset_face`` the asset
+        face closest to each sim face's centroid.
     """
 
     vertices: np.ndarray
@@ -55,6 +61,7 @@ class SimMesh:
     node_bary: np.ndarray
     boundary: np.ndarray
     edge_length: float
+    proxy: Proxy | None = None
 
 
 
@@ -150,8 +157,11 @@ def build_simmesh(
     target_faces: int | None = SIM_FACES_DEFAULT,
     seed: int = 0,
     jitter: float = 0.15,
+    proxy_above: int | None = None,
+    proxy: Proxy | None = None,
 ) -> SimMesh:
-    """Build the simulation mesh: a conforming, welded refinement inside each asset face.
+    """Build the simulation mesh: a conforming, welded refinement inside each asset face, or
+    inside the faces of a decimated proxy when the asset is far denser than wanted.
 
     Parameters
     ----------
@@ -167,6 +177,12 @@ def build_simmesh(
     jitter : float
         Random displacement of interior points, as a fraction of the edge length (0 to 0.45);
         edge points move half as much, along their edge.
+    proxy_above : int, optional
+        Asset face count above which the simulation runs on a decimated proxy
+        (:mod:`.proxy`); default :func:`~.proxy.proxy_limit` of the wanted face count.
+    proxy : Proxy, optional
+        A proxy already decimated for this mesh (``SimMesh.proxy`` of an earlier build), to
+        refine again at another edge length without decimating twice.
 
     Returns
     -------
@@ -180,14 +196,45 @@ def build_simmesh(
     """
     h = _check_size(mesh, detail, target_faces, jitter)
     rng = np.random.default_rng(seed)
+    if proxy is None:
+        wv, wf, keep = _welded_surface(mesh.vertices, mesh.faces, warn=True)
+        wanted = _surface_area(mesh) / (_EQUILATERAL * h * h)
+        if len(wf) <= (proxy_limit(wanted) if proxy_above is None else proxy_above):
+            return _refine(wv, wf, keep, h, rng, jitter)
+        proxy = decimate(wv, wf, keep, max(int(wanted), 100))
+    pv, pf, pkeep = _welded_surface(proxy.vertices, proxy.faces, warn=False)
+    sim = _refine(pv, pf, pkeep, h, rng, jitter)
+    centroid = sim.vertices[sim.faces].mean(axis=1)
+    asset_face = proxy.onto_asset(centroid)[0]
+    node_face, node_bary, _ = proxy.onto_asset(sim.vertices)
+    return replace(sim, asset_face=asset_face, node_face=node_face, node_bary=node_bary,
+                   proxy=proxy)
 
-    wv, wf_all, _ = weld_by_position(mesh.vertices, mesh.faces)
+
+def _welded_surface(vertices: np.ndarray, faces: np.ndarray, warn: bool):
+    """Vertices welded by position, the non-degenerate faces made a 2-manifold and their rows
+    in ``faces``: (W, 3), (R, 3), (R,).  ``warn`` names what was repaired (the asset's own
+    faces; a proxy's repairs are not the user's business)."""
+    wv, wf_all, _ = weld_by_position(vertices, faces)
     tri_all = wv[wf_all]
     edge_len_all = np.linalg.norm(tri_all[:, [1, 2, 0]] - tri_all, axis=2)
     twice_area = np.linalg.norm(face_cross(wv, wf_all), axis=1)
     # Zero-area faces carry no material and would give Triangle a collinear boundary: drop them.
     keep = np.flatnonzero(twice_area > 1e-12 * edge_len_all.max(axis=1) ** 2)
-    wf, keep, wv, n_v = _manifold_copy(wv, wf_all, keep)
+    if warn:
+        wf, keep, wv, _ = _manifold_copy(wv, wf_all, keep)
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", CrackbakeWarning)
+            wf, keep, wv, _ = _manifold_copy(wv, wf_all, keep)
+    return wv, wf, keep
+
+
+def _refine(wv: np.ndarray, wf: np.ndarray, keep: np.ndarray, h: float,
+            rng: np.random.Generator, jitter: float) -> SimMesh:
+    """The sim mesh refined at edge length ``h`` inside the welded faces ``wf`` (rows ``keep``
+    of the mesh they came from)."""
+    n_v = len(wv)
     face_edge, forward, ev0, ev1 = _welded_edges(wf, n_v)
     n_e = len(ev0)
     corners = face_frames_2d(wv[wf], h)
@@ -222,7 +269,7 @@ def _manifold_copy(wv: np.ndarray, wf_all: np.ndarray, keep: np.ndarray):
             f"{int(dup.sum())} duplicated face(s) (same three vertices as another face) are left "
             "out of the crack simulation and still baked; remove them to silence this",
             CrackbakeWarning,
-            stacklevel=4,
+            stacklevel=5,
         )
     wf, origin, n_cut = split_nonmanifold(wf_all[keep], len(wv))
     n_split = len(origin) - len(wv)
@@ -236,7 +283,7 @@ def _manifold_copy(wv: np.ndarray, wf_all: np.ndarray, keep: np.ndarray):
             f"the mesh is not manifold ({' and '.join(what)}); each manifold patch is simulated "
             "on its own and cracks end where patches meet; repair the mesh to join them",
             CrackbakeWarning,
-            stacklevel=4,
+            stacklevel=5,
         )
         wv = wv[origin]
     return wf, keep, wv, len(wv)
