@@ -24,6 +24,7 @@ from crackbake.params import (
     RES_MAX,
     RES_MIN,
     SIM_FACES_DEFAULT,
+    SIM_PROXY_MODES,
     STRESS_RES_DEFAULT,
     TARGETS,
     UV_MODES,
@@ -177,6 +178,14 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option("--detail", type=float, help="Simulation mesh edge length, mesh units.")
 @click.option("--sim-faces", type=int, help=f"Simulation mesh size in faces [{SIM_FACES_DEFAULT}].")
+@click.option(
+    "--sim-proxy",
+    type=click.Choice(SIM_PROXY_MODES),
+    default="auto",
+    show_default=True,
+    help="Simulate on a decimated stand-in of the asset: auto when the asset has over twice "
+    "--sim-faces (and over 200k faces); always; never (refine the asset's own faces).",
+)
 @click.option("--shrink", type=float, help="Uniform shrinkage tension (crackle, glaze, mud).")
 @click.option("--shrink-rate", type=float, help="Shrinkage added per solver step (relative).")
 @click.option(

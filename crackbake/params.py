@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import sys
 import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
 from functools import cache
@@ -28,6 +29,8 @@ DECAL_RES_DEFAULT = 1024
 #: Most ``--frames`` (the frame number has four digits).
 FRAMES_MAX = 10_000
 UV_MODES = ("auto", "keep", "unwrap")
+#: ``--sim-proxy``: when the simulation runs on a decimated stand-in of the asset.
+SIM_PROXY_MODES = ("auto", "always", "never")
 #: Engine profiles (``--target``; the table is :data:`crackbake.exchange.targets.TARGETS`).
 TARGETS = ("gltf", "unity", "unity-hdrp", "unreal", "godot", "blender")
 #: Normal-map Y conventions (``--normal-y``): OpenGL (+Y, green up) or DirectX (-Y).
@@ -339,6 +342,11 @@ class RunParams:
         ``iben`` (Iben & O'Brien) or ``thesis`` (the MSc variant).
     detail, sim_faces
         Simulation mesh target edge length (mesh units) or face count.
+    sim_proxy : str
+        ``auto``: an asset over twice the wanted sim faces (and over 200k faces) is simulated
+        on a decimated proxy of itself (:mod:`crackbake.simulate.simmesh.proxy`); ``always``:
+        every asset is (a clean isotropic sim mesh for assets of long thin triangles);
+        ``never``: the sim mesh always refines the asset's own faces.
     toughness, tip_factor, relax_steps, relax_rate, relax_share, max_cracks, max_steps,
     max_crack_length, crack_width, depth_ratio
         Solver settings (:class:`crackbake.simulate.solver.SolverParams`).
@@ -380,6 +388,7 @@ class RunParams:
     method: str | None = None
     detail: float | None = None
     sim_faces: int | None = None
+    sim_proxy: str = "auto"
     toughness: float | None = None
     tip_factor: float | None = None
     relax_steps: int | None = None
@@ -404,6 +413,11 @@ class RunParams:
     extra: dict = field(default_factory=dict)
 
     @property
+    def proxy_above(self) -> int | None:
+        """``build_simmesh``'s ``proxy_above`` for ``sim_proxy`` (None: the automatic limit)."""
+        return {"auto": None, "always": 0, "never": sys.maxsize}[self.sim_proxy]
+
+    @property
     def out_dir(self) -> Path:
         return self.out if self.out is not None else Path(f"{Path(self.mesh).stem}_cracks")
 
@@ -417,6 +431,9 @@ class RunParams:
             )
         if self.uv not in UV_MODES:
             raise CrackbakeError(f"--uv '{self.uv}' is unknown; use one of {', '.join(UV_MODES)}")
+        if self.sim_proxy not in SIM_PROXY_MODES:
+            raise CrackbakeError(f"--sim-proxy '{self.sim_proxy}' is unknown; use one of "
+                                 f"{', '.join(SIM_PROXY_MODES)}")
         _check_range("--padding", self.padding, 0, RES_MAX, " texels")
         _check_range("--stress-res", self.stress_res, RES_MIN, RES_MAX, " texels")
         _check_range("--frames", self.frames, 2, FRAMES_MAX, " frames")

@@ -302,7 +302,8 @@ def solve(
         sources = stress_sources(params, mesh, relative)
     logger.info("building the simulation mesh")
     t = time.perf_counter()
-    sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces, seed=params.seed)
+    sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces, seed=params.seed,
+                        proxy_above=params.proxy_above)
     timings["simmesh"] = time.perf_counter() - t
     logger.info("stress field on %d simulation faces", len(sim.faces))
     t = time.perf_counter()
@@ -310,7 +311,8 @@ def solve(
     finer = None if relative.get("sim_size_set") else impact_detail(field, sim.edge_length)
     if finer is not None:  # an impact on a thin feature: its star needs a finer sim mesh
         logger.info("impact on a thin feature: sim edge %.4g -> %.4g", sim.edge_length, finer)
-        sim = build_simmesh(mesh, detail=finer, seed=params.seed, proxy=sim.proxy)
+        sim = build_simmesh(mesh, detail=finer, seed=params.seed, proxy=sim.proxy,
+                            proxy_above=params.proxy_above)
         field = stress_field(sim, mesh, sources, seed=params.seed)
     field = with_spacing(field, params, mesh.diagonal)
     timings["stress"] = time.perf_counter() - t
