@@ -30,6 +30,7 @@ from crackbake.params import (
     RunParams,
     check_seed,
     check_sim_faces,
+    is_length,
     load_preset,
 )
 
@@ -92,7 +93,7 @@ class LibraryParams:
         load_preset(self.preset)  # unknown preset: lists the names
         if not _integer(self.n) or not 1 <= self.n <= N_MAX:
             raise CrackbakeError(f"-n {self.n} is out of range; use 1 to {N_MAX} variants")
-        if not _positive(self.size):
+        if not is_length(self.size):
             raise CrackbakeError(
                 f"--size {self.size} is not a plate size; use a number above 0 up to "
                 f"{LENGTH_MAX:g} mesh units"
@@ -104,7 +105,7 @@ class LibraryParams:
             )
         if self.normal_y not in NORMAL_Y:
             raise CrackbakeError(f"--normal-y '{self.normal_y}' is unknown; use gl or dx")
-        if self.depth is not None and not _positive(self.depth):
+        if self.depth is not None and not is_length(self.depth):
             raise CrackbakeError(f"--depth {self.depth} must be a number above 0 (mesh units)")
         check_sim_faces(self.sim_faces)
         check_seed(self.seed)
@@ -122,13 +123,6 @@ def _integer(x) -> bool:
     return isinstance(x, numbers.Integral) and not isinstance(x, bool)
 
 
-def _positive(x) -> bool:
-    return (
-        isinstance(x, numbers.Real)
-        and not isinstance(x, bool)
-        and math.isfinite(x)
-        and 0 < x <= LENGTH_MAX
-    )
 
 
 @dataclass(frozen=True)

@@ -99,6 +99,12 @@ def check_sim_faces(sim_faces: int | None) -> None:
         )
 
 
+def is_length(x) -> bool:
+    """Whether ``x`` is a real number (not a bool) in ``(0, LENGTH_MAX]`` mesh units."""
+    return (isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x)
+            and 0 < x <= LENGTH_MAX)
+
+
 def _check_range(
     flag: str, value, low: float, high: float, unit: str = "", low_open: bool = False
 ) -> None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 import math
-import numbers
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from crackbake.params import (
     RunParams,
     check_seed,
     check_sim_faces,
+    is_length,
     load_preset,
 )
 
@@ -88,9 +88,7 @@ class TileParams:
             raise CrackbakeError(
                 f"--method {method} cannot run on a periodic tile; use --method iben"
             )
-        ok = (isinstance(self.size, numbers.Real) and not isinstance(self.size, bool)
-              and math.isfinite(self.size) and 0 < self.size <= LENGTH_MAX)
-        if not ok:
+        if not is_length(self.size):
             raise CrackbakeError(
                 f"--size {self.size} is not a tile size; use a number above 0 up to "
                 f"{LENGTH_MAX:g} mesh units"

@@ -126,8 +126,10 @@ def asset_barycentric(mesh: Mesh, asset_faces: np.ndarray, points: np.ndarray) -
     return barycentric(tri, np.asarray(points, dtype=np.float64))
 
 
-def _check_size(mesh: Mesh, detail: float | None, target_faces: int | None, jitter: float) -> float:
-    """The target edge length (mesh units) after the argument and size checks."""
+def _check_size(mesh: Mesh, detail: float | None, target_faces: int | None,
+                jitter: float) -> tuple[float, float]:
+    """The target edge length (mesh units) after the argument and size checks, and the face
+    count it gives over the surface."""
     if detail is not None:
         if not np.isfinite(detail) or detail <= 0:
             raise CrackbakeError(
@@ -148,7 +150,7 @@ def _check_size(mesh: Mesh, detail: float | None, target_faces: int | None, jitt
             f"the simulation mesh would have about {estimate:,.0f} faces (limit "
             f"{MAX_SIM_FACES:,}); use --detail {suggest:.4g} or larger, or fewer --sim-faces"
         )
-    return h
+    return h, estimate
 
 
 def build_simmesh(
@@ -194,11 +196,10 @@ def build_simmesh(
         ``detail`` <= 0, ``target_faces`` < 100, an estimated sim mesh above 20M faces, a bad
         jitter, or a mesh without area.
     """
-    h = _check_size(mesh, detail, target_faces, jitter)
+    h, wanted = _check_size(mesh, detail, target_faces, jitter)
     rng = np.random.default_rng(seed)
     if proxy is None:
         wv, wf, keep = _welded_surface(mesh.vertices, mesh.faces, warn=True)
-        wanted = _surface_area(mesh) / (_EQUILATERAL * h * h)
         if len(wf) <= (proxy_limit(wanted) if proxy_above is None else proxy_above):
             return _refine(wv, wf, keep, h, rng, jitter)
         proxy = decimate(wv, wf, keep, max(int(wanted), 100))
