@@ -188,6 +188,7 @@ def plate_mesh(size: float, cells: int = PLATE_CELLS):
 def bake_variant(ctx, mesh, uvmesh, params: LibraryParams, variant: Variant) -> Baked:
     """Solve and bake one variant on the plate with the pipeline's own stages."""
     from crackbake.bake.raster import bake_cracks
+    from crackbake.bake.uv.uvmesh import bake_arrays
     from crackbake.network import segments
     from crackbake.pipeline import solve
 
@@ -203,9 +204,10 @@ def bake_variant(ctx, mesh, uvmesh, params: LibraryParams, variant: Variant) -> 
     timings: dict[str, float] = {}
     network, _stats, _solved = solve(mesh, run, relative, timings)
     t = time.perf_counter()
+    arrays = bake_arrays(uvmesh)  # with the copies of faces straying past the page
     maps = bake_cracks(
-        uvmesh.vertices, uvmesh.faces, uvmesh.uv, segments(network), params.res,
-        profile_shape=run.profile, ctx=ctx, normals=uvmesh.normals, tangents=uvmesh.tangents,
+        arrays.pop("vertices"), arrays.pop("faces"), arrays.pop("uv"), segments(network),
+        params.res, profile_shape=run.profile, ctx=ctx, **arrays,
     )  # fmt: skip
     timings["bake"] = time.perf_counter() - t
     return Baked(variant, maps, len(network.cracks), timings)

@@ -18,6 +18,7 @@ from crackbake.bake.raster import CrackMaps, bake_cracks
 from crackbake.bake.stress import StressMaps, bake_stress
 from crackbake.bake.tangents import with_tangents
 from crackbake.bake.uv import UVMesh, prepare_uvs
+from crackbake.bake.uv.uvmesh import bake_arrays
 from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.bundle import write_outputs
 from crackbake.exchange.interrupt import run_staged
@@ -216,10 +217,12 @@ def _bake(
     """The GPU bake, timed as ``bake``."""
     logger.info("baking %dx%d", params.res, params.res)
     t = time.perf_counter()
+    # The faces plus the copies of faces straying past the page, wrapped where engines show them.
+    arrays = bake_arrays(uvmesh)
     maps = bake_cracks(
-        uvmesh.vertices,
-        uvmesh.faces,
-        uvmesh.uv,
+        arrays["vertices"],
+        arrays["faces"],
+        arrays["uv"],
         segments(network),
         params.res,
         max_distance=params.max_distance,
@@ -228,8 +231,8 @@ def _bake(
         dilate_px=params.dilate,
         tile=params.tile,
         ctx=ctx,
-        normals=uvmesh.normals,
-        tangents=uvmesh.tangents,
+        normals=arrays["normals"],
+        tangents=arrays["tangents"],
     )
     timings["bake"] = time.perf_counter() - t
     return maps

@@ -181,3 +181,107 @@ def test_a_few_faces_straying_outside_are_kept_with_a_warning():
     far = uv.copy()
     far[0] = (-0.6, 0.02)
     assert not U.check_uvs(make_mesh(v, f, far)).usable
+
+
+# ------------------------------------------------------------------------------ stray UVs
+
+
+def _overhanging_plane(n: int = 20, island: bool = False):
+    """A unit plane (z = 0) of n x n quads whose UVs run u 0.2..1.1, v 0.1..0.9: its faces
+    beyond x = 8/9 reach past u = 1 (at n = 20, three columns, one straddling u = 1), where
+    REPEAT shows them at u 0..0.1 (empty).  With ``island``, a separate quad
+    (at z = 1, never cracked) holds UVs [0, 0.1] x [0.1, 0.18]: the place of two rows' wraps."""
+    pts, f = uv_grid(n, n, 1.0, 1.0)
+    v = np.c_[pts, np.zeros(len(pts))]
+    uv = np.c_[0.2 + 0.9 * pts[:, 0], 0.1 + 0.8 * pts[:, 1]]
+    if island:
+        k = len(v)
+        v = np.r_[v, [[0, 0, 1], [0.1, 0, 1], [0.1, 0.08, 1], [0, 0.08, 1]]]
+        uv = np.r_[uv, [[0, 0.1], [0.1, 0.1], [0.1, 0.18], [0, 0.18]]]
+        f = np.r_[f, [[k, k + 1, k + 2], [k, k + 2, k + 3]]]
+    return make_mesh(v, f, uv)
+
+
+def _crack_at(x: float, width: float = 0.02):
+    """One straight crack across the plane at world x, y 0..1 (a Segments of one segment)."""
+    from crackbake.network import Segments
+
+    return Segments(
+        a=np.array([[x, 0.0, 0.0]]), b=np.array([[x, 1.0, 0.0]]),
+        width=np.full((1, 2), width), depth=np.full((1, 2), width / 2),
+        time=np.zeros((1, 2)), crack_id=np.zeros(1, np.int64),
+    )  # fmt: skip
+
+
+def _mask(uvmesh, segs, res, ctx):
+    from crackbake.bake.raster import bake_cracks
+    from crackbake.bake.uv.uvmesh import bake_arrays
+
+    a = bake_arrays(uvmesh)
+    return bake_cracks(a["vertices"], a["faces"], a["uv"], segs, res, ctx=ctx,
+                       min_px=0.0).mask.astype(np.float64)  # fmt: skip
+
+
+def _texel(u: float, v: float, res: int) -> tuple[int, int]:
+    """(row, column) of the texel holding UV (u, v): row 0 is v = 1."""
+    return int((1.0 - v) * res), int(u * res)
+
+
+def test_straying_faces_are_baked_where_repeat_shows_them(gl_ctx):
+    import dataclasses
+
+    mesh = _overhanging_plane()
+    check = U.check_uvs(mesh, ctx=gl_ctx)
+    # 3 of 20 face columns stray (15 %, above the old 1 % limit): kept because all wrap.
+    assert check.usable and check.outside_fraction == pytest.approx(3 / 20)
+    stray = np.flatnonzero((mesh.uv[mesh.faces][..., 0] > 1 + 1e-9).any(axis=1))
+    assert np.array_equal(np.unique(check.wraps[:, 0]), stray)
+    assert (check.wraps[:, 1:] == [1, 0]).all() and check.lost_faces == 0
+    res = 256
+    with pytest.warns(CrackbakeWarning, match=r"120 faces reach slightly outside.*120 are also "
+                      r"baked wrapped into the tile$"):  # fmt: skip
+        kept = U.prepare_uvs(mesh, "auto", res, ctx=gl_ctx)
+    assert kept.method == "kept" and np.array_equal(kept.uv, mesh.uv)  # the GLB keeps them
+    # World x = 0.95 has u = 0.2 + 0.9 * 0.95 = 1.055, which REPEAT samples at u = 0.055.
+    segs = _crack_at(0.95)
+    after = _mask(kept, segs, res, gl_ctx)
+    before = _mask(dataclasses.replace(kept, wraps=None), segs, res, gl_ctx)
+    rows = slice(*sorted(_texel(0.0, v, res)[0] for v in (0.15, 0.85)))
+    col = _texel(0.055, 0.5, res)[1]
+    assert after[rows, col].min() > 0.9 and before[rows, col].max() == 0.0
+    # Away from the crack the wrapped band is clean, and the tile itself is unchanged.
+    assert after[rows, _texel(0.01, 0.5, res)[1]].max() == 0.0
+    inside = slice(_texel(0.2, 0.5, res)[1] + 1, res)
+    assert np.array_equal(after[:, inside], before[:, inside])
+
+
+def test_a_wrap_onto_another_island_is_not_drawn_and_counted(gl_ctx):
+    mesh = _overhanging_plane(island=True)
+    check = U.check_uvs(mesh, ctx=gl_ctx)
+    assert check.usable
+    corners = mesh.uv[mesh.faces]
+    stray = (corners[..., 0] > 1 + 1e-9).any(axis=1)
+    low = stray & (corners[..., 1].min(axis=1) < 0.18 - 1e-9)  # their wraps meet the island
+    assert np.array_equal(np.unique(check.wraps[:, 0]), np.flatnonzero(stray & ~low))
+    assert check.lost_faces == int(low.sum()) == 12
+    # The lost part: u 1..1.1 x v 0.1..0.18 of the page, 0.008 of its texels (under the 1 %
+    # that keeps a layout whose strays are more than 1 % of the faces).
+    assert check.lost_fraction == pytest.approx(0.1 * 0.08, rel=0.03)
+    res = 256
+    with pytest.warns(CrackbakeWarning, match=r"12 could not be .*about (\d+) texels at 256x256") \
+            as rec:  # fmt: skip
+        kept = U.prepare_uvs(mesh, "auto", res, ctx=gl_ctx)
+    texels = int(__import__("re").search(r"about (\d+) texels", str(rec[-1].message)).group(1))
+    assert texels == pytest.approx(0.008 * res * res, rel=0.03)
+    after = _mask(kept, _crack_at(0.95), res, gl_ctx)
+    col = _texel(0.055, 0.5, res)[1]
+    assert after[_texel(0, 0.5, res)[0], col] > 0.9  # wrapped above the island
+    assert after[_texel(0, 0.14, res)[0], col] == 0.0  # the island keeps its own (no crack)
+
+
+def test_an_island_running_on_past_the_page_edge_is_not_udim(gl_ctx):
+    # At n = 18 the page edge u = 1 is a grid line: every face lies inside one tile, as in a
+    # UDIM layout, but the island runs on across it (shared UV vertices), so it strays.
+    check = U.check_uvs(_overhanging_plane(18), ctx=gl_ctx)
+    assert check.usable and not check.udim and check.lost_faces == 0
+    assert len(check.wraps) == 2 * 2 * 18

@@ -212,10 +212,13 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     first = on_final_mesh(v0, f0, nodal_values(v0, f0, s0, sep0), v1)
     nodal = np.concatenate([first, final], axis=1)
     if getattr(initial, "proxy", None) is None:
-        data = draw_data(uvmesh, tan, v1, f1, result.asset_face, nodal)
+        asset_face = np.asarray(result.asset_face, np.int64)
+        data = draw_data(uvmesh, tan, v1, f1, asset_face, nodal)
     else:  # sim nodes lie near the asset, not in its faces: draw the asset at its own vertices
-        data = draw_data(uvmesh, tan, uvmesh.vertices, uvmesh.faces,
-                         np.arange(len(uvmesh.faces)), at_points(v1, f1, nodal, uvmesh.vertices))
+        asset_face = np.arange(len(uvmesh.faces))
+        data = draw_data(uvmesh, tan, uvmesh.vertices, uvmesh.faces, asset_face,
+                         at_points(v1, f1, nodal, uvmesh.vertices))
+    data = wrapped_rows(data, asset_face, getattr(uvmesh, "wraps", None))
     timings["prepare"] = time.perf_counter() - t0
     planes = _render(ctx, data, res, tile, timings)
     t1 = time.perf_counter()
@@ -227,6 +230,23 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     timings["principal"] = time.perf_counter() - t2
     return StressMaps(res=res, stress0=maps["stress0"], stress=maps["stress"], inside=inside,
                       timings=timings)
+
+
+def wrapped_rows(data: np.ndarray, asset_face: np.ndarray, wraps: np.ndarray | None) -> np.ndarray:
+    """``data`` (3M, C) plus, for each wrapped copy (face, du, dv) of ``UVMesh.wraps``, the rows
+    of the sim triangles inside that asset face with their UVs shifted by (-du, -dv): the
+    stress shows where engines sampling with REPEAT show the straying face."""
+    if wraps is None or len(wraps) == 0:
+        return data
+    wraps = np.asarray(wraps, np.int64)
+    order = np.argsort(asset_face, kind="stable")
+    lo = np.searchsorted(asset_face[order], wraps[:, 0], side="left")
+    hi = np.searchsorted(asset_face[order], wraps[:, 0], side="right")
+    tris = np.concatenate([order[a:b] for a, b in zip(lo, hi, strict=True)])
+    shift = np.repeat(wraps[:, 1:3], hi - lo, axis=0).astype(np.float32)
+    rows = data.reshape(-1, 3, data.shape[1])[tris].copy()
+    rows[:, :, 0:2] -= shift[:, None, :]
+    return np.concatenate([data, rows.reshape(-1, data.shape[1])])
 
 
 _OUT = ("xx", "yy", "xy", "sep")

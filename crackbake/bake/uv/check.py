@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from crackbake.bake.uv.overlap import uv_overlap_fraction
+from crackbake.bake.uv.overlap import uv_overlap_fraction, wrap_conflicts
 from crackbake.io.mesh import Mesh
 
 # Kept UVs may stray this far outside [0, 1] (exporters round) and are clipped.
@@ -14,10 +14,14 @@ UV_TOLERANCE = 1e-6
 # Twice the UV area below which a face counts as degenerate: far below one texel at 16384^2
 # (3.7e-9), so only truly collapsed faces qualify.
 DEGENERATE_AREA2 = 1e-12
-# Kept UVs may have up to this fraction of faces straying outside [0, 1] by at most
-# STRAY_MARGIN (Keenan Crane's spot has 10 of 5,856): they are kept, with a warning, rather than
-# throwing away an artist's layout for a few texels.
+# Kept UVs may stray outside [0, 1] by at most STRAY_MARGIN (exporters round, artists let an
+# island hang over the edge; Keenan Crane's spot has 10 of 5,856 faces at u = -0.05).  Engines
+# sample there with REPEAT, so the straying parts are also baked wrapped into the tile where
+# they do not overlap another island.  They are kept, with a warning, when at most
+# STRAY_FACE_FRACTION of the faces stray or when at most STRAY_LOST_FRACTION of the page's
+# texels cannot be baked for them, rather than throwing away an artist's layout for a few texels.
 STRAY_FACE_FRACTION = 0.01
+STRAY_LOST_FRACTION = 0.01
 STRAY_MARGIN = 0.25
 # Resolution at which check_uvs measures overlap; 1024^2 resolves islands down to ~0.1 % of the
 # page and costs well under a second even for 500k faces.
@@ -40,7 +44,17 @@ class UVCheck:
         Overlapping / covered UV area for usable UVs, else ``None``.
     outside_fraction : float
         Fraction of faces reaching slightly outside [0, 1] in otherwise usable UVs (exporters
-        and hand-made UVs often stray a little); their outside part gets no texels.
+        and hand-made UVs often stray a little).
+    wraps : (K, 3) int64
+        Copies (face, du, dv) of the straying faces to bake at ``uv - (du, dv)``: where an
+        engine sampling with REPEAT shows them, for every tile a face reaches that lands on
+        no other face.  Empty when nothing strays.
+    lost_fraction : float
+        Share of the page (texels / all texels, measured at :data:`OVERLAP_RES`) that straying
+        faces reach but cannot be baked for, because their wrapped place belongs to another
+        face; their cracks do not show there.
+    lost_faces : int
+        Straying faces with at least one copy that could not be wrapped.
     """
 
     usable: bool
@@ -48,6 +62,9 @@ class UVCheck:
     udim: bool
     overlap_fraction: float | None
     outside_fraction: float = 0.0
+    wraps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    lost_fraction: float = 0.0
+    lost_faces: int = 0
 
 
 def uv_area2(corners: np.ndarray) -> np.ndarray:
@@ -57,8 +74,11 @@ def uv_area2(corners: np.ndarray) -> np.ndarray:
     return np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
-def is_udim(corners: np.ndarray) -> bool:
-    """True when every face lies inside one integer UV tile of a UDIM layout, not all in 0-1."""
+def is_udim(corners: np.ndarray, faces: np.ndarray | None = None) -> bool:
+    """True when every face lies inside one integer UV tile of a UDIM layout, not all in 0-1.
+
+    With ``faces`` (F, 3), the UV vertex indices of the corners, a vertex shared by faces of
+    two tiles (an island crossing a tile edge) rules UDIM out."""
     if corners.size == 0:
         return False
     tile = np.floor(corners.mean(axis=1))  # (F, 2); a centroid is strictly inside its tile
@@ -67,6 +87,17 @@ def is_udim(corners: np.ndarray) -> bool:
     )
     if not inside.all():
         return False
+    # An island running on across a tile edge (a UV vertex shared by faces of two tiles) is one
+    # layout straying past the page, not UDIM tiles (islands there never cross tiles).
+    key = tile[:, 0] * 4096.0 + tile[:, 1]
+    if faces is not None:
+        per_corner = np.repeat(key, 3)
+        lo = np.full(int(faces.max()) + 1, np.inf)
+        hi = np.full(int(faces.max()) + 1, -np.inf)
+        np.minimum.at(lo, faces.reshape(-1), per_corner)
+        np.maximum.at(hi, faces.reshape(-1), per_corner)
+        if (hi > lo).any():
+            return False
     tu, tv = tile[:, 0], tile[:, 1]
     # UDIM numbers tiles 1001 + u + 10 v: u in 0..9, v >= 0.
     if (tu < 0).any() or (tu > 9).any() or (tv < 0).any():
@@ -104,24 +135,61 @@ def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
     lo, hi = corners.reshape(-1, 2).min(axis=0), corners.reshape(-1, 2).max(axis=0)
     outside_fraction = 0.0
     if (lo < -UV_TOLERANCE).any() or (hi > 1.0 + UV_TOLERANCE).any():
-        if is_udim(corners):
+        if is_udim(corners, faces):
             tiles = np.unique(np.floor(corners.mean(axis=1)), axis=0)
             return UVCheck(False, f"UVs span {len(tiles)} UDIM tiles", True, None)
         stray = ((corners < -UV_TOLERANCE) | (corners > 1.0 + UV_TOLERANCE)).any(axis=(1, 2))
         outside_fraction = float(stray.mean())
-        if (
-            outside_fraction > STRAY_FACE_FRACTION
-            or (lo < -STRAY_MARGIN).any()
-            or (hi > 1.0 + STRAY_MARGIN).any()
-        ):
-            return UVCheck(
-                False,
-                f"UVs lie outside [0, 1] (u {lo[0]:.3g}..{hi[0]:.3g}, "
-                f"v {lo[1]:.3g}..{hi[1]:.3g})",
-                False,
-                None,
-            )
+        outside = UVCheck(
+            False,
+            f"UVs lie outside [0, 1] (u {lo[0]:.3g}..{hi[0]:.3g}, v {lo[1]:.3g}..{hi[1]:.3g})",
+            False,
+            None,
+        )
+        if (lo < -STRAY_MARGIN).any() or (hi > 1.0 + STRAY_MARGIN).any():
+            return outside
     if not (uv_area2(corners) > DEGENERATE_AREA2).any():
         return UVCheck(False, "every face has zero UV area", False, None)
+    wraps = np.zeros((0, 3), np.int64)
+    lost_fraction, lost_faces = 0.0, 0
+    if outside_fraction > 0:
+        copies = stray_copies(corners)
+        keep, lost = wrap_conflicts(uv, faces, copies, OVERLAP_RES, ctx=ctx)
+        wraps = copies[keep]
+        lost_fraction = lost / OVERLAP_RES**2
+        lost_faces = len(np.unique(copies[~keep, 0]))
+        if outside_fraction > STRAY_FACE_FRACTION and lost_fraction > STRAY_LOST_FRACTION:
+            return outside
     overlap = uv_overlap_fraction(np.clip(uv, 0.0, 1.0), faces, OVERLAP_RES, ctx=ctx)
-    return UVCheck(True, "", False, overlap, outside_fraction)
+    return UVCheck(True, "", False, overlap, outside_fraction, wraps, lost_fraction, lost_faces)
+
+
+def stray_copies(corners: np.ndarray) -> np.ndarray:
+    """Every (face, du, dv) with (du, dv) != (0, 0) a face's UV box reaches into, (K, 3).
+
+    Parameters
+    ----------
+    corners : (F, 3, 2) float
+        UV corners per face.
+
+    Returns
+    -------
+    (K, 3) int64
+        Face index and the whole-tile offset its copy is drawn at (``uv - (du, dv)``), faces
+        in order; a face straddling a page edge gets one copy per tile it reaches past it.
+    """
+    first = np.floor(corners.min(axis=1) + UV_TOLERANCE).astype(np.int64)  # (F, 2)
+    last = np.floor(corners.max(axis=1) - UV_TOLERANCE).astype(np.int64)
+    out = []
+    for du in range(int(first[:, 0].min()), int(last[:, 0].max()) + 1):
+        for dv in range(int(first[:, 1].min()), int(last[:, 1].max()) + 1):
+            if du == 0 and dv == 0:
+                continue
+            hit = np.flatnonzero(
+                (first[:, 0] <= du) & (du <= last[:, 0]) & (first[:, 1] <= dv) & (dv <= last[:, 1])
+            )
+            out.append(np.c_[hit, np.full(len(hit), du), np.full(len(hit), dv)])
+    if not out:
+        return np.zeros((0, 3), np.int64)
+    copies = np.concatenate(out).astype(np.int64)
+    return copies[np.lexsort((copies[:, 2], copies[:, 1], copies[:, 0]))]

@@ -21,8 +21,10 @@ from crackbake.params import UV_MODES
 OVERLAP_WARN_FRACTION = 0.01
 
 
-def kept_uvmesh(mesh: Mesh, check: UVCheck) -> UVMesh:
-    """The asset's own UVs as a :class:`UVMesh`, warning about overlap, strays and zero area."""
+def kept_uvmesh(mesh: Mesh, check: UVCheck, res: int = 2048) -> UVMesh:
+    """The asset's own UVs as a :class:`UVMesh`, warning about overlap, strays and zero area.
+
+    ``res`` is the texture size the stray warning counts lost texels at."""
     label = mesh_label(mesh)
     overlap = float(check.overlap_fraction or 0.0)
     if overlap > OVERLAP_WARN_FRACTION:
@@ -33,15 +35,9 @@ def kept_uvmesh(mesh: Mesh, check: UVCheck) -> UVMesh:
             stacklevel=3,
         )
     if check.outside_fraction > 0:
-        n = int(round(check.outside_fraction * len(mesh.faces)))
-        warnings.warn(
-            f"{label}: {n} faces reach slightly outside the 0-1 UV square; their outside parts "
-            "get no texels (use --uv unwrap to avoid it)",
-            CrackbakeWarning,
-            stacklevel=3,
-        )
-    # Not clipped: clipping would distort the straying faces; the bake simply gets no texels
-    # outside the page and the GLB keeps the artist's UVs.
+        warnings.warn(stray_message(label, mesh, check, res), CrackbakeWarning, stacklevel=3)
+    # Not clipped: clipping would distort the straying faces.  The GLB keeps the artist's UVs
+    # and the bake draws the straying parts again where REPEAT sampling shows them (wraps).
     uv = np.asarray(mesh.uv, dtype=np.float64)
     n_degenerate = int(np.count_nonzero(uv_area2(uv[mesh.faces]) <= DEGENERATE_AREA2))
     if n_degenerate > OVERLAP_WARN_FRACTION * len(mesh.faces):
@@ -60,7 +56,27 @@ def kept_uvmesh(mesh: Mesh, check: UVCheck) -> UVMesh:
         method="kept",
         overlap_fraction=overlap,
         padding_px=0,
+        wraps=np.asarray(check.wraps, np.int64),
     )
+
+
+def stray_message(label: str, mesh: Mesh, check: UVCheck, res: int) -> str:
+    """The one-line warning about faces straying past the UV page: how many, how many were
+    baked wrapped into the tile, and how many texels could not be."""
+    n = int(round(check.outside_fraction * len(mesh.faces)))
+    wrapped = len(np.unique(np.asarray(check.wraps)[:, 0])) if len(check.wraps) else 0
+    msg = (
+        f"{label}: {n} faces reach slightly outside the 0-1 UV square; engines repeat the "
+        f"texture there, so {wrapped} are also baked wrapped into the tile"
+    )
+    if check.lost_faces:
+        texels = int(round(check.lost_fraction * res * res))
+        msg += (
+            f"; {check.lost_faces} could not be (their wrapped place belongs to another island): "
+            f"about {texels} texels at {res}x{res} show another island's cracks there "
+            "(use --uv unwrap to avoid it)"
+        )
+    return msg
 
 
 def prepare_uvs(
@@ -114,7 +130,7 @@ def prepare_uvs(
     label = mesh_label(mesh)
     check = check_uvs(mesh, ctx=ctx)
     if check.usable:
-        return kept_uvmesh(mesh, check)
+        return kept_uvmesh(mesh, check, res)
     if mode == "keep":
         if check.udim:
             raise CrackbakeError(

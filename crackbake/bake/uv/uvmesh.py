@@ -43,6 +43,11 @@ class UVMesh:
         splits vertices whose corners disagree): ``xyz`` unit, along +u and orthogonal to the
         normal; ``w`` = +1 or -1, the bitangent sign, so ``B = w * cross(N, T)`` points
         towards +v (up in the image).  None until computed.
+    wraps : (K, 3) int64 or None
+        Kept UVs only: copies (face, du, dv) of faces straying past the page, baked at
+        ``uv - (du, dv)`` where an engine sampling with REPEAT shows them
+        (:func:`crackbake.bake.uv.check.check_uvs` chose those that overlap no other face).
+        The GLB keeps the artist's UVs; only the bake draws the copies (:func:`bake_arrays`).
     """
 
     vertices: np.ndarray
@@ -54,6 +59,48 @@ class UVMesh:
     overlap_fraction: float
     padding_px: int
     tangents: np.ndarray | None = None
+    wraps: np.ndarray | None = None
+
+
+def bake_arrays(uvmesh: UVMesh) -> dict[str, np.ndarray | None]:
+    """The triangles the textures are baked from: the faces plus their wrapped copies.
+
+    Parameters
+    ----------
+    uvmesh : UVMesh
+
+    Returns
+    -------
+    dict
+        ``vertices`` (V'', 3), ``faces`` (F + K, 3), ``uv`` (V'', 2), ``normals`` (V'', 3) and
+        ``tangents`` (V'', 4) or None: the keyword arguments of
+        :func:`crackbake.bake.raster.bake_cracks`.  The first V' vertices and F faces are
+        ``uvmesh``'s own; each copy in ``uvmesh.wraps`` adds three vertices (its face's
+        corners, same position, normal and tangent, UVs shifted by whole tiles) and a face.
+    """
+    out = {
+        "vertices": uvmesh.vertices,
+        "faces": uvmesh.faces,
+        "uv": uvmesh.uv,
+        "normals": uvmesh.normals,
+        "tangents": uvmesh.tangents,
+    }
+    wraps = uvmesh.wraps
+    if wraps is None or len(wraps) == 0:
+        return out
+    wraps = np.asarray(wraps, np.int64)
+    corners = np.asarray(uvmesh.faces, np.int64)[wraps[:, 0]].reshape(-1)  # (3K,)
+    shift = np.repeat(wraps[:, 1:3].astype(np.float64), 3, axis=0)
+    n = len(uvmesh.vertices)
+    out["vertices"] = np.concatenate([uvmesh.vertices, uvmesh.vertices[corners]])
+    out["uv"] = np.concatenate([uvmesh.uv, uvmesh.uv[corners] - shift])
+    out["normals"] = np.concatenate([uvmesh.normals, uvmesh.normals[corners]])
+    if uvmesh.tangents is not None:
+        out["tangents"] = np.concatenate([uvmesh.tangents, uvmesh.tangents[corners]])
+    out["faces"] = np.concatenate(
+        [uvmesh.faces, n + np.arange(3 * len(wraps), dtype=np.int64).reshape(-1, 3)]
+    )
+    return out
 
 
 def default_padding(res: int) -> int:
