@@ -130,7 +130,8 @@ def test_errors(tmp_path):
         load_mesh(empty)
     cloud = tmp_path / "cloud.ply"
     trimesh.PointCloud(np.random.default_rng(0).random((20, 3))).export(cloud)
-    with pytest.raises(CrackbakeError, match="point cloud"):
+    with pytest.raises(CrackbakeError, match=r"point cloud \(the elements 20 'vertex' \(x, y, z\); "
+                       "no faces or triangle strips"):  # fmt: skip
         load_mesh(cloud)
     nan = tmp_path / "nan.obj"
     nan.write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
@@ -286,3 +287,56 @@ def test_obj_checks_span_the_scan_chunks(tmp_path):
     zero.write_bytes(body + b"f 1 2 3\nf 3 2 0\n")
     with pytest.raises(CrackbakeError, match=f"line {n + 6} uses vertex index 0"):
         load_mesh(zero)
+
+
+def _strip_ply(path: Path, binary: bool, nx: int = 5, ny: int = 4) -> np.ndarray:
+    """A (nx x ny)-quad grid in z = 0 written as one PLY ``tristrips`` element: one strip per
+    row (the row's vertices zig-zag, the next row's first), rows parted by ``-1`` and split
+    over two list entries of different lengths.  Returns its vertices."""
+    xs, ys = np.meshgrid(np.arange(nx + 1, dtype=float), np.arange(ny + 1, dtype=float))
+    v = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
+    idx = np.arange(v.shape[0]).reshape(ny + 1, nx + 1)
+    # Upper row first then lower: triangle (up0, lo0, up1) winds counter-clockwise (+z).
+    rows = [np.stack([idx[j + 1], idx[j]], axis=1).ravel() for j in range(ny)]
+    strips = [np.concatenate([rows[0], [-1], rows[1]]), np.concatenate([rows[2], [-1], rows[3]])]
+    strips[1] = np.r_[strips[1], -1]  # a trailing restart, as some writers leave
+    head = (f"ply\nformat {'binary_little_endian' if binary else 'ascii'} 1.0\n"
+            f"element vertex {len(v)}\nproperty float x\nproperty float y\nproperty float z\n"
+            f"element tristrips {len(strips)}\nproperty list int int vertex_indices\n"
+            "end_header\n")
+    if binary:
+        body = v.astype("<f4").tobytes() + b"".join(
+            np.int32(len(s)).tobytes() + s.astype("<i4").tobytes() for s in strips)
+        path.write_bytes(head.encode() + body)
+    else:
+        lines = [" ".join(f"{x:g}" for x in p) for p in v]
+        lines += [" ".join(str(int(i)) for i in [len(s), *s]) for s in strips]
+        path.write_text(head + "\n".join(lines) + "\n")
+    return v
+
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_triangle_strip_ply_loads_as_triangles(tmp_path, binary):
+    path = tmp_path / "strips.ply"
+    v = _strip_ply(path, binary)
+    mesh = load_mesh(path)
+    np.testing.assert_allclose(mesh.vertices, v)
+    # Every quad of the 5 x 4 grid becomes two triangles, each once, all facing +z (the
+    # alternating winding kept), covering the grid's area exactly.
+    assert mesh.faces.shape == (2 * 5 * 4, 3)
+    assert len({tuple(sorted(f)) for f in mesh.faces.tolist()}) == 40
+    e1 = v[mesh.faces[:, 1]] - v[mesh.faces[:, 0]]
+    e2 = v[mesh.faces[:, 2]] - v[mesh.faces[:, 0]]
+    z = np.cross(e1, e2)[:, 2]
+    assert (z > 0).all() and 0.5 * z.sum() == pytest.approx(20.0)
+
+
+def test_strip_triangles_alternate_winding_and_restart():
+    from crackbake.io.ply_strips import strip_triangles
+
+    tris = strip_triangles([np.array([0, 1, 2, 3, 4, -1, 5, 6, 7]), np.array([8, 9])])
+    assert tris.tolist() == [[0, 1, 2], [2, 1, 3], [2, 3, 4], [5, 6, 7]]
+    # Degenerate joining triangles (a repeated index) are dropped and the parity runs on, as
+    # GL draws a strip: windows 3 (odd) and 4 (even) give (3, 2, 4) and (3, 4, 5).
+    tris = strip_triangles([np.array([0, 1, 2, 2, 3, 4, 5])])
+    assert tris.tolist() == [[0, 1, 2], [3, 2, 4], [3, 4, 5]]

@@ -230,6 +230,25 @@ def test_impact_point_off_the_surface_is_snapped():
     assert np.allclose(field.impacts[0]["point"], [1.0, 0.2, 0.0])
 
 
+def test_an_impact_more_than_a_diagonal_off_is_refused_with_the_nearest_point():
+    sim, mesh = plate(20)
+    diag = 2 * np.sqrt(2.0)  # the plate spans [-1, 1]^2
+    # Within one diagonal (0.9 above the plate): snapped, with a warning.
+    with pytest.warns(CrackbakeWarning, match="snapped"):
+        stress_field(sim, mesh, [ImpactSource((0.4, 0.6, 0.9 * diag), radius=0.3)])
+    # Five diagonals above (a typo): refused, and the message names the nearest surface point.
+    with pytest.raises(CrackbakeError, match=r"is 5 mesh diagonals from the surface.*nearest "
+                       r"surface point is \(0\.4, 0\.6, 0\)"):  # fmt: skip
+        stress_field(sim, mesh, [ImpactSource((0.4, 0.6, 5 * diag), radius=0.3)])
+    # 1.2 diagonals beside the plate: refused by the box gap already, nearest point on the rim.
+    with pytest.raises(CrackbakeError, match=r"is 1\.2 mesh diagonals.*\(1, 0\.25, 0\)"):
+        stress_field(sim, mesh, [ImpactSource((1 + 1.2 * diag, 0.25, 0.0), radius=0.3)])
+    # Off a corner diagonally: 0.8 diagonals from the box along each axis, but 1.13 from the
+    # surface (the snapped distance decides).
+    with pytest.raises(CrackbakeError, match=r"is 1\.13 mesh diagonals.*\(1, 1, 0\)"):
+        stress_field(sim, mesh, [ImpactSource((1 + 0.8 * diag, 1 + 0.8 * diag, 0), radius=0.3)])
+
+
 def test_impact_on_a_non_manifold_patch_uses_fast_marching_per_manifold_piece():
     sim, mesh = plate(30)
     fmm, _, _ = impact_distance(sim, (0.0, 0.0, 0.0))

@@ -17,7 +17,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import face_cross, welded_vertex_normals
-from crackbake.io import obj_checks
+from crackbake.io import obj_checks, ply_strips
 
 __all__ = ["Mesh", "SUPPORTED_SUFFIXES", "VERTEX_COLOURS", "load_mesh"]
 
@@ -236,7 +236,10 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     import trimesh
 
     path = Path(path)
-    loaded, obj_text, short_faces = _read_file(path)
+    if path.suffix.lower() == ".ply" and path.is_file() and ply_strips.declares_strips(path):
+        loaded, obj_text, short_faces = _strip_mesh(path), None, 0
+    else:
+        loaded, obj_text, short_faces = _read_file(path)
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):
@@ -255,6 +258,9 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     if not geoms:
         kind = type(loaded).__name__
         what = "a point cloud" if kind == "PointCloud" else "no triangles"
+        held = _ply_elements(loaded) if path.suffix.lower() == ".ply" else ""
+        if held:
+            what = f"{what} ({held}; no faces or triangle strips)"
         raise CrackbakeError(f"{path}: the file holds {what}; crackbake needs a triangle mesh")
 
     uvs = [_uv_of(g) for g in geoms]
@@ -305,6 +311,29 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
         attributes=_concatenate_attributes([_vertex_attributes(g) for g in geoms]),
         objects=len(geoms),
     )
+
+
+def _ply_elements(loaded) -> str:
+    """What a PLY file holds, for the error message: each element trimesh read, with its count
+    and properties."""
+    raw = (getattr(loaded, "metadata", None) or {}).get("_ply_raw", {})
+    if not isinstance(raw, dict) or not raw:
+        return ""
+    parts = []
+    for name, element in raw.items():
+        count = element.get("length", 0) if isinstance(element, dict) else 0
+        props = list(element.get("properties", {})) if isinstance(element, dict) else []
+        parts.append(f"{count} '{name}' ({', '.join(props) or 'no properties'})")
+    return "the elements " + "; ".join(parts)
+
+
+def _strip_mesh(path: Path):
+    """A triangle-strip PLY as a trimesh, its raw vertex properties kept as trimesh keeps them."""
+    import trimesh
+
+    vertices, props, faces = ply_strips.read_strip_ply(path)
+    metadata = {"_ply_raw": {"vertex": {"data": props}}}
+    return trimesh.Trimesh(vertices=vertices, faces=faces, process=False, metadata=metadata)
 
 
 def _uv_of(geom) -> np.ndarray | None:

@@ -20,7 +20,7 @@ from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import unit_rows, vertex_normals
 from crackbake.io.mesh import Mesh
 from crackbake.simulate.solver.fem import face_frames, face_geometry
-from crackbake.simulate.stress.geodesic import impact_distance, iso_length
+from crackbake.simulate.stress.geodesic import _snap, impact_distance, iso_length
 from crackbake.simulate.stress.sources import (
     CurvatureSource,
     DirectionalSource,
@@ -129,25 +129,38 @@ class _Geometry:
     centroid: np.ndarray  # (M, 3)
 
 
-# An impact point farther than this many bounding-box diagonals from the mesh is a typo (or a
-# point in other units), not an intent: snapping it would pick an arbitrary spot.
-IMPACT_MAX_DIAGONALS = 10.0
+# An impact point farther than this many bounding-box diagonals from the surface is a typo (or a
+# point in other units), not an intent: snapping it would pick an arbitrary spot.  Nearer, it is
+# snapped to the surface with a warning.
+IMPACT_MAX_DIAGONALS = 1.0
 
 
-def _check_impact_near(point, geo: _Geometry) -> None:
-    """Refuse an impact point far off the mesh (``CrackbakeError``)."""
+def _refuse_far_impact(p: np.ndarray, distance: float, nearest: np.ndarray, diag: float) -> None:
+    """The one-line error for an impact ``distance`` off the surface (``CrackbakeError``)."""
+    shown = ", ".join(f"{float(x):g}" for x in p)
+    near = ", ".join(f"{float(x):.6g}" for x in nearest)
+    raise CrackbakeError(
+        f"impact point ({shown}) is {distance / diag:.3g} mesh diagonals from the surface (a typo "
+        f"or other units?); the nearest surface point is ({near}): give a point on or within "
+        f"{IMPACT_MAX_DIAGONALS:g} mesh diagonal of the surface"
+    )
+
+
+def _check_impact_near(point, geo: _Geometry, sim=None) -> None:
+    """Refuse an impact point whose bounding-box gap alone puts it more than
+    :data:`IMPACT_MAX_DIAGONALS` off the mesh (``CrackbakeError``); the exact surface distance is
+    checked once the point is snapped (:func:`_impact_field`)."""
     p = _finite_vector(point, "impact point")
     lo, hi = geo.vertices.min(axis=0), geo.vertices.max(axis=0)
     # Per-axis gap to the box, so 1e308 coordinates do not overflow a norm.
     gap = float(np.max(np.maximum(np.maximum(lo - p, p - hi), 0.0)))
     diag = float(np.linalg.norm(hi - lo))
     if gap > IMPACT_MAX_DIAGONALS * diag:
-        shown = ", ".join(f"{float(x):g}" for x in p)
-        raise CrackbakeError(
-            f"impact point ({shown}) is {gap / diag:.3g} mesh diagonals from the surface; "
-            f"give a point on or near the mesh (its bounding box spans "
-            f"{', '.join(f'{float(x):g}' for x in lo)} to {', '.join(f'{float(x):g}' for x in hi)})"
-        )
+        # The nearest surface point of a point that far is (near enough) that of its projection
+        # a little outside the box, and this keeps the distances finite.
+        q = np.clip(p, lo - diag, hi + diag)
+        nearest = _snap(sim, q)[0] if sim is not None else np.clip(p, lo, hi)
+        _refuse_far_impact(p, gap, nearest, diag)
 
 
 def _impact_radius(radius: float, sim) -> float:
@@ -194,12 +207,14 @@ def _impact_shadow(geo: _Geometry, dist: np.ndarray, radius: float, edge: float)
 def _impact_field(
     sim, geo: _Geometry, src: ImpactSource, radius: float
 ) -> tuple[np.ndarray, dict, float]:
-    _check_impact_near(src.point, geo)
+    _check_impact_near(src.point, geo, sim)
     radius = _impact_radius(radius, sim)
     reach = 0.5 * np.pi * radius
     dist, snapped, face = impact_distance(sim, src.point, max_distance=reach)
     moved = float(np.linalg.norm(snapped - np.asarray(src.point, dtype=np.float64)))
     extent = float(np.linalg.norm(geo.vertices.max(axis=0) - geo.vertices.min(axis=0)))
+    if moved > IMPACT_MAX_DIAGONALS * extent:
+        _refuse_far_impact(np.asarray(src.point, np.float64), moved, snapped, extent)
     if moved > 0.01 * extent:
         warnings.warn(
             f"impact point {tuple(float(x) for x in src.point)} lies {moved:.4g} off the surface; "
