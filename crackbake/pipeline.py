@@ -8,6 +8,7 @@ Progress is reported through :mod:`logging` (logger ``"crackbake.pipeline"``).
 from __future__ import annotations
 
 import logging
+import re
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -305,18 +306,26 @@ def solve(
         sources = stress_sources(params, mesh, relative)
     logger.info("building the simulation mesh")
     t = time.perf_counter()
-    sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces, seed=params.seed,
-                        proxy_above=params.proxy_above)
-    timings["simmesh"] = time.perf_counter() - t
-    logger.info("stress field on %d simulation faces", len(sim.faces))
-    t = time.perf_counter()
-    field = stress_field(sim, mesh, sources, seed=params.seed)
-    finer = None if relative.get("sim_size_set") else impact_detail(field, sim.edge_length)
-    if finer is not None:  # an impact on a thin feature: its star needs a finer sim mesh
-        logger.info("impact on a thin feature: sim edge %.4g -> %.4g", sim.edge_length, finer)
-        sim = build_simmesh(mesh, detail=finer, seed=params.seed, proxy=sim.proxy,
-                            proxy_above=params.proxy_above)
-        field = stress_field(sim, mesh, sources, seed=params.seed)
+    # Held back until the sim mesh is final: a rebuild for a thin feature repeats them.
+    first: list = []
+    second: list = []
+    try:
+        with warnings.catch_warnings(record=True) as first:
+            sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces,
+                                seed=params.seed, proxy_above=params.proxy_above)
+            timings["simmesh"] = time.perf_counter() - t
+            logger.info("stress field on %d simulation faces", len(sim.faces))
+            t = time.perf_counter()
+            field = stress_field(sim, mesh, sources, seed=params.seed)
+        finer = None if relative.get("sim_size_set") else impact_detail(field, sim.edge_length)
+        if finer is not None:  # an impact on a thin feature: its star needs a finer sim mesh
+            logger.info("impact on a thin feature: sim edge %.4g -> %.4g", sim.edge_length, finer)
+            with warnings.catch_warnings(record=True) as second:
+                sim = build_simmesh(mesh, detail=finer, seed=params.seed, proxy=sim.proxy,
+                                    proxy_above=params.proxy_above)
+                field = stress_field(sim, mesh, sources, seed=params.seed)
+    finally:
+        _warn_once(first, second)
     field = with_spacing(field, params, mesh.diagonal)
     timings["stress"] = time.perf_counter() - t
     sp = solver_params(params, mesh, relative)
@@ -351,6 +360,27 @@ def solve(
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
     return network, jsonable(stats), Solved(sim=sim, field=field, result=result)
+
+
+def _warn_kind(w) -> tuple:
+    """A warning's category and text with its numbers blanked: the same warning about a
+    rebuilt sim mesh differs only in figures (a snapped point, an edge length)."""
+    return w.category, re.sub(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", "#", str(w.message))
+
+
+def _warn_once(first: list, second: list) -> None:
+    """Re-issue the warnings of the first sim mesh and, when it was rebuilt, of the second, each
+    kind once: a kind both gave is said as the rebuilt mesh says it (the figures the run used),
+    in the first's order."""
+    latest = {_warn_kind(w): w for w in second}
+    said = set()
+    for w in [*first, *second]:
+        kind = _warn_kind(w)
+        if kind in said:
+            continue
+        said.add(kind)
+        w = latest.get(kind, w)
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
 
 
 def _grow(sim, field, sp):

@@ -381,3 +381,54 @@ def test_a_run_cut_short_by_max_steps_warns(plate, tmp_path):
         warnings.simplefilter("error", CrackbakeWarning)
         full = run(RunParams(out=tmp_path / "full", **base))
     assert full.solved.result.stats["stopped"] in ("at rest", "max cracks", "saturated")
+
+
+def test_warnings_of_a_rebuilt_sim_mesh_are_said_once():
+    from crackbake.errors import CrackbakeWarning
+    from crackbake.pipeline import _warn_once
+
+    def record(*texts):
+        with warnings.catch_warnings(record=True) as got:
+            warnings.simplefilter("always")
+            for t in texts:
+                warnings.warn(t, CrackbakeWarning, stacklevel=1)
+        return got
+
+    first = record("the mesh is not manifold (1 edge)", "impact lies 0.1 off; snapped to (0, 1.1)")
+    second = record("impact lies 0.1 off; snapped to (0, 1.0999)",
+                    "the mesh is not manifold (1 edge)", "a new one")  # fmt: skip
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        _warn_once(first, second)
+    # Each kind once, in the first mesh's order, as the rebuilt mesh says it; new ones after.
+    assert [str(w.message) for w in said] == [
+        "the mesh is not manifold (1 edge)", "impact lies 0.1 off; snapped to (0, 1.0999)",
+        "a new one"]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_a_sim_mesh_rebuilt_for_a_thin_feature_warns_once(tmp_path):
+    """A glass impact just off a thin capsule's tip (the default sim mesh is rebuilt finer for
+    its shadow) on a mesh with a non-manifold fin: the snapped-impact and non-manifold
+    warnings each show once on stderr, as the rebuilt mesh states them."""
+    import trimesh
+
+    t = trimesh.creation.capsule(height=2.0, radius=0.1, count=[24, 24])
+    v, f = trimesh.remesh.subdivide_to_size(t.vertices, t.faces, max_edge=0.05)
+    # A 3 x 3 square below it, with a fin on its diagonal: three faces on one edge.
+    sq = np.array([[-1.5, -1.5, -2], [1.5, -1.5, -2], [1.5, 1.5, -2], [-1.5, 1.5, -2],
+                   [0, 0, -1.0]])  # fmt: skip
+    k = len(v)
+    faces = np.r_[f, k + np.array([[0, 1, 2], [0, 2, 3], [0, 2, 4]])]
+    path = tmp_path / "capsule.obj"
+    trimesh.Trimesh(np.r_[v, sq], faces, process=False).export(path)
+    tip = v[np.argmax(v[:, 2])] + [0, 0, 0.1]  # 0.1 above the pole: snapped, with a warning
+    r = CliRunner().invoke(main, [
+        str(path), "--preset", "glass", "--impact", ",".join(f"{x:g}" for x in tip) + ":0.6",
+        "--max-steps", "30", "--res", "64", "--formats", "png", "-o", str(tmp_path / "o")])
+    assert r.exit_code == 0, r.output
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
+    snapped = [ln for ln in lines if "snapped to" in ln]
+    fins = [ln for ln in lines if "not manifold" in ln]
+    assert len(snapped) == 1 and len(fins) == 1, lines
+    assert len(lines) == len(set(lines))
