@@ -27,6 +27,7 @@ from crackbake.params import (
     SIM_PROXY_MODES,
     STRESS_RES_DEFAULT,
     TARGETS,
+    UP_AXES,
     UV_MODES,
     RunParams,
     load_preset,
@@ -330,6 +331,11 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     "--normal-y",
     type=click.Choice(NORMAL_Y),
     help="Normal-map Y convention: gl (+Y, OpenGL) or dx (-Y, DirectX) [the target's].",
+)
+@click.option(
+    "--up",
+    type=click.Choice(UP_AXES),
+    help="The preview's up axis [y, or z when the mesh clearly stands on its -Z side].",
 )
 @click.option("--float", "float32", is_flag=True, help="Write every EXR channel as 32-bit float.")
 @click.option("--object", "object_name", help="Pick this object from a multi-object file.")

@@ -35,6 +35,8 @@ SIM_PROXY_MODES = ("auto", "always", "never")
 TARGETS = ("gltf", "unity", "unity-hdrp", "unreal", "godot", "blender")
 #: Normal-map Y conventions (``--normal-y``): OpenGL (+Y, green up) or DirectX (-Y).
 NORMAL_Y = ("gl", "dx")
+#: ``--up`` axes of the preview (None: +Y unless the mesh clearly stands on -Z).
+UP_AXES = ("x", "y", "z", "-x", "-y", "-z")
 METHODS = ("iben", "thesis")
 RES_MIN, RES_MAX = 64, 16384
 #: Largest framebuffer edge of one bake pass (the bake tiles bigger textures): default, range.
@@ -334,6 +336,10 @@ class RunParams:
         Engine profile deciding the PNG set: one of :data:`TARGETS`.
     normal_y : str or None
         ``gl`` or ``dx`` normal-map Y convention; ``None`` = the target's own.
+    up : str or None
+        The preview's up axis, one of :data:`UP_AXES`; ``None``: +Y (the OBJ, PLY and glTF
+        convention) unless the mesh clearly stands on its -Z side
+        (:func:`crackbake.bake.preview.up_axis`).
     object_name : str or None
         Object to pick from a multi-object file.
     unwrap_timeout : float
@@ -385,6 +391,7 @@ class RunParams:
     float32: bool = False
     target: str = "gltf"
     normal_y: str | None = None
+    up: str | None = None
     object_name: str | None = None
     unwrap_timeout: float = 300.0
     cache: bool = True
@@ -466,6 +473,8 @@ class RunParams:
             )
         if self.normal_y is not None and self.normal_y not in NORMAL_Y:
             raise CrackbakeError(f"--normal-y '{self.normal_y}' is unknown; use gl or dx")
+        if self.up is not None and self.up not in UP_AXES:
+            raise CrackbakeError(f"--up '{self.up}' is unknown; use one of {', '.join(UP_AXES)}")
         _check_range("--unwrap-timeout", self.unwrap_timeout, *UNWRAP_TIMEOUT_RANGE, " s")
         if not TILE_MIN <= self.tile <= TILE_MAX:
             raise CrackbakeError(

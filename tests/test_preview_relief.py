@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import make_mesh
 from maps_factory import plate_uvmesh
 
 from crackbake.bake.preview import preview_camera, render_preview, up_axis
@@ -62,6 +63,69 @@ def test_up_axis_from_what_the_mesh_stands_on():
     z_up = replace(spot, vertices=spot.vertices @ TO_Z_UP.T, source="spot_z.ply")
     assert tuple(up_axis(z_up)) == (0, 0, 1)
     assert tuple(up_axis(replace(z_up, source="spot.glb"))) == (0, 1, 0)  # glTF is Y-up
+
+
+def _figure():
+    """A Y-up figure standing on two small feet: a 0.4 x 2 x 0.1 slab body (its flat back, 0.8
+    square units, faces -Z) on two 0.1 x 0.1 soles 0.3 apart."""
+    import trimesh
+
+    body = trimesh.creation.box((0.4, 2.0, 0.1))
+    body.apply_translation((0, 1.1, 0))
+    feet = [trimesh.creation.box((0.1, 0.1, 0.1)) for _ in range(2)]
+    feet[0].apply_translation((-0.15, 0.05, 0))
+    feet[1].apply_translation((0.15, 0.05, 0))
+    m = trimesh.util.concatenate([body, *feet])
+    return make_mesh(m.vertices, m.faces, source="figure.obj")
+
+
+def _statue():
+    """A round Y-up statue (a capsule of radius 0.2 along Y) on a 0.8 x 0.05 x 0.8 pedestal."""
+    import trimesh
+
+    body = trimesh.creation.capsule(height=1.6, radius=0.2, count=[16, 16])
+    body.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    body.apply_translation((0, 1.15, 0))
+    base = trimesh.creation.box((0.8, 0.05, 0.8))
+    base.apply_translation((0, 0.025, 0))
+    m = trimesh.util.concatenate([body, base])
+    return make_mesh(m.vertices, m.faces, source="statue.obj")
+
+
+def test_a_y_up_figure_with_a_flat_back_stays_upright():
+    from crackbake.bake.preview import _frame, up_vector
+
+    fig = _figure()
+    # Its back's hull facet (0.8) dwarfs the feet's (0.04), but it stands on its feet (its
+    # centre over them) as it would on its back: no strong evidence, so +Y.  (The old rule,
+    # Z's support 1.5x Y's, laid it on its back.)
+    assert tuple(up_axis(fig)) == (0, 1, 0)
+    assert tuple(up_axis(replace(fig, vertices=fig.vertices @ TO_Z_UP.T))) == (0, 1, 0)
+    # A statue on a pedestal, exported Z-up: it stands only on -Z (0.64 against 0.04).
+    statue = _statue()
+    assert tuple(up_axis(statue)) == (0, 1, 0)
+    z_up = replace(statue, vertices=statue.vertices @ TO_Z_UP.T, source="statue_z.ply")
+    assert tuple(up_axis(z_up)) == (0, 0, 1)
+    # --up overrides the guess; every axis gets a rotation taking +Y onto it.
+    assert tuple(up_vector("-x", fig)) == (-1, 0, 0)
+    for name in ("x", "y", "z", "-x", "-y", "-z"):
+        r = _frame(up_vector(name, fig))
+        np.testing.assert_allclose(r @ [0, 1, 0], up_vector(name, fig), atol=1e-12)
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(r) == pytest.approx(1.0)
+
+
+def test_up_option_turns_the_preview_camera():
+    fig = _figure()
+    net = CrackNetwork(cracks=[], mesh={})
+    assert preview_camera(fig, net)[1] == (0, 1, 0)
+    assert preview_camera(fig, net, "z")[1] == (0, 0, 1)
+    assert preview_camera(fig, net, "-y")[0][1] < 0  # the view is tilted towards -Y's "up"
+    from crackbake.errors import CrackbakeError
+    from crackbake.params import RunParams
+
+    with pytest.raises(CrackbakeError, match="--up 'w' is unknown; use one of x, y, z"):
+        RunParams(mesh=SPOT, shrink=1.0, up="w").validate()
 
 
 def test_z_up_mesh_renders_the_same_upright_picture(gl_ctx):

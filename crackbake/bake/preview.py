@@ -183,14 +183,45 @@ def _draw(gl: GLScope, mesh, color, normal_map, size, mvp, key, fill) -> np.ndar
     return np.frombuffer(out_fbo.read(components=3), np.uint8).reshape(size, size, 3)
 
 
-def up_axis(mesh: Mesh) -> np.ndarray:
-    """The mesh's up axis, +Y or +Z: the one it stands on.
+#: ``--up`` names and their axes.
+UP_VECTORS = {
+    "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0),
+    "-x": (-1.0, 0.0, 0.0), "-y": (0.0, -1.0, 0.0), "-z": (0.0, 0.0, -1.0),
+}  # fmt: skip
+# Z-up needs strong evidence: its support polygon this many times Y's, the mesh's centre over it,
+# and not over Y's.
+Z_UP_SUPPORT_RATIO = 3.0
 
-    glTF is Y-up by definition.  For other files each candidate scores the area of the convex
-    hull's facets facing straight down along it (within 5 degrees): the support polygon of the
-    feet or base the object rests on (spot's four hooves span one big hull facet; a rounded
-    end spans none).  Z wins only when its support is clearly bigger (1.5x), so meshes that
-    rest on nothing keep the Y-up convention of OBJ and most DCC tools.
+
+def _support(pts: np.ndarray, hull, area: np.ndarray, axis: int, centre: np.ndarray):
+    """Area of the hull facets facing straight down along ``axis`` (within 5 degrees) and
+    whether ``centre`` lies over the polygon they span (the mesh would stand on them)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    down = hull.equations[:, axis] < -np.cos(np.radians(5))  # outward normal points down
+    score = float(area[down].sum())
+    if score <= 0.0:
+        return 0.0, False
+    keep = [k for k in range(3) if k != axis]
+    foot = pts[np.unique(hull.simplices[down])][:, keep]
+    try:
+        poly = ConvexHull(foot)
+    except (QhullError, ValueError):  # a line of support: a knife edge, no stand
+        return score, False
+    inside = (poly.equations[:, :2] @ centre[keep] + poly.equations[:, 2] <= 1e-12).all()
+    return score, bool(inside)
+
+
+def up_axis(mesh: Mesh) -> np.ndarray:
+    """The mesh's up axis, +Y unless the mesh clearly stands on its -Z side.
+
+    OBJ, PLY and glTF are Y-up by convention (glTF by definition, so it is always +Y).  Z-up
+    (scans and CAD exports) is taken only with strong evidence: the convex hull's facets facing
+    straight down along -Z (within 5 degrees: the support polygon of the feet or base it would
+    rest on) cover at least :data:`Z_UP_SUPPORT_RATIO` times those along -Y, the surface's
+    centre lies over that polygon (it would stand), and not over the -Y one.  So a Y-up figure
+    on two small feet with a flat back stays upright; spot rotated to Z-up stands on its
+    hooves.  ``--up`` overrides the guess.
 
     Returns
     -------
@@ -210,16 +241,35 @@ def up_axis(mesh: Mesh) -> np.ndarray:
         return y_up
     tri = pts[hull.simplices]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    down = hull.equations[:, :3] < -np.cos(np.radians(5))  # outward normal points down
-    score_y, score_z = area[down[:, 1]].sum(), area[down[:, 2]].sum()
-    return z_up if score_z > 1.5 * score_y else y_up
+    cross = face_cross(mesh.vertices, mesh.faces)
+    weight = np.linalg.norm(cross, axis=1)
+    centre = (weight @ mesh.vertices[mesh.faces].mean(axis=1)) / max(weight.sum(), 1e-300)
+    score_y, stands_y = _support(pts, hull, area, 1, centre)
+    score_z, stands_z = _support(pts, hull, area, 2, centre)
+    strong = score_z >= Z_UP_SUPPORT_RATIO * score_y and stands_z and not stands_y
+    return z_up if strong else y_up
+
+
+def up_vector(up: str | None, mesh: Mesh) -> np.ndarray:
+    """The preview's up: the ``--up`` axis (``x``, ``y``, ``z``, ``-x``, ``-y``, ``-z``) or, when
+    None, :func:`up_axis`'s guess; (3,) float64."""
+    if up is None:
+        return up_axis(mesh)
+    return np.asarray(UP_VECTORS[up], np.float64)
 
 
 def _frame(up: np.ndarray) -> np.ndarray:
-    """Rotation taking the Y-up candidate directions to a mesh whose up is ``up``."""
-    if up[2] > 0.5:
-        return np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # y -> z, z -> -y
-    return np.eye(3)
+    """Rotation taking +Y (the candidate directions' up) to ``up`` (a unit axis)."""
+    y = np.array([0.0, 1.0, 0.0])
+    up = np.asarray(up, np.float64)
+    c = float(up @ y)
+    if c > 0.5:
+        return np.eye(3)
+    if c < -0.5:
+        return np.diag([1.0, -1.0, -1.0])  # half a turn about x
+    k = np.cross(y, up)  # a quarter turn about k: R = I + K + K^2
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + kx + kx @ kx
 
 
 def preview_direction(
@@ -266,15 +316,16 @@ def _direction(cross: np.ndarray, network: CrackNetwork, up: np.ndarray):
     return tuple(float(x) for x in cand[int(np.argmax(score))])
 
 
-def preview_camera(mesh: Mesh, network: CrackNetwork):
+def preview_camera(mesh: Mesh, network: CrackNetwork, up: str | None = None):
     """Where the preview camera looks from: ``(view_dir, up, target, distance)``.
 
-    The view is :func:`preview_direction` with the mesh's :func:`up_axis`; the camera aims at
+    The view is :func:`preview_direction` with ``up`` (an ``--up`` name; None: the mesh's
+    :func:`up_axis`) up; the camera aims at
     the middle of the crack points seen from there and comes close enough that they fill
     about 80 % of the frame, but never closer than framing 40 % of the mesh (so the picture
     keeps context) nor farther than framing the whole mesh.  Without cracks it frames the mesh.
     """
-    up = up_axis(mesh)
+    up = up_vector(up, mesh)
     an = face_cross(mesh.vertices, mesh.faces)
     view_dir = np.asarray(_direction(an, network, up))
     lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)

@@ -206,7 +206,7 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) ->
         jobs.extend(submit_frames(pool, stage.path, stem, maps, params.frames))
         try:
             if "preview" in formats:
-                _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx)
+                _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx, params.up)
             write_sidecar(network, stage.path("cracks.json"))
             write_obj(network, stage.path("cracks.obj"))
             if glb_keys:
@@ -284,10 +284,10 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
     return colour, normal
 
 
-def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx) -> None:
+def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx, up=None) -> None:
     tangents = getattr(uvmesh, "tangents", None)
     colour, normal = _preview_pages(maps, texture, tangents is not None)
-    view_dir, up, target, distance = preview_camera(mesh, network)
+    view_dir, up, target, distance = preview_camera(mesh, network, up)
     picture = render_preview(
         uvmesh.vertices,
         uvmesh.faces,
