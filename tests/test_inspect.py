@@ -206,3 +206,42 @@ def test_missing_file_is_a_usage_error(tmp_path):
     proc = cli(str(tmp_path / "nope.exr"))
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and "does not exist" in proc.stderr
+
+
+def test_text_table_says_what_the_fields_and_units_mean(run_files, tmp_path):
+    from crackbake.bake.stress import STRESS_UNITS
+
+    d, _, fields = run_files
+    ours = tmp_path / "ours_stress.exr"
+    write_exr(ours, stress_planes(fields), stress_attributes("t", units=STRESS_UNITS))
+    proc = cli(str(ours))
+    assert proc.returncode == 0, proc.stderr
+    text = proc.stdout
+    assert "stress0 is the initial stress field (before any crack), stress the final one" in text
+    # Each unit in the table is put in plain words once, under it.
+    for units in (STRESS_UNITS, "x toughness", "unit vector"):
+        assert any(ln.startswith(units.split(" (")[0] + ":") for ln in text.splitlines()), units
+    assert "not pascals" in text and "1 or more cracks" in text
+    # A crack master has none of those units: no notes.
+    lines = cli(str(d / "a_cracks.exr")).stdout.splitlines()
+    assert len(lines) == 2 + 4
+
+
+def test_strokes_stay_off_the_gutters(run_files, tmp_path):
+    _, _, fields = run_files
+    # Texel columns from 78 on are gutter: crackbake writes no direction (0, 0) there.  The
+    # stroke centred at picture column 232 (texel 77) would reach column 238 (texel 79).
+    g = 78
+    f = {k: v.copy() for k, v in fields["stress0"].items()}
+    f["dir"][:, g:] = 0
+    path = tmp_path / "g_stress.exr"
+    write_exr(path, stress_planes({"stress0": f, "stress": fields["stress"]}),
+              stress_attributes("t", units="Pa"))  # fmt: skip
+    out = tmp_path / "pics"
+    assert cli(str(path), "--png", str(out)).returncode == 0
+    strokes, base = _rgb(out / "stress0_p1_dir.png"), _rgb(out / "stress0_p1.png")
+    ink = np.any(strokes != base, axis=2)
+    scale = 3
+    assert ink[:, : g * scale].sum() > 100  # strokes on the island
+    assert ink[:, 232 - 8 : g * scale].any()  # the last column of strokes, cut at the edge
+    assert not ink[:, g * scale :].any()  # none on the gutter, not even stroke ends

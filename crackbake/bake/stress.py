@@ -20,7 +20,8 @@ final sim mesh (:func:`at_points`).  Per texel::
 i.e. the frame engines decode tangent-space normal maps in (MikkTSpace ``T``, ``B = w N x T``),
 orthonormalised.  Components: ``xx = e1.S.e1``, ``yy = e2.S.e2``, ``xy = e1.S.e2``; principal
 values ``p1 >= p2`` and the unit direction of ``p1`` as ``(cos a, sin a)`` in ``(e1, e2)``,
-``a`` in (-90, 90] degrees (a direction is only defined up to sign; isotropic texels get (1, 0)).
+``a`` in (-90, 90] degrees (a direction is only defined up to sign; texels without one, no
+stress or the same in every direction, and the gutters between islands get (0, 0)).
 
 Units: the solver's stress units, i.e. the stress sources' *strength* (every source is linear in
 its strength, which is the principal stress it adds; crackbake/simulate/stress/sources.py).
@@ -321,7 +322,8 @@ def _fill_principal(source, xx, yy, xy, sep, p1, p2, dx, dy):
     so that it vectorises (3x faster than with branches): every texel is written, island texels
     with their own value (their source is themselves), so concurrent reads of them see the same
     bits.  Half-angle formulas (cos 2a = h / r, sin 2a = xy / r) need no trigonometry;
-    isotropic texels (r = 0) get (1, 0).
+    texels with no direction (r = 0: no stress, or the same in every direction) and gutter
+    texels (no surface) get (0, 0); the other channels are filled from the nearest island.
     """
     one = np.float32(1.0)
     half_ = np.float32(0.5)
@@ -343,11 +345,13 @@ def _fill_principal(source, xx, yy, xy, sep, p1, p2, dx, dy):
         r = np.sqrt(h * h + b * b)
         p1[i] = mean + r
         p2[i] = mean - r
-        c2 = h / r if r > 0 else one
+        # No direction where the stress has none, nor in the gutters (no surface there).
+        has = (r > 0) & (j == i)
+        c2 = h / r if has else one
         cx = np.sqrt(max(half_ * (one + c2), zero))
         sy = np.sqrt(max(half_ * (one - c2), zero))
-        dx[i] = cx
-        dy[i] = sy if b >= 0 else -sy
+        dx[i] = cx if has else zero
+        dy[i] = (sy if b >= 0 else -sy) if has else zero
 
 
 def _principal_maps(planes: dict[str, np.ndarray], name: str, res: int,

@@ -130,7 +130,41 @@ def format_table(info: Inspection) -> str:
     lines += [
         "  ".join(t.ljust(wd) for t, wd in zip(r, widths, strict=True)).rstrip() for r in rows
     ]
+    notes = _notes(info)
+    if notes:
+        lines += ["", *notes]
     return "\n".join(lines)
+
+
+#: Plain words for the units the table shows (crackbake's own EXRs), keyed by units text.
+UNITS_TEXT = {
+    "source strength (relative)": (
+        "source strength: relative stress, not pascals: 1 is the stress a source of strength 1 "
+        "(--impact, --direction, --shrink) adds; tension > 0, compression < 0"
+    ),
+    "x toughness": (
+        "x toughness: how close the material is to cracking: the stress that pulls it apart "
+        "divided by its toughness; 1 or more cracks"
+    ),
+    "unit vector": (
+        "unit vector: the direction of p1 (the largest stress) along the texture's T (+u) and "
+        "B (+v); 0, 0 where there is none (no stress, or the same every way, and the gutters)"
+    ),
+}
+
+
+def _notes(info: Inspection) -> list[str]:
+    """Lines under the table: what the stress fields are and what their units mean."""
+    layers = {c.layer.split(".", 1)[0] for c in info.channels if c.layer}
+    notes = []
+    if {"stress0", "stress"} & layers:
+        notes.append(
+            "stress0 is the initial stress field (before any crack), stress the final one "
+            "(after the last crack: what the cracks left)"
+        )
+    for units in dict.fromkeys(c.units for c in info.channels if c.units in UNITS_TEXT):
+        notes.append(UNITS_TEXT[units])
+    return notes
 
 
 # ---------------------------------------------------------------------------------- pictures
@@ -214,9 +248,12 @@ def _strokes(rgb: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
     py = np.rint(cy - t * uy).astype(np.intp).clip(0, h - 1)
     # Black strokes on light colours, white on dark ones (deep red/blue of strong stress).
     lum = rgb[cy, cx] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-    ink = np.where(lum < 0.35, 1.0, 0.0).astype(np.float32)
+    ink = np.broadcast_to(np.where(lum < 0.35, 1.0, 0.0).astype(np.float32), py.shape)
+    # Only over texels that have a direction: a stroke near an island's edge stops there
+    # instead of running on over the gutter (crackbake writes (0, 0) there).
+    on = (dx[py, px] != 0) | (dy[py, px] != 0)
     out = rgb.copy()
-    out[py, px] = np.broadcast_to(ink, py.shape)[..., None]
+    out[py[on], px[on]] = ink[on][..., None]
     return out
 
 

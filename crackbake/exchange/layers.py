@@ -132,7 +132,8 @@ STRESS_COMPONENTS: dict[str, tuple[tuple[str, ...], str, str, str]] = {
     "p2": (("V",), "value", "signed, <= p1", "smallest principal stress"),
     "dir": (
         ("X", "Y"), "vector", "-1..1",
-        "unit direction of p1 in (T, B) components (a line: its sign is arbitrary)",
+        "unit direction of p1 in (T, B) components (a line: its sign is arbitrary); 0, 0 where "
+        "the stress has no direction (none, or the same every way)",
     ),
     "sep": (("V",), "value", ">= 0", "separation that drives cracking / toughness (>= 1 fails)"),
 }  # fmt: skip
