@@ -303,3 +303,87 @@ def test_decal_normal_is_in_the_projector_frame(gl_ctx):
     tilted = np.linalg.norm(expected[..., :2], axis=-1) > 0.05
     assert tilted.sum() > 50
     np.testing.assert_allclose(dec.normal, expected, atol=2e-3)
+
+
+def _slab(gap: float = 0.01):
+    """A unit square facing +z at z = 0 over a second facing -z at z = -gap (a thin ear or a
+    sheet: two faces ``gap`` apart), 8 x 8 quads each."""
+    n = 8
+    g = np.linspace(0.0, 1.0, n + 1)
+    xx, yy = np.meshgrid(g, g)
+    top = np.c_[xx.ravel(), yy.ravel(), np.zeros(xx.size)]
+    idx = np.arange(xx.size).reshape(n + 1, n + 1)
+    a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    c, d = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    f_top = np.r_[np.c_[a, b, c], np.c_[a, c, d]]  # counter-clockwise from +z
+    v = np.r_[top, top - [0, 0, gap]]
+    f = np.r_[f_top, f_top[:, [0, 2, 1]] + len(top)]  # the back faces -z
+    return v, f.astype(np.int64)
+
+
+def test_a_decal_on_a_thin_slab_reaches_only_the_front(gl_ctx, tmp_path):
+    v, f = _slab(0.01)
+    size = 0.8  # the old box: 2.5 % of 0.8 = 0.02 each side, the back face inside it
+    proj = make_projector(v, f, np.array([0.5, 0.5, 0.05]), size)
+    np.testing.assert_allclose(proj.axes[2], [0, 0, 1], atol=1e-9)
+    local = proj.to_local(v)
+    front, back = local[: len(v) // 2], local[len(v) // 2 :]
+    # The box holds the front (flat: z = 0) and stops halfway to the back, 0.01 behind.
+    assert proj.depth / 2 == pytest.approx(0.005, rel=1e-6)
+    assert (np.abs(front[:, 2]) <= proj.depth / 2).all()
+    assert (np.abs(back[:, 2]) > proj.depth / 2).all()
+    # Each engine's box too: the back face's points, inside the footprint, lie outside it
+    # (the Godot block: local +Y towards the projector, size (w, d, h)).
+    block = engine_blocks(proj)["godot"]
+    basis = np.array(block["basis_columns"]).T
+    inner = np.abs(back[:, :2]).max(axis=1) < size / 2
+    pts = v[len(v) // 2 :][inner]
+    y = (pts - np.array(block["origin"])) @ basis[:, 1] / np.linalg.norm(basis[:, 1])
+    assert (np.abs(y) > block["size"][1] / 2).all()
+    # The bake itself keeps the first surface: the decal shows the front's crack.
+    crack = Crack(id=0, points=np.array([[0.2, 0.5, 0.0], [0.8, 0.5, 0.0]]),
+                  faces=np.zeros(2, int), time=np.zeros(2), width=np.full(2, 0.02),
+                  depth=np.full(2, 0.01))  # fmt: skip
+    dec = bake_decal(v, f, segments(CrackNetwork(cracks=[crack], mesh={})), proj, 128, 0.05,
+                     ctx=gl_ctx)  # fmt: skip
+    assert dec.mask.max() > 0.9 and dec.inside.all()
+
+
+def _tilted_plane(angle_deg: float):
+    """A 1 x 1 plane through the origin, its normal tilted ``angle_deg`` from +z about x, and
+    a crack across it along x (two triangles, subdivided for the bake's footprints)."""
+    n = 16
+    g = np.linspace(-0.5, 0.5, n + 1)
+    xx, yy = np.meshgrid(g, g)
+    a = np.radians(angle_deg)
+    v = np.c_[xx.ravel(), yy.ravel() * np.cos(a), yy.ravel() * np.sin(a)]
+    idx = np.arange(xx.size).reshape(n + 1, n + 1)
+    p, q = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    r, s = idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    f = np.r_[np.c_[p, q, r], np.c_[p, r, s]].astype(np.int64)
+    crack = Crack(id=0, points=np.array([[-0.4, 0.0, 0.0], [0.4, 0.0, 0.0]]),
+                  faces=np.zeros(2, int), time=np.zeros(2), width=np.full(2, 0.01),
+                  depth=np.full(2, 0.005))  # fmt: skip
+    return v, f, segments(CrackNetwork(cracks=[crack], mesh={}))
+
+
+def test_decals_fade_with_the_angle_to_the_projector(gl_ctx):
+    from crackbake.bake.decal import ANGLE_FADE_DEG, Projector, angle_fade_image
+
+    lo, hi = (np.cos(np.radians(a)) for a in ANGLE_FADE_DEG[::-1])
+    peak = {}
+    for angle in (0.0, 40.0, 70.0, 85.0):
+        v, f, seg = _tilted_plane(angle)
+        proj = Projector(matrix=np.eye(4), width=1.0, height=1.0, depth=1.2)  # looks along -z
+        fade = angle_fade_image(v, f, proj, 64, ctx=gl_ctx)
+        t = np.clip((np.cos(np.radians(angle)) - lo) / (hi - lo), 0, 1)
+        want = t * t * (3 - 2 * t)  # smoothstep, as engines' angle fade
+        rows = np.abs(np.linspace(0.5, -0.5, 64) + 0.5 / 64) < 0.45 * np.cos(np.radians(angle))
+        np.testing.assert_allclose(fade[rows], want, atol=2e-3)
+        dec = bake_decal(v, f, seg, proj, 128, 0.05, ctx=gl_ctx)
+        raw = bake_decal(v, f, seg, proj, 128, 0.05, ctx=gl_ctx, angle_fade=None)
+        peak[angle] = (float(dec.mask.max()), float(raw.mask.max()))
+        assert peak[angle][0] == pytest.approx(want * peak[angle][1], abs=0.01)
+    # Face on and at 40 degrees: untouched; at 85 degrees (the dashed streaks): gone.
+    assert peak[0.0][0] == peak[0.0][1] > 0.5 and peak[40.0][0] == peak[40.0][1]
+    assert peak[85.0][0] == 0.0 and peak[85.0][1] >= 0.3

@@ -16,12 +16,13 @@ image covers ``x = (col + 0.5) / res * w - w/2``, ``y = h/2 - (row + 0.5) / res 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from crackbake.bake.raster import CrackMaps, bake_cracks
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import closest_on_triangles, face_areas, face_normals
 from crackbake.network import Segments
 from crackbake.params import MIN_PX_DEFAULT
@@ -32,6 +33,15 @@ DEPTH_MARGIN = 0.025
 NORMAL_RADIUS = 0.125
 #: Texels of gutter fill around the surface seen in the decal (bilinear filtering, mip-maps).
 DECAL_DILATE_PX = 4
+#: Angle fade (degrees between the surface normal and the projector's axis): the decal is baked
+#: at full strength up to the first angle and fades out (smoothstep) by the second, as engines'
+#: angle fade does (Unity's DecalProjector start/end angle fade, Godot's normal fade).  Beyond
+#: about 70 degrees one decal texel spans several texel widths of surface, and its cracks turn
+#: into blocky dashed streaks.
+ANGLE_FADE_DEG = (60.0, 80.0)
+#: The box stops this share of the way from the surface under the decal to the next surface
+#: behind (or in front of) it along the projection, so an engine paints only the first surface.
+SECOND_SURFACE_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -122,6 +132,9 @@ def make_projector(
     centre = closest[hit]
     normals = face_normals(vertices, faces)
     near = np.linalg.norm(closest - centre, axis=1) <= NORMAL_RADIUS * size
+    # Only the side the impact is on: the far side of a thin ear or sheet lies near too, and
+    # its opposite normals would cancel the average.
+    near &= normals @ normals[hit] > 0
     near[hit] = True
     n = (normals[near] * face_areas(vertices, faces)[near, None]).sum(0)
     if not np.linalg.norm(n) > 0:
@@ -130,8 +143,22 @@ def make_projector(
             "move the impact onto a face with area"
         )
     axes = _frame(n)
-    half = _surface_half_depth(vertices, faces, normals, axes, centre, size, hit)
-    depth = 2.0 * (half * 1.05 + DEPTH_MARGIN * size)
+    half, own = _surface_half_depth(vertices, faces, normals, axes, centre, size, hit)
+    reach = half * 1.05 + DEPTH_MARGIN * size
+    other = _other_surface_depth(vertices, faces, own, axes, centre, size)
+    if other < reach:
+        # Another surface (the far side of a thin ear, a wall behind) lies inside the box an
+        # engine projects through: stop the box between the two.
+        reach = half + SECOND_SURFACE_SHARE * (other - half)
+        if other <= half * 1.0001:
+            warnings.warn(
+                f"the decal at {tuple(np.round(centre, 6))} cannot hold the surface under it "
+                f"(reaching {half:.4g} deep) without reaching another surface {other:.4g} "
+                "behind or in front of it, which engines will paint too; use a smaller --decal",
+                CrackbakeWarning,
+                stacklevel=2,
+            )
+    depth = 2.0 * reach
     matrix = np.eye(4)
     matrix[:3, :3] = axes.T
     matrix[:3, 3] = centre
@@ -158,7 +185,47 @@ def _surface_half_depth(vertices, faces, normals, axes, centre, size, hit) -> fl
     inc = coo_matrix((np.ones(rows.size), (rows, sub.ravel())), shape=(len(idx), len(vertices)))
     _, label = connected_components((inc @ inc.T).tocsr(), directed=False)
     own = label == label[int(np.searchsorted(idx, hit))]
-    return float(np.abs(local[sub[own].ravel(), 2]).max())
+    return float(np.abs(local[sub[own].ravel(), 2]).max()), idx[own]
+
+
+def _other_surface_depth(vertices, faces, own, axes, centre, size) -> float:
+    """Nearest |local z| of any surface inside the footprint other than the decal's own
+    (``own``: the faces :func:`_surface_half_depth` measured), mesh units; inf when none.
+
+    The nearest hit along the projection per point of a 64 x 64 grid over the footprint (a
+    depth pre-pass in the projector's view, both facings): a hit on a face outside ``own``
+    counts, as an engine would paint it if the box reached it.
+    """
+    local = (vertices - centre) @ axes.T
+    half = 0.5 * size
+    tri = local[faces]
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    inside = (lo[:, 0] <= half) & (hi[:, 0] >= -half) & (lo[:, 1] <= half) & (hi[:, 1] >= -half)
+    inside[own] = False
+    cand = np.flatnonzero(inside)
+    if len(cand) == 0:
+        return float("inf")
+    g = (np.arange(64) + 0.5) / 64 * size - half
+    px, py = (a.ravel() for a in np.meshgrid(g, g))
+    best = np.inf
+    for chunk in np.array_split(cand, max(1, len(cand) // 256)):  # 256 x 4096 per round
+        a, b, c = (tri[chunk, k] for k in range(3))
+        # 2-D barycentrics of every grid point in every candidate face (orthographic rays).
+        d = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
+        ok = np.abs(d) > 1e-300
+        a, b, c, d = a[ok], b[ok], c[ok], d[ok]
+        if len(d) == 0:
+            continue
+        w0 = ((b[:, 1, None] - c[:, 1, None]) * (px - c[:, 0, None])
+              + (c[:, 0, None] - b[:, 0, None]) * (py - c[:, 1, None])) / d[:, None]
+        w1 = ((c[:, 1, None] - a[:, 1, None]) * (px - c[:, 0, None])
+              + (a[:, 0, None] - c[:, 0, None]) * (py - c[:, 1, None])) / d[:, None]
+        w2 = 1.0 - w0 - w1
+        hit = (w0 >= 0) & (w1 >= 0) & (w2 >= 0)
+        z = np.abs(w0 * a[:, 2, None] + w1 * b[:, 2, None] + w2 * c[:, 2, None])
+        if hit.any():
+            best = min(best, float(z[hit].min()))
+    return best
 
 
 def decal_faces(vertices: np.ndarray, faces: np.ndarray, projector: Projector) -> np.ndarray:
@@ -183,6 +250,7 @@ def bake_decal(
     tile: int | None = None,
     ctx=None,
     min_px: float = MIN_PX_DEFAULT,
+    angle_fade: tuple[float, float] | None = ANGLE_FADE_DEG,
 ) -> CrackMaps:
     """Bake the crack network as the projector sees it: the decal texture set.
 
@@ -204,6 +272,9 @@ def bake_decal(
     ctx : moderngl.Context, optional
     min_px : float
         Least drawn crack width in decal texels (``bake_cracks``).
+    angle_fade : (float, float) or None
+        Start and end of the angle fade, degrees between the surface normal and the
+        projector's axis (:data:`ANGLE_FADE_DEG`; :func:`angle_fade_image`); None: no fade.
 
     Returns
     -------
@@ -224,11 +295,71 @@ def bake_decal(
     tangents[:, :3] = projector.axes[0]
     tangents[:, 3] = 1.0  # B = cross(N, T) = +Y, image up
     extra = {} if tile is None else {"tile": tile}
-    return bake_cracks(
+    maps = bake_cracks(
         vertices, sub, placement, segments, res, max_distance=max_distance,
         profile_shape=profile_shape, dilate_px=DECAL_DILATE_PX, ctx=ctx, normals=normals,
         tangents=tangents, projection=clip, min_px=min_px, **extra,
     )  # fmt: skip
+    if angle_fade is not None:
+        fade_maps(maps, angle_fade_image(vertices, sub, projector, res, angle_fade, ctx))
+    return maps
+
+
+def angle_fade_image(vertices: np.ndarray, faces: np.ndarray, projector: Projector, res: int,
+                     angles: tuple[float, float] = ANGLE_FADE_DEG, ctx=None) -> np.ndarray:
+    """Per decal texel, the angle fade of the surface nearest the projector there, (res, res)
+    float32 in [0, 1], row 0 = top: 1 where the surface normal lies within ``angles[0]``
+    degrees of the projector's axis, 0 beyond ``angles[1]``, smoothstep between (1 where no
+    surface is drawn).  The faces are drawn as the decal bake draws them (depth-tested)."""
+    import moderngl
+
+    from crackbake.bake.context import GLScope, shader_source
+
+    start, end = (float(a) for a in angles)
+    if not 0.0 <= start < end <= 180.0:
+        raise CrackbakeError(f"angle fade {start:g}..{end:g} degrees must rise within 0..180")
+    vbo_data = np.ascontiguousarray(vertices, np.float32)
+    with GLScope(ctx) as gl:
+        c = gl.ctx
+        prog = gl.keep(c.program(vertex_shader=shader_source("decal_project.vert"),
+                                 fragment_shader=shader_source("decal_facing.frag")))
+        vbo = gl.keep(c.buffer(vbo_data))
+        ibo = gl.keep(c.buffer(np.ascontiguousarray(faces, np.uint32)))
+        vao = gl.keep(c.vertex_array(prog, [(vbo, "3f", "in_pos")], index_buffer=ibo,
+                                     index_element_size=4))
+        prog["u_projection"].write(np.asarray(projector.clip_matrix(), np.float32).T.tobytes())
+        prog["u_res"].value = float(res)
+        prog["u_tile"].value = (0.0, 0.0, float(res), float(res))
+        prog["u_axis"].value = tuple(float(x) for x in projector.axes[2])
+        prog["u_cos"].value = (float(np.cos(np.radians(start))), float(np.cos(np.radians(end))))
+        target = gl.keep(c.texture((res, res), 1, dtype="f4"))
+        depth = gl.keep(c.depth_renderbuffer((res, res)))
+        fbo = gl.keep(c.framebuffer(color_attachments=[target], depth_attachment=depth))
+        fbo.use()
+        c.viewport = (0, 0, res, res)
+        fbo.clear(1.0, 1.0, 1.0, 1.0, depth=1.0)
+        c.enable_only(moderngl.DEPTH_TEST)
+        vao.render(moderngl.TRIANGLES)
+        out = np.empty((res, res), np.float32)
+        fbo.read_into(out, components=1, dtype="f4")
+    return out
+
+
+def fade_maps(maps: CrackMaps, fade: np.ndarray) -> None:
+    """Fade a decal's crack channels in place by ``fade`` (res, res): the coverage, the depth
+    and the normal's and occlusion's departure from flat and open shrink with it (the width,
+    time, id and distance channels describe the crack, not how it shows, and stay)."""
+    part = fade < 1.0  # texels at full strength keep their exact values
+    f = np.clip(fade[part], 0.0, 1.0)
+    maps.mask[part] = (maps.mask[part].astype(np.float32) * f).astype(maps.mask.dtype)
+    maps.depth[part] = maps.depth[part] * f
+    if maps.occlusion is not None:
+        occ = maps.occlusion[part].astype(np.float32)
+        maps.occlusion[part] = (1.0 - (1.0 - occ) * f).astype(maps.occlusion.dtype)
+    if maps.normal is not None:
+        n = maps.normal[part] * f[:, None]
+        n[:, 2] += 1.0 - f
+        maps.normal[part] = n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
 def bake_decals(uvmesh, segs: Segments, maps: CrackMaps, impacts, size: float, res: int,
