@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crackbake.bake.decal import Projector
+from crackbake.bake.decal import ANGLE_FADE_DEG, Projector
 from crackbake.bake.raster import CrackMaps
 from crackbake.exchange.pngenc import png_bytes, write_bytes
 from crackbake.exchange.targets import data_scales, pack, quantise
@@ -120,6 +120,9 @@ def engine_blocks(p: Projector) -> dict:
                 "pivot": [0.0, 0.0, 0.5 * d * scale],
                 "uv_scale": [1.0, 1.0],
                 "uv_bias": [0.0, 0.0],
+                # The fade the decal was baked with, so the surfaces beyond it get none either.
+                "start_angle_fade": ANGLE_FADE_DEG[0],
+                "end_angle_fade": ANGLE_FADE_DEG[1],
             })  # fmt: skip
         elif engine == "unreal":
             block.update({
@@ -188,6 +191,7 @@ def write_decal_set(
             "resolution": int(maps.res),
             "files": files,
             "height_scale": float(scale),
+            "angle_fade_deg": list(ANGLE_FADE_DEG),
             "engines": engine_blocks(proj),
         })  # fmt: skip
     doc = manifest(entries, normal_y)
