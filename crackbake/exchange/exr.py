@@ -16,6 +16,7 @@ import os
 import numpy as np
 
 from crackbake.errors import CrackbakeError
+from crackbake.io.safe_open import check_regular
 
 PathLike = str | os.PathLike
 
@@ -185,6 +186,7 @@ def read_exr(path: PathLike) -> tuple[dict[str, np.ndarray], dict]:
     import OpenEXR
 
     try:
+        check_regular(path)  # OpenEXR would block on a FIFO forever
         with OpenEXR.File(os.fspath(path), separate_channels=True) as f:
             part = f.parts[0]
             channels = {name: np.asarray(ch.pixels) for name, ch in part.channels.items()}

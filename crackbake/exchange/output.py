@@ -20,13 +20,14 @@ from crackbake.exchange.outdir import (
     swap_in,
     target_dir,
 )
+from crackbake.io.safe_open import open_regular
 
 PathLike = str | os.PathLike
 
 
 def sha256_file(path: PathLike) -> str:
     """Hex SHA-256 of a file's bytes, read in chunks (no whole-file copy in memory)."""
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
