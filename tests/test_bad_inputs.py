@@ -88,6 +88,52 @@ def _inputs(folder: Path) -> None:
     (folder / "noext").write_text(PLATE)
     (folder / "not_an_image.png").write_text("not a png")
     (folder / "maps").mkdir()
+    (folder / "album").mkdir()
+    (folder / "album" / "photo.jpg").write_bytes(b"\xff\xd8 a photo")
+    _exr_inputs(folder)
+    _gltf_inputs(folder)
+
+
+def _exr_inputs(folder: Path) -> None:
+    """good.exr, trunc.exr (its first half) and huge.exr (a 60001^2 data window declared)."""
+    import struct
+
+    from crackbake.exchange.exr import write_exr
+
+    ramp = np.linspace(0, 1, 64 * 64, dtype=np.float32).reshape(64, 64)
+    write_exr(folder / "good.exr", {"R": ramp, "G": ramp})
+    data = (folder / "good.exr").read_bytes()
+    (folder / "trunc.exr").write_bytes(data[: len(data) // 2])
+    at = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4  # after the size
+    assert struct.unpack_from("<4i", data, at) == (0, 0, 63, 63)
+    huge = bytearray(data)
+    struct.pack_into("<4i", huge, at, 0, 0, 60000, 60000)
+    (folder / "huge.exr").write_bytes(bytes(huge))
+
+
+def _gltf_inputs(folder: Path) -> None:
+    """The plate as glTF with its first buffer renamed: zerobuf.gltf names zero.bin (a link to
+    /dev/zero, made per case), upbuf.gltf a real buffer outside its folder (a name not beside
+    the mesh: trimesh's resolver also tries the bare file name there)."""
+    import trimesh
+
+    files = trimesh.load(folder / "plate.obj", process=False).export(file_type="gltf")
+    doc = json.loads(files.pop("model.gltf"))
+    for name, blob in files.items():
+        (folder / name).write_bytes(blob)
+    (folder / "sub").mkdir()
+    (folder / "sub" / "outside.bin").write_bytes(files[doc["buffers"][0]["uri"]])
+    for stem, uri in (("zerobuf", "zero.bin"), ("upbuf", "../_inputs/sub/outside.bin")):
+        doc["buffers"][0]["uri"] = uri
+        (folder / f"{stem}.gltf").write_text(json.dumps(doc))
+
+
+def _specials(folder: Path) -> None:
+    """FIFOs and links to /dev/zero, made in each case's folder (copying them would block)."""
+    for name in ("pipe.obj", "pipe.json", "pipe.png", "pipe.exr"):
+        os.mkfifo(folder / name)
+    for name in ("zero.obj", "zero.json", "zero.bin"):
+        (folder / name).symlink_to("/dev/zero")
 
 
 IMPACT = "0.5,0.5,0.05"
@@ -178,6 +224,32 @@ CASES: list[tuple[str, list[str], str]] = [
      "negative width (-5); width must be >= 0"),
     ("sidecar other mesh", ["plate.obj", "--cracks", "other_mesh.json"],
      "bake it on the mesh it was made for"),
+    # --- files that are not regular files, files outside the mesh's folder (issue 19 §2) ---
+    ("mesh fifo", ["pipe.obj", "--shrink", "1"],
+     "pipe.obj: is a FIFO (named pipe), not a regular file"),
+    ("mesh dev zero via symlink", ["zero.obj", "--shrink", "1"],
+     "zero.obj: is a character device, not a regular file"),
+    ("sidecar fifo", ["plate.obj", "--cracks", "pipe.json"], "pipe.json: is a FIFO"),
+    ("sidecar dev zero via symlink", ["plate.obj", "--cracks", "zero.json"],
+     "zero.json: is a character device"),
+    ("weight map fifo", ["plate.obj", "--shrink", "1", "--weight-map", "pipe.png"],
+     "--weight-map pipe.png: is a FIFO"),
+    ("gltf buffer dev zero", ["zerobuf.gltf", "--shrink", "1", "--allow-outside-textures"],
+     "zerobuf.gltf: 'zero.bin': is a character device"),
+    ("gltf buffer outside its folder", ["upbuf.gltf", "--shrink", "1"],
+     "upbuf.gltf: names '../_inputs/sub/outside.bin', which lies outside the mesh's folder; "
+     "move it beside the mesh or pass --allow-outside-textures"),
+    ("gltf buffer dev zero outside", ["zerobuf.gltf", "--shrink", "1"],
+     "names 'zero.bin', which lies outside the mesh's folder"),
+    # --- crackbake inspect (issue 19 §3) ---
+    ("inspect truncated exr", ["inspect", "trunc.exr"], "cannot read EXR 'trunc.exr': "),
+    ("inspect huge data window", ["inspect", "huge.exr"],
+     "cannot read EXR 'huge.exr': its data window is 60001x60001 pixels"),
+    ("inspect fifo", ["inspect", "pipe.exr"], "pipe.exr: is a FIFO"),
+    ("inspect png dev null", ["inspect", "good.exr", "--png", "/dev/null"],
+     "output '/dev/null' exists and is not a folder; choose a folder with --png"),
+    ("inspect png user folder", ["inspect", "good.exr", "--png", "album"],
+     "output folder 'album' is not empty and has no crackbake manifest.json"),
 ]
 
 
@@ -185,16 +257,24 @@ def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
     name, args, _ = case
     folder = root / name.replace(" ", "_")
     shutil.copytree(root / "_inputs", folder)
+    _specials(folder)
     before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
     t0 = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache")}
-    r = subprocess.run(
-        [sys.executable, "-m", "crackbake", "--res", "64", "-o", "out", *args],
-        cwd=folder, capture_output=True, text=True, env=env, timeout=300,
-    )
+    common = [] if args[:1] == ["inspect"] else ["--res", "64", "-o", "out"]
+    try:
+        # A read that blocks (a FIFO) must fail the case, not hang the catalogue.
+        r = subprocess.run(
+            [sys.executable, "-m", "crackbake", *common, *args],
+            cwd=folder, capture_output=True, text=True, env=env,
+            timeout=60 if "fifo" in name else 300,
+        )
+        rc, stderr, stdout = r.returncode, r.stderr, r.stdout
+    except subprocess.TimeoutExpired as exc:
+        rc, stderr, stdout = "timed out", str(exc), ""
     after = sorted(p.relative_to(folder) for p in folder.rglob("*"))
-    return {"secs": time.perf_counter() - t0, "rc": r.returncode, "stderr": r.stderr,
-            "stdout": r.stdout, "new": [str(p) for p in after if p not in before]}
+    return {"secs": time.perf_counter() - t0, "rc": rc, "stderr": stderr,
+            "stdout": stdout, "new": [str(p) for p in after if p not in before]}
 
 
 @pytest.fixture(scope="module")
