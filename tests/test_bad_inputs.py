@@ -332,3 +332,115 @@ def test_library_params_give_the_same_plain_messages(fields, message):
     with pytest.raises(CrackbakeError, match=message) as info:
         RunParams(mesh=Path("plate.obj"), **fields).validate()
     assert "np." not in str(info.value)
+
+
+# ------------------------------------------- paths a mesh names outside its folder (issue 19 §2)
+
+def _textured(root: Path) -> dict[str, Path]:
+    """Meshes naming a red texture outside their folder (and FIFOs inside it), each with a
+    sidecar: name -> mesh path."""
+    import trimesh
+    from PIL import Image
+
+    asset, secret = root / "asset", root / "secret"
+    asset.mkdir()
+    secret.mkdir()
+    Image.new("RGB", (8, 8), (255, 0, 0)).save(secret / "red.png")
+    (secret / "x.mtl").write_text("newmtl m\nmap_Kd red.png\n")
+    mtls = {
+        "obj_absolute": f"newmtl m\nmap_Kd {secret / 'red.png'}\n",
+        "obj_dotdot": "newmtl m\nmap_Kd ../secret/red.png\n",
+        "fifo_map": "newmtl m\nmap_Kd pipe.png\n",
+    }
+    meshes = {}
+    for stem, lib in [*((s, f"{s}.mtl") for s in mtls), ("mtllib_dotdot", "../secret/x.mtl"),
+                      ("fifo_mtllib", "pipe.mtl")]:
+        (asset / f"{stem}.obj").write_text(f"mtllib {lib}\nusemtl m\n" + PLATE)
+        meshes[stem] = asset / f"{stem}.obj"
+    for stem, text in mtls.items():
+        (asset / f"{stem}.mtl").write_text(text)
+    os.mkfifo(asset / "pipe.png")
+    os.mkfifo(asset / "pipe.mtl")
+    # glTF: the plate with a green texture of its own, its image URI then pointed at red.png
+    Image.new("RGB", (8, 8), (0, 255, 0)).save(asset / "green.png")
+    (asset / "green.mtl").write_text("newmtl m\nmap_Kd green.png\n")
+    (asset / "green.obj").write_text("mtllib green.mtl\nusemtl m\n" + PLATE)
+    files = trimesh.load(asset / "green.obj", process=False).export(file_type="gltf")
+    doc = json.loads(files.pop("model.gltf"))
+    for name, blob in files.items():
+        (asset / name).write_bytes(blob)
+    doc["images"] = [{"uri": "../secret/red.png"}]
+    (asset / "gltf_uri.gltf").write_text(json.dumps(doc))
+    meshes["gltf_uri"] = asset / "gltf_uri.gltf"
+    for stem, mesh in meshes.items():
+        (asset / f"{stem}.json").write_text(json.dumps(_sidecar(mesh)))
+    return meshes
+
+
+TEXTURE_CASES = [
+    # (mesh, the path as the file names it: None for a FIFO, --allow-outside-textures)
+    ("obj_absolute", "{root}/secret/red.png", False),
+    ("obj_absolute", "{root}/secret/red.png", True),
+    ("obj_dotdot", "../secret/red.png", False),
+    ("obj_dotdot", "../secret/red.png", True),
+    ("mtllib_dotdot", "../secret/x.mtl", False),
+    ("mtllib_dotdot", "../secret/x.mtl", True),
+    ("gltf_uri", "../secret/red.png", False),
+    ("gltf_uri", "../secret/red.png", True),
+    ("fifo_map", None, False),
+    ("fifo_mtllib", None, False),
+]
+
+
+def _bake_textured(root: Path, meshes: dict, case: tuple) -> dict:
+    stem, _, allow = case
+    out = root / f"out_{stem}_{allow}"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(root / ".cache")}
+    mesh = meshes[stem]
+    args = [str(mesh), "--cracks", str(mesh.with_suffix(".json")), "--res", "64",
+            "--formats", "png", "-o", str(out), *(["--allow-outside-textures"] * allow)]
+    try:  # a FIFO must not hang the test
+        r = subprocess.run([sys.executable, "-m", "crackbake", *args], capture_output=True,
+                           text=True, env=env, timeout=120)
+    except subprocess.TimeoutExpired as exc:
+        return {"rc": "timed out", "stderr": str(exc), "colour": None}
+    colour = None
+    if r.returncode == 0:
+        from PIL import Image
+
+        with Image.open(out / f"{stem}_basecolor.png") as im:
+            colour = np.median(np.asarray(im.convert("RGB")).reshape(-1, 3), axis=0)
+    return {"rc": r.returncode, "stderr": r.stderr, "colour": colour}
+
+
+@pytest.fixture(scope="module")
+def textured(tmp_path_factory) -> tuple[Path, dict]:
+    root = tmp_path_factory.mktemp("textures")
+    meshes = _textured(root)
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        done = pool.map(lambda c: _bake_textured(root, meshes, c), TEXTURE_CASES)
+        return root, dict(zip(((c[0], c[2]) for c in TEXTURE_CASES), done, strict=True))
+
+
+@pytest.mark.parametrize(("stem", "named", "allow"), TEXTURE_CASES,
+                         ids=[f"{c[0]}{'-allowed' if c[2] else ''}" for c in TEXTURE_CASES])
+def test_textures_outside_the_mesh_folder_are_not_read(textured, stem, named, allow):
+    """Refused with one warning naming the path, the base colour grey; the flag reads it."""
+    root, results = textured
+    r = results[(stem, allow)]
+    assert r["rc"] == 0, r["stderr"]
+    warned = [ln for ln in r["stderr"].splitlines()
+              if ln.startswith("warning: ") and "base colour" in ln]
+    red, green, blue = r["colour"]
+    if allow:
+        assert not warned, warned
+        assert red > 200 and green < 60 and blue < 60, r["colour"]  # the outside red texture
+        return
+    assert len(warned) == 1, r["stderr"]
+    if named is None:
+        assert "is a FIFO (named pipe), not a regular file, so it was not read" in warned[0]
+    else:
+        path = named.format(root=root)
+        assert f"'{path}'" in warned[0] and "lies outside the mesh's folder" in warned[0]
+        assert "--allow-outside-textures" in warned[0]
+    assert abs(red - blue) < 25 and abs(red - green) < 25, r["colour"]  # grey, not red
