@@ -340,6 +340,12 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("--float", "float32", is_flag=True, help="Write every EXR channel as 32-bit float.")
 @click.option("--object", "object_name", help="Pick this object from a multi-object file.")
 @click.option(
+    "--allow-outside-textures",
+    is_flag=True,
+    help="Read the material files, textures and glTF buffers the mesh names even outside its "
+    "folder (refused by default).",
+)
+@click.option(
     "--unwrap-timeout",
     type=float,
     default=300.0,

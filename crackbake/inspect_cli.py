@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err
+from crackbake.cli import _Command, _err, reported
 from crackbake.errors import CrackbakeError
 
 
@@ -22,14 +23,53 @@ from crackbake.errors import CrackbakeError
 @click.option("--json", "as_json", is_flag=True, help="Print the table as JSON on stdout.")
 def inspect(exr: Path, png_dir: Path | None, as_json: bool) -> None:
     """Describe the channels of EXR: layer, channel, type, min/max/mean, non-zero, units."""
-    from crackbake.exchange.inspect import format_table, inspect_exr, write_pictures
+    try:  # warnings as one line each, a CrackbakeError as one line and its exit code
+        info, files = reported(lambda: _inspect(exr, png_dir), quiet=False)
+    except Exception as exc:  # a bug: one line, like the bake command
+        text = " ".join(str(exc).split())[:200]
+        _err(f"internal error: {type(exc).__name__}: {text}")
+        sys.exit(1)
+    from crackbake.exchange.inspect import format_table
 
-    try:
-        info, channels = inspect_exr(exr)
-        files = write_pictures(info, channels, png_dir) if png_dir is not None else []
-    except CrackbakeError as exc:
-        _err(f"error: {exc}")
-        sys.exit(exc.exit_code)
     click.echo(info.to_json() if as_json else format_table(info))
     if files and not as_json:
         click.echo(f"{len(files)} pictures in {png_dir}")
+
+
+def _inspect(exr: Path, png_dir: Path | None):
+    """The inspection of ``exr`` and the pictures written into ``png_dir`` (final paths).
+
+    ``png_dir`` is written like a bake's output folder (:class:`OutputStage`): the pictures and
+    a ``manifest.json`` appear at once, a folder of the user's own files is refused, symlinks
+    are never written through, and an interrupt leaves the folder as it was.
+    """
+    from crackbake.exchange.inspect import inspect_exr, write_pictures
+
+    info, channels = inspect_exr(exr)
+    if png_dir is None:
+        return info, []
+    from crackbake import __version__
+    from crackbake.exchange.interrupt import run_staged
+    from crackbake.exchange.output import OutputStage
+
+    def body() -> list[Path]:
+        written = write_pictures(info, channels, stage.staging_dir)
+        manifest = {
+            "crackbake": __version__,
+            "kind": "inspect",
+            "source": str(exr),
+            "files": stage.records(),
+        }
+        text = json.dumps(manifest, indent=2) + "\n"
+        try:
+            stage.path("manifest.json").write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise CrackbakeError(
+                f"cannot write '{png_dir}': {exc.strerror or exc}; check that the folder is "
+                "writable and has space"
+            ) from exc
+        stage.commit()
+        return [stage.final / p.name for p in written]
+
+    stage = OutputStage(png_dir, option="--png")
+    return info, run_staged(stage, body)

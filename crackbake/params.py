@@ -342,6 +342,9 @@ class RunParams:
         (:func:`crackbake.bake.preview.up_axis`).
     object_name : str or None
         Object to pick from a multi-object file.
+    allow_outside_textures : bool
+        Read the material libraries, textures and glTF buffers the mesh names even outside its
+        folder (refused with a warning by default).
     unwrap_timeout : float
         Seconds xatlas may run.
     cache : bool
@@ -393,6 +396,7 @@ class RunParams:
     normal_y: str | None = None
     up: str | None = None
     object_name: str | None = None
+    allow_outside_textures: bool = False
     unwrap_timeout: float = 300.0
     cache: bool = True
     tile: int = TILE_DEFAULT

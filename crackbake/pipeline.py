@@ -133,7 +133,7 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
 
     logger.info("loading %s", params.mesh)
     t = time.perf_counter()
-    mesh = load_mesh(params.mesh, params.object_name)
+    mesh = load_mesh(params.mesh, params.object_name, params.allow_outside_textures)
     timings["load"] = time.perf_counter() - t
     check_scale(mesh)  # before any work: the float32 bake cannot resolve extreme scales
 

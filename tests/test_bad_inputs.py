@@ -88,6 +88,52 @@ def _inputs(folder: Path) -> None:
     (folder / "noext").write_text(PLATE)
     (folder / "not_an_image.png").write_text("not a png")
     (folder / "maps").mkdir()
+    (folder / "album").mkdir()
+    (folder / "album" / "photo.jpg").write_bytes(b"\xff\xd8 a photo")
+    _exr_inputs(folder)
+    _gltf_inputs(folder)
+
+
+def _exr_inputs(folder: Path) -> None:
+    """good.exr, trunc.exr (its first half) and huge.exr (a 60001^2 data window declared)."""
+    import struct
+
+    from crackbake.exchange.exr import write_exr
+
+    ramp = np.linspace(0, 1, 64 * 64, dtype=np.float32).reshape(64, 64)
+    write_exr(folder / "good.exr", {"R": ramp, "G": ramp})
+    data = (folder / "good.exr").read_bytes()
+    (folder / "trunc.exr").write_bytes(data[: len(data) // 2])
+    at = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4  # after the size
+    assert struct.unpack_from("<4i", data, at) == (0, 0, 63, 63)
+    huge = bytearray(data)
+    struct.pack_into("<4i", huge, at, 0, 0, 60000, 60000)
+    (folder / "huge.exr").write_bytes(bytes(huge))
+
+
+def _gltf_inputs(folder: Path) -> None:
+    """The plate as glTF with its first buffer renamed: zerobuf.gltf names zero.bin (a link to
+    /dev/zero, made per case), upbuf.gltf a real buffer outside its folder (a name not beside
+    the mesh: trimesh's resolver also tries the bare file name there)."""
+    import trimesh
+
+    files = trimesh.load(folder / "plate.obj", process=False).export(file_type="gltf")
+    doc = json.loads(files.pop("model.gltf"))
+    for name, blob in files.items():
+        (folder / name).write_bytes(blob)
+    (folder / "sub").mkdir()
+    (folder / "sub" / "outside.bin").write_bytes(files[doc["buffers"][0]["uri"]])
+    for stem, uri in (("zerobuf", "zero.bin"), ("upbuf", "../_inputs/sub/outside.bin")):
+        doc["buffers"][0]["uri"] = uri
+        (folder / f"{stem}.gltf").write_text(json.dumps(doc))
+
+
+def _specials(folder: Path) -> None:
+    """FIFOs and links to /dev/zero, made in each case's folder (copying them would block)."""
+    for name in ("pipe.obj", "pipe.json", "pipe.png", "pipe.exr"):
+        os.mkfifo(folder / name)
+    for name in ("zero.obj", "zero.json", "zero.bin"):
+        (folder / name).symlink_to("/dev/zero")
 
 
 IMPACT = "0.5,0.5,0.05"
@@ -178,6 +224,32 @@ CASES: list[tuple[str, list[str], str]] = [
      "negative width (-5); width must be >= 0"),
     ("sidecar other mesh", ["plate.obj", "--cracks", "other_mesh.json"],
      "bake it on the mesh it was made for"),
+    # --- files that are not regular files, files outside the mesh's folder (issue 19 §2) ---
+    ("mesh fifo", ["pipe.obj", "--shrink", "1"],
+     "pipe.obj: is a FIFO (named pipe), not a regular file"),
+    ("mesh dev zero via symlink", ["zero.obj", "--shrink", "1"],
+     "zero.obj: is a character device, not a regular file"),
+    ("sidecar fifo", ["plate.obj", "--cracks", "pipe.json"], "pipe.json: is a FIFO"),
+    ("sidecar dev zero via symlink", ["plate.obj", "--cracks", "zero.json"],
+     "zero.json: is a character device"),
+    ("weight map fifo", ["plate.obj", "--shrink", "1", "--weight-map", "pipe.png"],
+     "--weight-map pipe.png: is a FIFO"),
+    ("gltf buffer dev zero", ["zerobuf.gltf", "--shrink", "1", "--allow-outside-textures"],
+     "zerobuf.gltf: 'zero.bin': is a character device"),
+    ("gltf buffer outside its folder", ["upbuf.gltf", "--shrink", "1"],
+     "upbuf.gltf: names '../_inputs/sub/outside.bin', which lies outside the mesh's folder; "
+     "move it beside the mesh or pass --allow-outside-textures"),
+    ("gltf buffer dev zero outside", ["zerobuf.gltf", "--shrink", "1"],
+     "names 'zero.bin', which lies outside the mesh's folder"),
+    # --- crackbake inspect (issue 19 §3) ---
+    ("inspect truncated exr", ["inspect", "trunc.exr"], "cannot read EXR 'trunc.exr': "),
+    ("inspect huge data window", ["inspect", "huge.exr"],
+     "cannot read EXR 'huge.exr': its data window is 60001x60001 pixels"),
+    ("inspect fifo", ["inspect", "pipe.exr"], "pipe.exr: is a FIFO"),
+    ("inspect png dev null", ["inspect", "good.exr", "--png", "/dev/null"],
+     "output '/dev/null' exists and is not a folder; choose a folder with --png"),
+    ("inspect png user folder", ["inspect", "good.exr", "--png", "album"],
+     "output folder 'album' is not empty and has no crackbake manifest.json"),
 ]
 
 
@@ -185,16 +257,24 @@ def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
     name, args, _ = case
     folder = root / name.replace(" ", "_")
     shutil.copytree(root / "_inputs", folder)
+    _specials(folder)
     before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
     t0 = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache")}
-    r = subprocess.run(
-        [sys.executable, "-m", "crackbake", "--res", "64", "-o", "out", *args],
-        cwd=folder, capture_output=True, text=True, env=env, timeout=300,
-    )
+    common = [] if args[:1] == ["inspect"] else ["--res", "64", "-o", "out"]
+    try:
+        # A read that blocks (a FIFO) must fail the case, not hang the catalogue.
+        r = subprocess.run(
+            [sys.executable, "-m", "crackbake", *common, *args],
+            cwd=folder, capture_output=True, text=True, env=env,
+            timeout=60 if "fifo" in name else 300,
+        )
+        rc, stderr, stdout = r.returncode, r.stderr, r.stdout
+    except subprocess.TimeoutExpired as exc:
+        rc, stderr, stdout = "timed out", str(exc), ""
     after = sorted(p.relative_to(folder) for p in folder.rglob("*"))
-    return {"secs": time.perf_counter() - t0, "rc": r.returncode, "stderr": r.stderr,
-            "stdout": r.stdout, "new": [str(p) for p in after if p not in before]}
+    return {"secs": time.perf_counter() - t0, "rc": rc, "stderr": stderr,
+            "stdout": stdout, "new": [str(p) for p in after if p not in before]}
 
 
 @pytest.fixture(scope="module")
@@ -252,3 +332,115 @@ def test_library_params_give_the_same_plain_messages(fields, message):
     with pytest.raises(CrackbakeError, match=message) as info:
         RunParams(mesh=Path("plate.obj"), **fields).validate()
     assert "np." not in str(info.value)
+
+
+# ------------------------------------------- paths a mesh names outside its folder (issue 19 §2)
+
+def _textured(root: Path) -> dict[str, Path]:
+    """Meshes naming a red texture outside their folder (and FIFOs inside it), each with a
+    sidecar: name -> mesh path."""
+    import trimesh
+    from PIL import Image
+
+    asset, secret = root / "asset", root / "secret"
+    asset.mkdir()
+    secret.mkdir()
+    Image.new("RGB", (8, 8), (255, 0, 0)).save(secret / "red.png")
+    (secret / "x.mtl").write_text("newmtl m\nmap_Kd red.png\n")
+    mtls = {
+        "obj_absolute": f"newmtl m\nmap_Kd {secret / 'red.png'}\n",
+        "obj_dotdot": "newmtl m\nmap_Kd ../secret/red.png\n",
+        "fifo_map": "newmtl m\nmap_Kd pipe.png\n",
+    }
+    meshes = {}
+    for stem, lib in [*((s, f"{s}.mtl") for s in mtls), ("mtllib_dotdot", "../secret/x.mtl"),
+                      ("fifo_mtllib", "pipe.mtl")]:
+        (asset / f"{stem}.obj").write_text(f"mtllib {lib}\nusemtl m\n" + PLATE)
+        meshes[stem] = asset / f"{stem}.obj"
+    for stem, text in mtls.items():
+        (asset / f"{stem}.mtl").write_text(text)
+    os.mkfifo(asset / "pipe.png")
+    os.mkfifo(asset / "pipe.mtl")
+    # glTF: the plate with a green texture of its own, its image URI then pointed at red.png
+    Image.new("RGB", (8, 8), (0, 255, 0)).save(asset / "green.png")
+    (asset / "green.mtl").write_text("newmtl m\nmap_Kd green.png\n")
+    (asset / "green.obj").write_text("mtllib green.mtl\nusemtl m\n" + PLATE)
+    files = trimesh.load(asset / "green.obj", process=False).export(file_type="gltf")
+    doc = json.loads(files.pop("model.gltf"))
+    for name, blob in files.items():
+        (asset / name).write_bytes(blob)
+    doc["images"] = [{"uri": "../secret/red.png"}]
+    (asset / "gltf_uri.gltf").write_text(json.dumps(doc))
+    meshes["gltf_uri"] = asset / "gltf_uri.gltf"
+    for stem, mesh in meshes.items():
+        (asset / f"{stem}.json").write_text(json.dumps(_sidecar(mesh)))
+    return meshes
+
+
+TEXTURE_CASES = [
+    # (mesh, the path as the file names it: None for a FIFO, --allow-outside-textures)
+    ("obj_absolute", "{root}/secret/red.png", False),
+    ("obj_absolute", "{root}/secret/red.png", True),
+    ("obj_dotdot", "../secret/red.png", False),
+    ("obj_dotdot", "../secret/red.png", True),
+    ("mtllib_dotdot", "../secret/x.mtl", False),
+    ("mtllib_dotdot", "../secret/x.mtl", True),
+    ("gltf_uri", "../secret/red.png", False),
+    ("gltf_uri", "../secret/red.png", True),
+    ("fifo_map", None, False),
+    ("fifo_mtllib", None, False),
+]
+
+
+def _bake_textured(root: Path, meshes: dict, case: tuple) -> dict:
+    stem, _, allow = case
+    out = root / f"out_{stem}_{allow}"
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(root / ".cache")}
+    mesh = meshes[stem]
+    args = [str(mesh), "--cracks", str(mesh.with_suffix(".json")), "--res", "64",
+            "--formats", "png", "-o", str(out), *(["--allow-outside-textures"] * allow)]
+    try:  # a FIFO must not hang the test
+        r = subprocess.run([sys.executable, "-m", "crackbake", *args], capture_output=True,
+                           text=True, env=env, timeout=120)
+    except subprocess.TimeoutExpired as exc:
+        return {"rc": "timed out", "stderr": str(exc), "colour": None}
+    colour = None
+    if r.returncode == 0:
+        from PIL import Image
+
+        with Image.open(out / f"{stem}_basecolor.png") as im:
+            colour = np.median(np.asarray(im.convert("RGB")).reshape(-1, 3), axis=0)
+    return {"rc": r.returncode, "stderr": r.stderr, "colour": colour}
+
+
+@pytest.fixture(scope="module")
+def textured(tmp_path_factory) -> tuple[Path, dict]:
+    root = tmp_path_factory.mktemp("textures")
+    meshes = _textured(root)
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        done = pool.map(lambda c: _bake_textured(root, meshes, c), TEXTURE_CASES)
+        return root, dict(zip(((c[0], c[2]) for c in TEXTURE_CASES), done, strict=True))
+
+
+@pytest.mark.parametrize(("stem", "named", "allow"), TEXTURE_CASES,
+                         ids=[f"{c[0]}{'-allowed' if c[2] else ''}" for c in TEXTURE_CASES])
+def test_textures_outside_the_mesh_folder_are_not_read(textured, stem, named, allow):
+    """Refused with one warning naming the path, the base colour grey; the flag reads it."""
+    root, results = textured
+    r = results[(stem, allow)]
+    assert r["rc"] == 0, r["stderr"]
+    warned = [ln for ln in r["stderr"].splitlines()
+              if ln.startswith("warning: ") and "base colour" in ln]
+    red, green, blue = r["colour"]
+    if allow:
+        assert not warned, warned
+        assert red > 200 and green < 60 and blue < 60, r["colour"]  # the outside red texture
+        return
+    assert len(warned) == 1, r["stderr"]
+    if named is None:
+        assert "is a FIFO (named pipe), not a regular file, so it was not read" in warned[0]
+    else:
+        path = named.format(root=root)
+        assert f"'{path}'" in warned[0] and "lies outside the mesh's folder" in warned[0]
+        assert "--allow-outside-textures" in warned[0]
+    assert abs(red - blue) < 25 and abs(red - green) < 25, r["colour"]  # grey, not red

@@ -365,3 +365,171 @@ def test_read_only_parent_is_refused_before_any_work(nouv_obj, mount):
         f"'{ro / '.out.crackbake-lock'}'; the folder holding it must be writable, or choose "
         "another -o\n"
     )
+
+
+# ------------------------------------------------------- files crackbake writes (issue 19 §1)
+
+def _lock_of(out: Path) -> Path:
+    return out.parent / f".{out.name}.crackbake-lock"
+
+
+@pytest.mark.parametrize("dangling", [False, True], ids=["to a file", "dangling"])
+def test_lock_never_writes_through_a_symlink(nouv_obj, tmp_path, dangling):
+    """A symlink named like the lock: refused, its target neither written nor created."""
+    target = tmp_path / "precious.txt"
+    if not dangling:
+        target.write_text("the user's own words\n")
+    out = tmp_path / "o"
+    _lock_of(out).symlink_to(target)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    r = CliRunner().invoke(main, [str(nouv_obj), "--preset", "mud", "-o", str(out)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr == (
+        f"error: cannot lock output folder '{out}': '{_lock_of(out)}' is a symbolic link, not a "
+        "lock file crackbake made, and crackbake will not write to it; remove it or choose "
+        "another folder with -o\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    if dangling:
+        assert not os.path.lexists(target)
+    else:
+        assert target.read_text() == "the user's own words\n"
+    assert _lock_of(out).is_symlink()
+
+
+@pytest.mark.parametrize(
+    ("content", "links", "what"),
+    [(b"my notes\n", 1, "a file that holds something other than a pid"),
+     (b"123\n", 2, "a file with 2 hard links")],
+    ids=["foreign text", "hard link"],
+)
+def test_lock_refuses_a_file_it_did_not_make(nouv_obj, tmp_path, content, links, what):
+    lock = _lock_of(tmp_path / "o")
+    lock.write_bytes(content)
+    if links == 2:
+        os.link(lock, tmp_path / "elsewhere.txt")
+    r = CliRunner().invoke(main, [str(nouv_obj), "--preset", "mud", "-o", str(tmp_path / "o")])
+    assert r.exit_code == 2 and f"'{lock}' is {what}, not a lock file" in r.stderr, r.output
+    assert lock.read_bytes() == content and not (tmp_path / "o").exists()
+
+
+def _exr(path: Path) -> Path:
+    from crackbake.exchange.exr import write_exr
+
+    ramp = np.linspace(0, 1, 16 * 24, dtype=np.float32).reshape(16, 24)
+    write_exr(path, {"R": ramp, "G": 1 - ramp})
+    return path
+
+
+def _no_dac_override() -> None:
+    """In the child, as root: drop the capabilities that bypass permission bits, so a
+    read-only folder is read-only for it as for any user (they come back for no exec)."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    for cap in (1, 2, 3):  # CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER
+        if libc.prctl(24, cap, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
+            raise OSError(ctypes.get_errno(), "PR_CAPBSET_DROP")
+
+
+def inspect_cli(*args: str, cwd: Path, permissions: bool = False):
+    """``crackbake inspect ARGS`` as a process; ``permissions``: file modes bind it even as root."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, "-m", "crackbake", "inspect", *args], cwd=cwd, env=env, text=True,
+        capture_output=True, timeout=120,
+        preexec_fn=_no_dac_override if permissions and os.geteuid() == 0 else None,
+    )  # fmt: skip
+
+
+def test_inspect_png_is_a_transaction(tmp_path):
+    """`inspect --png` writes a set with a manifest; it replaces its own set, never a user's
+    files, and never writes through a symlink."""
+    exr = _exr(tmp_path / "a.exr")
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me\n")
+    r = inspect_cli(str(exr), "--png", "pics", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    pics = tmp_path / "pics"
+    assert sorted(p.name for p in pics.iterdir()) == ["G.png", "R.png", "manifest.json"]
+    listed = json.loads((pics / "manifest.json").read_text())
+    assert [f["name"] for f in listed["files"]] == ["G.png", "R.png"]
+    # A picture replaced by a symlink to the user's file: the set is replaced as a whole, the
+    # link removed, its target untouched.
+    (pics / "R.png").unlink()
+    (pics / "R.png").symlink_to(victim)
+    r = inspect_cli(str(exr), "--png", "pics", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert not (pics / "R.png").is_symlink() and victim.read_text() == "keep me\n"
+    assert beside(pics) == []
+    # A folder of the user's own (here a link named like a picture): refused, untouched.
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "R.png").symlink_to(victim)
+    r = inspect_cli(str(exr), "--png", "mine", cwd=tmp_path)
+    assert r.returncode == 2 and r.stderr == (
+        "error: output folder 'mine' is not empty and has no crackbake manifest.json; crackbake "
+        "replaces its output folder as a whole, so choose a new or empty folder with --png\n"
+    )
+    assert victim.read_text() == "keep me\n" and os.listdir(mine) == ["R.png"]
+
+
+def test_inspect_png_into_a_read_only_folder(tmp_path):
+    exr = _exr(tmp_path / "a.exr")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        r = inspect_cli(str(exr), "--png", str(ro / "pics"), cwd=tmp_path, permissions=True)
+    finally:
+        ro.chmod(0o755)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr == (
+        f"error: cannot lock output folder '{ro / 'pics'}': Permission denied creating "
+        f"'{ro / '.pics.crackbake-lock'}'; the folder holding it must be writable, or choose "
+        "another --png\n"
+    )
+    assert list(ro.iterdir()) == []
+
+
+def test_read_only_previous_folder_leaves_no_copy(tmp_path):
+    """A previous set made read-only is swapped out and deleted (with a warning), not kept in a
+    hidden folder; a read-only leftover of an older version is removed by the next run."""
+    exr = _exr(tmp_path / "a.exr")
+    pics = tmp_path / "pics"
+    assert inspect_cli(str(exr), "--png", "pics", cwd=tmp_path).returncode == 0
+    pics.chmod(0o555)
+    r = inspect_cli(str(exr), "--png", "pics", cwd=tmp_path, permissions=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.startswith("warning: output folder 'pics' was read-only; crackbake replaces")
+    assert r.stderr.count("\n") == 1
+    assert beside(pics) == []
+    assert pics.stat().st_mode & 0o200  # the new set is writable
+    # What crackbake before this fix left: the old set, read-only, under a staging name.
+    left = tmp_path / ".pics.crackbake-staging-0123abcd"
+    shutil.copytree(pics, left)
+    (left / "R.png").chmod(0o444)
+    left.chmod(0o555)
+    r = inspect_cli(str(exr), "--png", "pics", cwd=tmp_path, permissions=True)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert beside(pics) == []
+
+
+def test_user_folder_named_like_an_output_is_kept(old_set, tmp_path):
+    """`out/cracks.json/mine.txt`: the folder would be deleted with the previous set: refused."""
+    before = snapshot(old_set)
+    (old_set / "cracks.json").unlink()
+    (old_set / "cracks.json").mkdir()
+    (old_set / "cracks.json" / "mine.txt").write_text("mine\n")
+    r = CliRunner().invoke(main, [*QUICK, "-o", str(old_set)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr == (
+        f"error: output folder '{old_set}' holds a folder 'cracks.json' where crackbake wrote a "
+        "file, and the folder is replaced as a whole; move it out or choose another folder "
+        "with -o\n"
+    )
+    assert (old_set / "cracks.json" / "mine.txt").read_text() == "mine\n"
+    (old_set / "cracks.json" / "mine.txt").unlink()
+    (old_set / "cracks.json").rmdir()
+    assert snapshot(old_set) == {k: v for k, v in before.items() if k != "cracks.json"}
+    assert beside(old_set) == []

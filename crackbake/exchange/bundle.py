@@ -178,7 +178,7 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) ->
     formats = params.formats
     texture = None
     if mesh.source and {"png", "glb", "preview"} & set(formats):
-        texture = base_color_texture(mesh.source, maps.res)
+        texture = base_color_texture(mesh.source, maps.res, params.allow_outside_textures)
     with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
         jobs: list[Future] = []
         if "exr" in formats:

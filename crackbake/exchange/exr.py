@@ -12,10 +12,15 @@ threads (see ``benchmarks/bench_exr.py``); it is kept as the independent reader 
 from __future__ import annotations
 
 import os
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
 from crackbake.errors import CrackbakeError
+from crackbake.io.safe_open import check_regular
 
 PathLike = str | os.PathLike
 
@@ -166,6 +171,56 @@ def write_exr(
         ) from exc
 
 
+def _check_size(path: PathLike, header: dict) -> None:
+    """Refuse a data window whose pixels would not fit in memory (a damaged or hostile header
+    can declare any size), before the bindings allocate them."""
+    window = header.get("dataWindow")
+    if window is None:
+        return
+    (x0, y0), (x1, y1) = (np.asarray(c, np.int64) for c in window)
+    w, h = int(x1 - x0 + 1), int(y1 - y0 + 1)
+    nbytes = max(w, 0) * max(h, 0) * 4 * max(len(header.get("channels", [])), 1)
+    limit = _memory_bytes() // 2
+    if w <= 0 or h <= 0 or nbytes > limit:
+        raise CrackbakeError(
+            f"cannot read EXR '{path}': its data window is {w}x{h} pixels (about "
+            f"{nbytes / 2**30:.3g} GiB decoded), beyond the {limit / 2**30:.3g} GiB this machine "
+            "can hold (half its memory); check the file is complete and undamaged"
+        )
+
+
+@contextmanager
+def _stderr_captured() -> Iterator[Callable[[], list[str]]]:
+    """The library's messages on a damaged file (written straight to file descriptors 2 and
+    1) kept out of the terminal, so it gives crackbake's one error line; yields a function
+    returning what went to stderr, as lines."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    with tempfile.TemporaryFile() as sink, open(os.devnull, "wb") as null:
+        os.dup2(null.fileno(), 1)
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield lambda: _lines(sink)
+        finally:
+            for fd, old in zip((1, 2), saved, strict=True):
+                os.dup2(old, fd)
+                os.close(old)
+
+
+def _lines(sink) -> list[str]:
+    sink.seek(0)
+    text = sink.read(4096).decode("utf-8", "replace")
+    return [" ".join(line.split()) for line in text.splitlines() if line.strip()]
+
+
+def _memory_bytes() -> int:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError):
+        return 8 << 30
+
+
 def read_exr(path: PathLike) -> tuple[dict[str, np.ndarray], dict]:
     """Read every channel of a (single-part or first-part) EXR with the OpenEXR bindings.
 
@@ -184,16 +239,28 @@ def read_exr(path: PathLike) -> tuple[dict[str, np.ndarray], dict]:
     """
     import OpenEXR
 
+    damaged = (
+        f"cannot read EXR '{path}': {{}}; check the path and that the file is a complete "
+        "OpenEXR image"
+    )
     try:
-        with OpenEXR.File(os.fspath(path), separate_channels=True) as f:
+        check_regular(path)  # OpenEXR would block on a FIFO forever
+        with OpenEXR.File(os.fspath(path), header_only=True) as f:
+            _check_size(path, f.parts[0].header if f.parts else {})
+        with _stderr_captured() as said, OpenEXR.File(os.fspath(path), separate_channels=True) as f:
+            if not f.parts:  # what the bindings give for a truncated file
+                why = (said() or ["it holds no readable image"])[0]
+                why = why.removeprefix(f"{os.fspath(path)}: ")
+                raise CrackbakeError(damaged.format(f"{why} (truncated?)"))
             part = f.parts[0]
             channels = {name: np.asarray(ch.pixels) for name, ch in part.channels.items()}
             header = dict(part.header)
-    except (RuntimeError, ValueError, OSError) as exc:
+    except (RuntimeError, ValueError, OSError, IndexError, KeyError, TypeError) as exc:
         raise CrackbakeError(
-            f"cannot read EXR '{path}': {str(exc).splitlines()[0] if str(exc) else exc}; "
-            "check the path and that the file is a complete OpenEXR image"
+            damaged.format(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
         ) from exc
+    except MemoryError as exc:
+        raise CrackbakeError(damaged.format("out of memory decoding it")) from exc
     if "compression" in header:
         header["compression"] = _compression_name(header["compression"])
     return channels, header

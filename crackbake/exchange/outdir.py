@@ -24,9 +24,11 @@ import fcntl
 import json
 import os
 import shutil
+import stat
+import warnings
 from pathlib import Path
 
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 
 # Present in a staging folder until its set is complete; marks it as ours for clean-up.
 MARKER = ".crackbake-staging"
@@ -35,8 +37,10 @@ MANIFEST = "manifest.json"
 _LEGACY_STAGING = ".crackbake-staging-"
 
 
-def target_dir(out_dir: str | os.PathLike) -> Path:
+def target_dir(out_dir: str | os.PathLike, option: str = "-o") -> Path:
     """Absolute output folder with symlinks resolved (a link to a folder means that folder).
+
+    ``option`` is how messages name the option that sets the folder (``-o``, ``--png``).
 
     Raises
     ------
@@ -44,17 +48,17 @@ def target_dir(out_dir: str | os.PathLike) -> Path:
         An empty path, the file system root, or a folder holding the current directory.
     """
     if not str(out_dir).strip():
-        raise CrackbakeError("the output folder '' is empty; name a folder with -o")
+        raise CrackbakeError(f"the output folder '' is empty; name a folder with {option}")
     final = Path(os.path.realpath(os.path.abspath(os.fspath(out_dir))))
     if final.name in ("", ".", ".."):
         raise CrackbakeError(
-            f"cannot use '{out_dir}' as the output folder; name a sub-folder with -o"
+            f"cannot use '{out_dir}' as the output folder; name a sub-folder with {option}"
         )
     cwd = Path(os.path.realpath(os.getcwd()))
     if cwd == final or final in cwd.parents:
         raise CrackbakeError(
             f"output folder '{out_dir}' is or holds the current folder, and crackbake replaces "
-            "its output folder as a whole; choose another folder with -o"
+            f"its output folder as a whole; choose another folder with {option}"
         )
     return final
 
@@ -64,7 +68,9 @@ def sibling(final: Path, kind: str) -> Path:
     return final.parent / f".{final.name}.crackbake-{kind}"
 
 
-def check_replaceable(final: Path, shown: str | os.PathLike | None = None) -> bool:
+def check_replaceable(
+    final: Path, shown: str | os.PathLike | None = None, option: str = "-o"
+) -> bool:
     """Refuse an output path crackbake must not replace; True when a previous set is there.
 
     The folder may be missing, empty, or a crackbake output folder: a ``manifest.json`` written
@@ -82,18 +88,19 @@ def check_replaceable(final: Path, shown: str | os.PathLike | None = None) -> bo
         return False
     if not final.is_dir():
         raise CrackbakeError(
-            f"output '{shown}' exists and is not a folder; choose a folder with -o"
+            f"output '{shown}' exists and is not a folder; choose a folder with {option}"
         )
     if os.path.ismount(final):
         raise CrackbakeError(
             f"output folder '{shown}' is a mount point, which cannot be replaced as a whole; "
-            "choose a folder inside it with -o"
+            f"choose a folder inside it with {option}"
         )
     try:
         entries = sorted(os.listdir(final))
     except OSError as exc:
         raise CrackbakeError(
-            f"cannot read output folder '{shown}': {exc.strerror}; choose another folder with -o"
+            f"cannot read output folder '{shown}': {exc.strerror}; choose another folder "
+            f"with {option}"
         ) from exc
     if not entries:
         return False
@@ -101,17 +108,28 @@ def check_replaceable(final: Path, shown: str | os.PathLike | None = None) -> bo
     if listed is None:
         raise CrackbakeError(
             f"output folder '{shown}' is not empty and has no crackbake manifest.json; crackbake "
-            "replaces its output folder as a whole, so choose a new or empty folder with -o"
+            f"replaces its output folder as a whole, so choose a new or empty folder with {option}"
         )
     foreign = [
         e for e in entries
-        if e != MANIFEST and e not in listed and not e.startswith(_LEGACY_STAGING)
-    ]
+        if e != MANIFEST and e not in listed
+        and not (e.startswith(_LEGACY_STAGING) and _is_ours(final / e))
+    ]  # fmt: skip
     if foreign:
         more = f" and {len(foreign) - 1} more" if len(foreign) > 1 else ""
         raise CrackbakeError(
             f"output folder '{shown}' holds '{foreign[0]}'{more}, which crackbake did not write, "
-            "and the folder is replaced as a whole; move them out or choose another folder with -o"
+            "and the folder is replaced as a whole; move them out or choose another folder with "
+            f"{option}"
+        )
+    # crackbake writes files only: a folder under an output's name holds the user's own files
+    folders = [e for e in entries if e in listed and os.path.isdir(final / e)
+               and not os.path.islink(final / e)]  # fmt: skip
+    if folders:
+        raise CrackbakeError(
+            f"output folder '{shown}' holds a folder '{folders[0]}' where crackbake wrote a "
+            "file, and the folder is replaced as a whole; move it out or choose another folder "
+            f"with {option}"
         )
     return True
 
@@ -156,9 +174,48 @@ def remove_leftovers(final: Path) -> list[Path]:
     for entry in candidates:
         path = Path(entry.path)
         if entry.is_dir(follow_symlinks=False) and _is_ours(path):
-            shutil.rmtree(path, ignore_errors=True)
-            removed.append(path)
+            if remove_tree(path):
+                removed.append(path)
+            else:
+                warn_left(path)
     return removed
+
+
+def remove_tree(path: Path) -> bool:
+    """Remove a folder crackbake made (a staged or replaced set); True when it is gone.
+
+    A previous output folder the user made read-only still swaps out (renaming needs only the
+    parent writable) but its files cannot be deleted: such folders inside the tree are made
+    writable first (never through a symlink).
+    """
+    shutil.rmtree(path, ignore_errors=True)
+    if not os.path.lexists(path):
+        return True
+    _make_writable(path)
+    for root, dirs, _ in os.walk(path):  # top-down: each folder is opened before its children
+        for d in dirs:
+            _make_writable(os.path.join(root, d))
+    shutil.rmtree(path, ignore_errors=True)
+    return not os.path.lexists(path)
+
+
+def _make_writable(folder: str | os.PathLike) -> None:
+    try:
+        st = os.lstat(folder)
+        if stat.S_ISDIR(st.st_mode):
+            os.chmod(folder, stat.S_IMODE(st.st_mode) | stat.S_IRWXU)
+    except OSError:
+        pass
+
+
+def warn_left(path: Path) -> None:
+    """Warn that the crackbake folder ``path`` could not be removed."""
+    warnings.warn(
+        f"could not remove '{path}', a copy of an earlier output set; delete it by hand (the "
+        "next run into this folder tries again)",
+        CrackbakeWarning,
+        stacklevel=3,
+    )
 
 
 class FolderLock:
@@ -170,20 +227,19 @@ class FolderLock:
     still the one on disk, so a run never holds a lock on a removed file.
     """
 
-    def __init__(self, final: Path, shown: str | os.PathLike | None = None) -> None:
+    def __init__(
+        self, final: Path, shown: str | os.PathLike | None = None, option: str = "-o"
+    ) -> None:
         self.path = sibling(final, "lock")
         self.shown = final if shown is None else shown
+        self.option = option
         self._fd: int | None = None
 
     def acquire(self) -> FolderLock:
         for _ in range(20):
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
-            except OSError as exc:
-                raise CrackbakeError(
-                    f"cannot lock output folder '{self.shown}': {exc.strerror} creating "
-                    f"'{self.path}'; the folder holding it must be writable, or choose another -o"
-                ) from exc
+            fd = self._open()
+            if fd is None:
+                continue  # removed between our two opens: create it again
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -191,10 +247,11 @@ class FolderLock:
                 os.close(fd)
                 raise CrackbakeError(
                     f"output folder '{self.shown}' is in use by another crackbake run "
-                    f"(pid {pid}); wait for it to finish or choose another folder with -o"
+                    f"(pid {pid}); wait for it to finish or choose another folder with "
+                    f"{self.option}"
                 ) from None
             try:
-                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
+                same = os.path.samestat(os.fstat(fd), os.lstat(self.path))
             except FileNotFoundError:
                 same = False
             if same:
@@ -204,6 +261,51 @@ class FolderLock:
                 return self
             os.close(fd)  # the owner removed it while we waited: lock the new file
         raise CrackbakeError(f"cannot lock output folder '{self.shown}'; try again")
+
+    def _open(self) -> int | None:
+        """The lock file opened read-write: created now, or one a crackbake run left.
+
+        Never through a symlink (``O_NOFOLLOW``; ``O_EXCL`` does not follow a dangling one
+        either) and never a file crackbake did not make: only a regular file with one link
+        that holds nothing but a pid is reused.  None when it vanished between the two opens.
+        """
+        flags = os.O_RDWR | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+        try:
+            return os.open(self.path, flags | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            pass
+        except OSError as exc:
+            raise CrackbakeError(
+                f"cannot lock output folder '{self.shown}': {exc.strerror} creating "
+                f"'{self.path}'; the folder holding it must be writable, or choose another "
+                f"{self.option}"
+            ) from exc
+        try:
+            fd = os.open(self.path, flags)
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            what = {errno.ELOOP: "a symbolic link", errno.EISDIR: "a folder"}.get(exc.errno)
+            raise self._foreign(what or exc.strerror) from exc
+        st = os.fstat(fd)
+        why = None
+        if not stat.S_ISREG(st.st_mode):
+            why = "not a regular file"
+        elif st.st_nlink != 1:
+            why = f"a file with {st.st_nlink} hard links"
+        elif st.st_size > 32 or (st.st_size and not _read_pid(fd, "").isdigit()):
+            why = "a file that holds something other than a pid"
+        if why is not None:
+            os.close(fd)
+            raise self._foreign(why)
+        return fd
+
+    def _foreign(self, what: str) -> CrackbakeError:
+        return CrackbakeError(
+            f"cannot lock output folder '{self.shown}': '{self.path}' is {what}, not a lock "
+            f"file crackbake made, and crackbake will not write to it; remove it or choose "
+            f"another folder with {self.option}"
+        )
 
     def release(self) -> None:
         if self._fd is None:
@@ -222,12 +324,12 @@ class FolderLock:
         self.release()
 
 
-def _read_pid(fd: int) -> str:
+def _read_pid(fd: int, unknown: str = "unknown") -> str:
     try:
-        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        text = os.pread(fd, 33, 0).decode("ascii", "replace").strip()
     except OSError:
         text = ""
-    return text if text.isdigit() else "unknown"
+    return text if text.isdigit() else unknown
 
 
 _AT_FDCWD = -100

@@ -6,27 +6,31 @@ import errno
 import hashlib
 import os
 import secrets
-import shutil
+import stat
+import warnings
 from pathlib import Path
 
-from crackbake.errors import CrackbakeError
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.exchange.interrupt import deferred, raise_if_received
 from crackbake.exchange.outdir import (
     MARKER,
     FolderLock,
     check_replaceable,
     remove_leftovers,
+    remove_tree,
     sibling,
     swap_in,
     target_dir,
+    warn_left,
 )
+from crackbake.io.safe_open import open_regular
 
 PathLike = str | os.PathLike
 
 
 def sha256_file(path: PathLike) -> str:
     """Hex SHA-256 of a file's bytes, read in chunks (no whole-file copy in memory)."""
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
@@ -62,10 +66,13 @@ class OutputStage:
         ``final`` held a previous set when the stage was entered.
     committed : bool
         The new set is in place.
+    option : str
+        How messages name the option that chose the folder (``-o``; ``--png`` for inspect).
     """
 
-    def __init__(self, out_dir: PathLike) -> None:
+    def __init__(self, out_dir: PathLike, option: str = "-o") -> None:
         self.out_dir = Path(out_dir) if str(out_dir) else out_dir
+        self.option = option
         self.final: Path | None = None
         self.had_previous = False
         self.committed = False
@@ -86,20 +93,21 @@ class OutputStage:
         self._close()
 
     def _open(self) -> None:
-        final = target_dir(self.out_dir)
+        opt = self.option
+        final = target_dir(self.out_dir, opt)
         self.final = final
-        check_replaceable(final, self.out_dir)  # cheap refusals before touching anything
-        self._made = _make_parents(final.parent, self.out_dir)
-        self._lock = FolderLock(final, self.out_dir).acquire()
+        check_replaceable(final, self.out_dir, opt)  # cheap refusals before touching anything
+        self._made = _make_parents(final.parent, self.out_dir, opt)
+        self._lock = FolderLock(final, self.out_dir, opt).acquire()
         remove_leftovers(final)
-        self.had_previous = check_replaceable(final, self.out_dir)  # again, under the lock
+        self.had_previous = check_replaceable(final, self.out_dir, opt)  # again, under the lock
         try:
             self._staging = _new_folder(sibling(final, "staging-"))
             (self._staging / MARKER).write_bytes(b"")
         except OSError as exc:
             raise CrackbakeError(
                 f"cannot write beside output folder '{self.out_dir}': {exc.strerror}; "
-                "choose a writable location with -o"
+                f"choose a writable location with {opt}"
             ) from exc
 
     def _close(self) -> None:
@@ -176,7 +184,9 @@ class OutputStage:
             try:
                 # The set is complete: once the marker is gone, the manifest marks it as ours.
                 (staging / MARKER).unlink()
-                check_replaceable(self.final, self.out_dir)  # nothing foreign arrived meanwhile
+                # nothing foreign arrived meanwhile
+                check_replaceable(self.final, self.out_dir, self.option)
+                read_only = _read_only(self.final)
                 old = swap_in(staging, self.final)
             except OSError as exc:
                 raise CrackbakeError(
@@ -186,14 +196,24 @@ class OutputStage:
             self.committed = True
             self._staging = None
             if old is not None:
-                shutil.rmtree(old, ignore_errors=True)
+                if read_only:
+                    warnings.warn(
+                        f"output folder '{self.out_dir}' was read-only; crackbake replaces its "
+                        "output folder as a whole, so its previous files are deleted and the "
+                        f"new folder is writable (to keep a set, copy it or use another "
+                        f"{self.option})",
+                        CrackbakeWarning,
+                        stacklevel=2,
+                    )
+                if not remove_tree(old):
+                    warn_left(old)
         return [self.final / n for n in names]
 
     def discard(self) -> None:
         """Remove the staging folder and everything in it (``out_dir`` is not touched)."""
         if self._staging is not None:
             with deferred():
-                shutil.rmtree(self._staging, ignore_errors=True)
+                remove_tree(self._staging)
                 self._staging = None
 
     def interrupted_message(self) -> str:
@@ -204,6 +224,14 @@ class OutputStage:
         if self.had_previous:
             return f"interrupted; the previous outputs in {shown} are unchanged"
         return "interrupted; no outputs were written"
+
+
+def _read_only(folder: Path) -> bool:
+    """The folder exists and its owner may not write to it (``chmod a-w``)."""
+    try:
+        return not os.stat(folder).st_mode & stat.S_IWUSR
+    except OSError:
+        return False
 
 
 def _new_folder(prefix: Path) -> Path:
@@ -221,7 +249,7 @@ def _new_folder(prefix: Path) -> Path:
     raise FileExistsError(errno.EEXIST, "no free staging name", str(prefix))
 
 
-def _make_parents(parent: Path, shown: PathLike) -> list[Path]:
+def _make_parents(parent: Path, shown: PathLike, option: str = "-o") -> list[Path]:
     """Create ``parent`` and its missing ancestors; return the ones created, outermost first."""
     missing = []
     p = parent
@@ -230,7 +258,7 @@ def _make_parents(parent: Path, shown: PathLike) -> list[Path]:
         p = p.parent
     if os.path.lexists(p) and not p.is_dir():
         raise CrackbakeError(
-            f"cannot create output folder '{shown}': '{p}' is not a folder; choose another -o"
+            f"cannot create output folder '{shown}': '{p}' is not a folder; choose another {option}"
         )
     made = []
     for folder in reversed(missing):
@@ -246,7 +274,7 @@ def _make_parents(parent: Path, shown: PathLike) -> list[Path]:
                     break
             raise CrackbakeError(
                 f"cannot create output folder '{shown}': {exc.strerror}; "
-                "choose a writable location with -o"
+                f"choose a writable location with {option}"
             ) from exc
         made.append(folder)
     return made

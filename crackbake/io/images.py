@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.safe_open import check_regular
 
 # Rec. 709 luminance weights, for colour weight maps and vertex colours.
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -35,8 +36,9 @@ def load_weight_map(path) -> np.ndarray:
     path = Path(path)
     if path.is_dir():
         raise CrackbakeError(f"{path}: the weight map is a folder; pass an image file")
-    if not path.is_file():
+    if not path.exists():
         raise CrackbakeError(f"{path}: weight map not found; check the path")
+    check_regular(path, f"--weight-map {path}")  # a FIFO blocks the reader, a device never ends
     try:
         pixels = _read_oiio(path)
     except ImportError:

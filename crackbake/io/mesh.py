@@ -9,6 +9,7 @@ never cut cracks or stress.
 from __future__ import annotations
 
 import io
+import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +19,7 @@ import numpy as np
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import face_cross, welded_vertex_normals
 from crackbake.io import obj_checks, ply_strips
+from crackbake.io.safe_open import check_regular, open_regular, read_bytes
 
 __all__ = ["Mesh", "SUPPORTED_SUFFIXES", "VERTEX_COLOURS", "load_mesh"]
 
@@ -124,7 +126,48 @@ def _scene_geometries(scene, object_name: str | None, path: Path):
     return [g for _, _, g in items]
 
 
-def _read_file(path: Path):
+def _resolver(path: Path, allow_outside: bool):
+    """trimesh's resolver for the files a mesh names (MTL, textures, glTF buffers), reading
+    only regular files, bounded by their size, inside the mesh's folder unless
+    ``allow_outside`` (trimesh refuses escapes too, but would block on a FIFO or read a
+    device forever)."""
+    import trimesh
+
+    class Resolver(trimesh.resolvers.FilePathResolver):
+        def get(self, name: str) -> bytes:
+            # trimesh's own candidates: the name, without a leading /, the bare file name
+            for candidate in (name.strip(), name.strip().lstrip("/"), os.path.split(name)[-1]):
+                try:
+                    found = self.absolute(candidate)
+                except ValueError:
+                    continue
+                if found.exists():
+                    try:
+                        return read_bytes(found, label=f"{path.name}: '{name}'")
+                    except CrackbakeError as exc:  # an OSError: trimesh skips bad materials
+                        raise _Refused(exc) from None
+            try:
+                self.absolute(name)
+            except ValueError:
+                raise _Refused(CrackbakeError(
+                    f"{path}: names '{name}', which lies outside the mesh's folder; move it "
+                    "beside the mesh or pass --allow-outside-textures"
+                )) from None
+            raise FileNotFoundError(name)
+
+    return Resolver(str(path), allow_anywhere=allow_outside)
+
+
+class _Refused(OSError):
+    """A file the mesh names that the resolver will not read (trimesh skips a material it
+    cannot read; a glTF buffer fails the load with ``error``'s message)."""
+
+    def __init__(self, error: CrackbakeError) -> None:
+        super().__init__(str(error))
+        self.error = error
+
+
+def _read_file(path: Path, allow_outside: bool = False):
     """The trimesh object of a mesh file, after the path and format checks."""
     import trimesh
 
@@ -132,6 +175,7 @@ def _read_file(path: Path):
         raise CrackbakeError(f"{path}: file not found; check the path")
     if path.is_dir():
         raise CrackbakeError(f"{path}: is a directory; pass a mesh file")
+    check_regular(path)  # a FIFO would block the read forever, /dev/zero never ends
     suffix = path.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
         raise CrackbakeError(
@@ -145,18 +189,20 @@ def _read_file(path: Path):
         source = str(path) if checked is data else io.BytesIO(checked)
         data = checked
     else:
-        with open(path, "rb") as fh:
+        with open_regular(path) as fh:
             head = fh.read(len(obj_checks.BOM))
         # A byte-order mark hides the first token of text formats from trimesh.
         source = io.BytesIO(_read_bytes(path)[len(head):]) if head == obj_checks.BOM else str(path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # numpy on corrupt numbers
-            # From bytes, the resolver still finds materials and buffers beside the file.
-            extra = {} if isinstance(source, str) else {
-                "resolver": trimesh.resolvers.FilePathResolver(str(path))
-            }
-            loaded = trimesh.load(source, file_type=suffix[1:], process=False, **extra)
+            # From bytes too, the resolver finds materials and buffers beside the file.
+            loaded = trimesh.load(
+                source, file_type=suffix[1:], process=False,
+                resolver=_resolver(path, allow_outside),
+            )  # fmt: skip
+    except _Refused as exc:
+        raise exc.error from None
     except Exception as exc:  # trimesh raises many types for corrupt input
         known = obj_checks.explain_bad_index(data, path) if data is not None else None
         if known is not None:
@@ -170,7 +216,7 @@ def _read_file(path: Path):
 
 def _read_bytes(path: Path) -> bytes:
     try:
-        return path.read_bytes()
+        return read_bytes(path)
     except OSError as exc:
         raise CrackbakeError(f"{path}: cannot read the file ({exc.strerror}); check it") from exc
 
@@ -215,7 +261,9 @@ def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
     return vertices, faces, uv_parts, normal_parts
 
 
-def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
+def load_mesh(
+    path: str | Path, object_name: str | None = None, allow_outside_textures: bool = False
+) -> Mesh:
     """Load a triangle mesh from OBJ, PLY, STL, OFF, glTF or GLB.
 
     Quads and polygons are triangulated, a scene with several meshes is concatenated (with a
@@ -227,6 +275,9 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
         Mesh file.
     object_name : str, optional
         Node or geometry name to pick from a multi-object file.
+    allow_outside_textures : bool
+        Let the file's material libraries, textures and glTF buffers lie outside its folder
+        (refused by default: an asset from elsewhere must not make crackbake read any file).
 
     Raises
     ------
@@ -236,10 +287,11 @@ def load_mesh(path: str | Path, object_name: str | None = None) -> Mesh:
     import trimesh
 
     path = Path(path)
+    # is_file() is true of regular files only: a FIFO or device goes on to _read_file's refusal.
     if path.suffix.lower() == ".ply" and path.is_file() and ply_strips.declares_strips(path):
         loaded, obj_text, short_faces = _strip_mesh(path), None, 0
     else:
-        loaded, obj_text, short_faces = _read_file(path)
+        loaded, obj_text, short_faces = _read_file(path, allow_outside_textures)
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):

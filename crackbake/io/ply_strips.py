@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from crackbake.errors import CrackbakeError
+from crackbake.io.safe_open import open_regular, read_bytes
 
 # Elements holding triangle strips (``-1`` restarts a strip) and their index property.
 STRIP_ELEMENTS = ("tristrips", "tristrip", "triangle_strips")
@@ -62,7 +63,7 @@ def strip_triangles(strips: list[np.ndarray]) -> np.ndarray:
 
 def declares_strips(path: Path) -> bool:
     """True when the PLY header declares a triangle-strip element."""
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(_HEADER_MAX)
     end = head.find(b"end_header")
     names = re.findall(rb"^\s*element\s+(\S+)", head[: end if end >= 0 else None], re.M)
@@ -109,7 +110,7 @@ def read_strip_ply(path: Path) -> tuple[np.ndarray, dict[str, np.ndarray], np.nd
     CrackbakeError
         A truncated or malformed file, or indices past the vertices.
     """
-    data = path.read_bytes()
+    data = read_bytes(path)
     try:
         fmt, elements, pos = _header(data, path)
         values: dict[str, dict[str, list | np.ndarray]] = {}

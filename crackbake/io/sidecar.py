@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from crackbake.io.mesh import Mesh
+from crackbake.io.safe_open import read_bytes
 from crackbake.io.sidecar_checks import (
     FORMAT,
     UNITS,
@@ -219,7 +220,7 @@ def read_sidecar(path: str | Path, mesh: Mesh | None = None) -> CrackNetwork:
     path = Path(path)
     source = str(path)
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = read_bytes(path).decode("utf-8")
     except FileNotFoundError as exc:
         raise fail(source, "file not found; check the path") from exc
     except IsADirectoryError as exc:

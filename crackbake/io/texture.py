@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+import os
 import struct
 import urllib.parse
 import warnings
@@ -19,7 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from crackbake.errors import CrackbakeWarning
+from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.io.safe_open import NotRegularFile, inside, read_bytes, read_text
+
+# Largest MTL file read (they hold a few lines per material).
+MTL_MAX_BYTES = 64 << 20
 
 # map_Kd options and how many values follow each (the file name comes after them).
 _MTL_OPTIONS = {
@@ -28,7 +33,9 @@ _MTL_OPTIONS = {
 }  # fmt: skip
 
 
-def base_color_texture(mesh_path: str | Path, res: int) -> np.ndarray | None:
+def base_color_texture(
+    mesh_path: str | Path, res: int, allow_outside: bool = False
+) -> np.ndarray | None:
     """The asset's base-colour texture at ``res`` x ``res``, or ``None`` when it has none.
 
     Parameters
@@ -37,13 +44,18 @@ def base_color_texture(mesh_path: str | Path, res: int) -> np.ndarray | None:
         The mesh file (OBJ with an MTL ``map_Kd``, glTF or GLB with a ``baseColorTexture``).
     res : int
         Edge of the returned page in texels (the bake resolution).
+    allow_outside : bool
+        Read material libraries and textures outside the mesh's folder (``../``, absolute
+        paths, symlinks out of it).  By default they are refused with a warning naming the
+        path, and the outputs use grey: an asset from elsewhere must not make crackbake read
+        (and embed) any file on the machine.
 
     Returns
     -------
     (res, res, 3) uint8 or None
         sRGB colour, row 0 = top (``v = 1``).  ``None`` (with a :class:`CrackbakeWarning` when
-        a texture was named but cannot be used: missing file, several different textures on
-        one mesh) for meshes without one.
+        a texture was named but cannot be used: missing file, outside the mesh's folder, not a
+        regular file, several different textures on one mesh) for meshes without one.
     """
     path = Path(mesh_path)
     suffix = path.suffix.lower()
@@ -51,31 +63,72 @@ def base_color_texture(mesh_path: str | Path, res: int) -> np.ndarray | None:
         return None
     try:
         if suffix == ".obj":
-            found = _obj_texture(path)
+            found = _obj_texture(path, allow_outside)
         elif suffix in (".gltf", ".glb"):
-            found = _gltf_texture(path)
+            found = _gltf_texture(path, allow_outside)
         else:
             return None
+        name = found.name if isinstance(found, Path) else "embedded image"
+        if isinstance(found, Path):
+            found = read_bytes(found, f"{path.name}: its base-colour texture {found}")
+    except _Outside as exc:
+        where = "" if exc.target == exc.name else f" ({exc.target})"
+        _warn(
+            f"{path.name}: {exc.what} '{exc.name}'{where} lies outside the mesh's folder, so it "
+            "was not read; using grey for the base colour (move it beside the mesh, or pass "
+            "--allow-outside-textures to read it)"
+        )
+        return None
+    except NotRegularFile as exc:  # a FIFO or device named as a texture or material library
+        _warn(f"{exc.label} is {exc.what}, not a regular file, so it was not read; using grey "
+              "for the base colour")
+        return None
+    except CrackbakeError as exc:  # e.g. an MTL file too big to be one
+        _warn(f"{exc}; using grey for the base colour")
+        return None
     except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error) as exc:
         _warn(f"{path.name}: its base-colour texture could not be read ({exc}); using grey")
         return None
     if found is None:
         return None
-    return _resampled(found, res, path)
+    return _resampled(found, res, path, name)
 
 
 def _warn(message: str) -> None:
     warnings.warn(message, CrackbakeWarning, stacklevel=4)
 
 
-def _resampled(source: bytes | Path, res: int, mesh_path: Path) -> np.ndarray | None:
+class _Outside(Exception):
+    """A path the mesh names that leads out of its folder (``target``: where it leads)."""
+
+    def __init__(self, name: str, target: str, what: str) -> None:
+        super().__init__(name)
+        self.name, self.target, self.what = name, target, what
+
+
+def _named(
+    mesh_path: Path, base: Path, name: str, allow_outside: bool, what: str = "base-colour texture"
+) -> Path:
+    """The file ``name`` (as the mesh, or its MTL in ``base``, spells it), made absolute.
+
+    Raises
+    ------
+    _Outside
+        It leads out of the mesh's folder (and ``allow_outside`` is off).
+    """
+    target = Path(os.path.abspath(base / name))
+    if not allow_outside and inside(mesh_path.parent, target) is None:
+        raise _Outside(name, os.path.realpath(target), what)
+    return target
+
+
+def _resampled(blob: bytes, res: int, mesh_path: Path, name: str) -> np.ndarray | None:
     from PIL import Image, UnidentifiedImageError
 
     try:
-        img = Image.open(io.BytesIO(source) if isinstance(source, bytes) else source)
+        img = Image.open(io.BytesIO(blob))
         img.load()
     except (OSError, UnidentifiedImageError) as exc:
-        name = source.name if isinstance(source, Path) else "embedded image"
         _warn(f"{mesh_path.name}: base-colour texture {name} is unreadable ({exc}); using grey")
         return None
     if img.mode not in ("RGB", "RGBA", "L", "LA", "P"):
@@ -87,18 +140,26 @@ def _resampled(source: bytes | Path, res: int, mesh_path: Path) -> np.ndarray | 
     return np.asarray(img, dtype=np.uint8)
 
 
-def _obj_texture(path: Path) -> Path | None:
-    data = path.read_bytes()
+def _obj_texture(path: Path, allow_outside: bool) -> Path | None:
+    data = read_bytes(path)
     libs = _directive(data, b"mtllib")
     used = set(_directive(data, b"usemtl"))
-    maps: dict[str, Path] = {}
+    maps: dict[str, tuple[Path, str]] = {}
     for lib in libs:
-        mtl = path.parent / lib
-        if not mtl.is_file():
+        # the MTL is read, so it is checked first
+        mtl = _named(path, path.parent, lib, allow_outside, "material library")
+        if not os.path.exists(mtl):
             continue
-        maps.update(_mtl_maps(mtl))
-    files = {maps[m] for m in (used or set(maps)) if m in maps}
-    return _one(files, path)
+        for material, name in _mtl_maps(mtl, path).items():
+            maps[material] = (mtl.parent, name)
+    files = {
+        Path(os.path.abspath(maps[m][0] / maps[m][1])): maps[m]
+        for m in (used or set(maps)) if m in maps
+    }  # fmt: skip
+    chosen = _one(set(files), path)
+    if chosen is None:
+        return None
+    return _existing(_named(path, *files[chosen], allow_outside), path)
 
 
 def _directive(data: bytes, word: bytes) -> list[str]:
@@ -124,11 +185,12 @@ def _directive(data: bytes, word: bytes) -> list[str]:
     return out
 
 
-def _mtl_maps(mtl: Path) -> dict[str, Path]:
-    """Material name -> its ``map_Kd`` file, from one MTL file."""
-    out: dict[str, Path] = {}
+def _mtl_maps(mtl: Path, mesh_path: Path) -> dict[str, str]:
+    """Material name -> its ``map_Kd`` file name as written, from one MTL file."""
+    out: dict[str, str] = {}
     current = None
-    for line in mtl.read_text("utf-8", errors="replace").splitlines():
+    text = read_text(mtl, f"{mesh_path.name}: its material library {mtl}", MTL_MAX_BYTES)
+    for line in text.splitlines():
         parts = line.strip().split()
         if not parts:
             continue
@@ -140,7 +202,7 @@ def _mtl_maps(mtl: Path) -> dict[str, Path]:
             while args and args[0].lower() in _MTL_OPTIONS:
                 args = args[1 + _MTL_OPTIONS[args[0].lower()] :]
             if args:
-                out[current] = (mtl.parent / " ".join(args).replace("\\", "/")).resolve()
+                out[current] = " ".join(args).replace("\\", "/")
     return out
 
 
@@ -154,15 +216,19 @@ def _one(files: set, path: Path):
         return None
     if not files:
         return None
-    found = next(iter(files))
-    if isinstance(found, Path) and not found.is_file():
+    return next(iter(files))
+
+
+def _existing(found: Path, path: Path) -> Path | None:
+    """``found``, or None with a warning when there is no such file."""
+    if not os.path.exists(found):
         _warn(f"{path.name}: base-colour texture {found.name} not found; using grey")
         return None
     return found
 
 
-def _gltf_texture(path: Path) -> bytes | Path | None:
-    data = path.read_bytes()
+def _gltf_texture(path: Path, allow_outside: bool) -> bytes | Path | None:
+    data = read_bytes(path)
     binary = None
     if path.suffix.lower() == ".glb":
         _magic, _version, _length = struct.unpack_from("<III", data, 0)
@@ -188,24 +254,28 @@ def _gltf_texture(path: Path) -> bytes | Path | None:
     chosen = _one(images, path)
     if chosen is None:
         return None
-    return _gltf_image(doc, chosen, path, binary)
+    return _gltf_image(doc, chosen, path, binary, allow_outside)
 
 
-def _gltf_image(doc: dict, index: int, path: Path, binary: bytes | None) -> bytes | Path:
+def _gltf_image(
+    doc: dict, index: int, path: Path, binary: bytes | None, allow_outside: bool
+) -> bytes | Path:
     image = doc["images"][index]
     if "bufferView" in image:
         view = doc["bufferViews"][image["bufferView"]]
         start = view.get("byteOffset", 0)
         buffer = doc["buffers"][view["buffer"]]
-        blob = binary if "uri" not in buffer else _uri_bytes(buffer["uri"], path)
+        blob = binary if "uri" not in buffer else _uri_bytes(buffer["uri"], path, allow_outside)
         return bytes(blob[start : start + view["byteLength"]])
     uri = image["uri"]
     if uri.startswith("data:"):
-        return _uri_bytes(uri, path)
-    return path.parent / urllib.parse.unquote(uri)
+        return _uri_bytes(uri, path, allow_outside)
+    return _existing(_named(path, path.parent, urllib.parse.unquote(uri), allow_outside), path)
 
 
-def _uri_bytes(uri: str, path: Path) -> bytes:
+def _uri_bytes(uri: str, path: Path, allow_outside: bool) -> bytes:
     if uri.startswith("data:"):
         return base64.b64decode(uri.split(",", 1)[1])
-    return (path.parent / urllib.parse.unquote(uri)).read_bytes()
+    name = urllib.parse.unquote(uri)
+    found = _named(path, path.parent, name, allow_outside, "buffer")
+    return read_bytes(found, f"{path.name}: buffer {name}")
