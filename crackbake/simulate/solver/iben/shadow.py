@@ -56,17 +56,45 @@ def face_shadow(f, X, F, G, gp, out):
 
 
 @njit(cache=True)
+def radius_at(x0, x1, x2, gp):
+    """The shadow radius at a point: ``gp[4]``, or with several impacts (``gp[7]`` = K and K
+    rows ``centre (3), reach, radius`` after it) the radius of the impact nearest to the point
+    in reaches (docs/solver.md, "Several impacts")."""
+    if gp.shape[0] <= 7:
+        return gp[4]
+    best = np.inf
+    r = gp[4]
+    for i in range(int(gp[7])):
+        b = 8 + 5 * i
+        d = np.sqrt((x0 - gp[b]) ** 2 + (x1 - gp[b + 1]) ** 2 + (x2 - gp[b + 2]) ** 2) / gp[b + 3]
+        if d < best:
+            best = d
+            r = gp[b + 4]
+    return r
+
+
+@njit(cache=True)
+def radius_scale(x0, x1, x2, gp):
+    """:func:`radius_at` over ``gp[4]``: 1.0 exactly with one shadow radius, so the world
+    lengths the rules scale by it are unchanged bit for bit."""
+    if gp.shape[0] <= 7:
+        return 1.0
+    return radius_at(x0, x1, x2, gp) / gp[4]
+
+
+@njit(cache=True)
 def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
     """Deposit ``amount * n n^T * k(r)`` with a compact kernel around p into the grid.
 
-    ``k(r) = (1 - r²/R²)² / (16 R / 15)`` for ``r < R`` (R = ``gp[4]``): its integral across a
+    ``k(r) = (1 - r²/R²)² / (16 R / 15)`` for ``r < R`` (R = ``gp[4]``, or with several
+    impacts that of the impact nearest to p: :func:`radius_at`): its integral across a
     straight line is 1, so a long crack whose segments each deposit ``length x normal stress``
     releases exactly its normal stress on the crack line, fading to nothing at distance R.
     """
     if G.shape[0] < 2:
         return
     cs = gp[3]
-    rk = gp[4]
+    rk = radius_at(p0, p1, p2, gp)
     norm = amount / (16.0 * rk / 15.0)
     lo0 = max(int(np.floor((p0 - rk - gp[0]) / cs)), 0)
     hi0 = min(int(np.floor((p0 + rk - gp[0]) / cs)), G.shape[0] - 1)
