@@ -315,9 +315,11 @@ def solve(
         logger.info("impact(s) on a thin feature: sim edge %.4g -> %s within %s", sim.edge_length,
                     ", ".join(f"{h:.4g}" for h in local.edges),
                     ", ".join(f"{r:.3g}" for r in local.radii))
-        sim = build_simmesh(mesh, detail=sim.edge_length, seed=params.seed, proxy=sim.proxy,
-                            proxy_above=params.proxy_above, local=local)
-        field = stress_field(sim, mesh, sources, seed=params.seed)
+        with warnings.catch_warnings():  # the first build and field said it all already
+            warnings.simplefilter("ignore", CrackbakeWarning)
+            sim = build_simmesh(mesh, detail=sim.edge_length, seed=params.seed, proxy=sim.proxy,
+                                proxy_above=params.proxy_above, local=local)
+            field = stress_field(sim, mesh, sources, seed=params.seed)
     field = with_spacing(field, params, mesh.diagonal)
     timings["stress"] = time.perf_counter() - t
     sp = solver_params(params, mesh, relative)

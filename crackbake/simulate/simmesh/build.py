@@ -93,6 +93,17 @@ class Local:
     radii: np.ndarray
     edges: np.ndarray
 
+    def ball_of(self, points: np.ndarray, edge: float) -> np.ndarray:
+        """The ball (index) whose edge length each of ``points`` (P, 3) takes, -1 where none
+        is finer than ``edge``, (P,) int64."""
+        best = np.full(len(points), float(edge))
+        out = np.full(len(points), -1, np.int64)
+        for k, (c, r, h) in enumerate(zip(self.centres, self.radii, self.edges, strict=True)):
+            take = (np.linalg.norm(points - c, axis=1) <= r) & (h < best)
+            best[take] = h
+            out[take] = k
+        return out
+
     def edge_at(self, points: np.ndarray, edge: float) -> np.ndarray:
         """Target edge length at each of ``points`` (P, 3): the smallest of ``edge`` and the
         edges of the balls holding the point, (P,)."""
@@ -286,14 +297,18 @@ def _refine(wv: np.ndarray, wf: np.ndarray, keep: np.ndarray, h: float,
     h_face = h
     if local is not None:
         h_face = local.edge_at(wv[wf].mean(axis=1), h)
-        fine = h_face < h
-        if fine.any():
+        ball = local.ball_of(wv[wf].mean(axis=1), h)
+        base = int(rng.integers(1 << 62)) if (ball >= 0).any() else 0
+        for k in np.unique(ball[ball >= 0]):
             # Faces outside the balls keep exactly the points the uniform layout gives them
             # (same draws), so a star far from a refined ball sees the same sim mesh as
-            # without it; the refined faces and their edges draw from a stream of their own.
-            sub = np.random.default_rng(rng.integers(1 << 62))
-            f_corners, f_edge, f_t, f_face, f_xy = _layout(wv[wf], face_edge, n_e, h_face, sub,
-                                                           jitter)
+            # without it; each ball's faces and their edges draw from a stream of their own,
+            # seeded by its centre, so a ball is meshed the same whatever other balls exist.
+            fine = ball == k
+            key = np.ascontiguousarray(local.centres[k], np.float64).view(np.uint32)
+            sub = np.random.default_rng([base, *(int(x) for x in key)])
+            f_corners, f_edge, f_t, f_face, f_xy = _layout(
+                wv[wf], face_edge, n_e, np.where(fine, h_face, h), sub, jitter)
             touch = np.zeros(n_e, dtype=bool)
             touch[face_edge[fine].ravel()] = True
             corners = np.where(fine[:, None, None], f_corners, corners)

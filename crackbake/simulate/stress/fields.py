@@ -269,6 +269,7 @@ def _impact_field(
             stacklevel=3,
         )
     nodal = dist[geo.faces]  # (M, 3)
+    _warn_small_piece(geo, nodal, snapped, radius, _edge_at(sim, snapped))
     d_face = nodal.mean(axis=1)  # inf when any corner is out of reach
     # Inside the source face the surface is flat, so the straight distance is the geodesic one.
     d_face[face] = np.linalg.norm(geo.centroid[face] - snapped)
@@ -307,6 +308,42 @@ def _impact_field(
         "strength": float(src.strength),
     }
     return stress, info, _impact_shadow(geo, dist, radius, _edge_at(sim, snapped))
+
+
+#: An impact whose reachable surface within its reach is under this share of a flat star's
+#: (``pi reach^2``) and ends there (a small separate piece) gets a warning.
+SMALL_PIECE_SHARE = 0.25
+
+
+def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, radius: float,
+                      edge: float) -> None:
+    """Warn when the surface the impact can reach is a piece too small for its star.
+
+    ``nodal`` (M, 3) is the impact's geodesic distance at each face's corners (``inf`` past
+    the reach or on other pieces).  The piece counts as small when every point it reaches lies
+    more than two sim edges inside the reach (the piece ends before the star would) and its
+    area is under :data:`SMALL_PIECE_SHARE` of ``pi reach^2``.
+    """
+    reach = 0.5 * np.pi * radius
+    finite = np.isfinite(nodal).all(axis=1)
+    if not finite.any():
+        return
+    far = float(nodal[finite].max())
+    area = float(geo.area[finite].sum())
+    flat = np.pi * reach * reach
+    if far >= reach - 2.0 * edge or area >= SMALL_PIECE_SHARE * flat:
+        return
+    corners = geo.vertices[geo.faces[finite]].reshape(-1, 3)
+    size = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
+    at = ", ".join(f"{float(x):.4g}" for x in snapped)
+    warnings.warn(
+        f"the impact at ({at}) lands on a separate piece {size:.3g} across (area {area:.3g}, "
+        f"{area / flat:.0%} of its star's): the star cannot grow past that piece; give another "
+        f"--impact point on a larger part, or a radius of about {2.0 * far / np.pi:.3g} (this "
+        "piece's reach) for a star that fits it",
+        CrackbakeWarning,
+        stacklevel=4,
+    )
 
 
 def _directional_field(geo: _Geometry, src: DirectionalSource) -> np.ndarray:

@@ -80,6 +80,7 @@ def solve_iben(sim, field, params: SolverParams) -> SolverResult:
         ``nucleations_near`` (refused beside an existing crack), ``tips_ended_near`` (by the
         near-crack rule), ``ligaments_broken`` (steps a tip took through a ligament),
         ``tips_arrested`` (free tips left below the toughness), ``shadow_radius``,
+        ``impact_steps`` (with several impacts, the step each one landed at, in order),
         ``stopped`` (why the run ended: ``max steps``, ``max cracks``, ``saturated`` or
         ``at rest``), ``loop_seconds`` (the crack loop alone), ``seconds``; and
         ``origins``, where and when each crack started and its length.
@@ -93,7 +94,8 @@ def solve_iben(sim, field, params: SolverParams) -> SolverResult:
     stages = _stage_impacts(s, mesh, cal, field, params)
     p = _loop_params(s, mesh, cal, params)
     t_loop = time.perf_counter()
-    s = _run_chunks(s, p, mesh.has_growth, stages) if cal.tau > 0 else s
+    mesh.landed = [0] if stages else []
+    s = _run_chunks(s, p, mesh.has_growth, stages, mesh.landed) if cal.tau > 0 else s
     loop_seconds = time.perf_counter() - t_loop
     return _result(s, mesh, cal, params, loop_seconds, t0)
 
@@ -285,11 +287,11 @@ def _stage_impacts(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, field,
 
 
 def _run_chunks(s: State, p: LoopParams, has_growth: bool,
-                stages: list[np.ndarray] | None = None) -> State:
+                stages: list[np.ndarray] | None = None, landed: list | None = None) -> State:
     """Run the compiled loop to its end in chunks of about a tenth of a second (so progress
     stays responsive without a clock inside the compiled loop); grow the state when full.
     Each of ``stages`` (per initial sim face, through ``s.AF``) is added to the stress once
-    the loop is done, and the loop runs on."""
+    the loop is done, and the loop runs on; the step it lands at is appended to ``landed``."""
     stages = list(stages or [])
     rebuild(s, bool(C.TIP_FIRST))
     w = work(s)
@@ -320,6 +322,8 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool,
         if code == DONE and stages and s.cnt[STEP] < p.max_steps:
             nf = int(s.cnt[FACES])
             s.S[:nf] += stages.pop(0)[s.AF[:nf]]
+            if landed is not None:
+                landed.append(int(s.cnt[STEP]))
             update_all(int(s.cnt[NODES]), nf, s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr, s.NF,
                        s.NFc, s.rho, s.val, s.vec, s.crack_of, s.G, s.gp, p.grain, p.seed,
                        s.tipn)
@@ -381,6 +385,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
             "ligaments_broken": int(cnt[BRIDGED]),
             "tips_arrested": int(np.count_nonzero(s.crack_of[:nn] >= 0)),
             "shadow_radius": float(s.gp[4]),
+            "impact_steps": list(getattr(mesh, "landed", [])),
             "loop_seconds": loop_seconds,
             "seconds": time.perf_counter() - t0,
         },
