@@ -174,3 +174,48 @@ def test_spot_flank_keeps_its_star_beside_the_horn():
     for k, imp in enumerate((flank, horn)):
         alone, solved_alone = _solve(SPOT_OBJ, [imp])
         _close(_measure(alone, solved_alone, 0, False), _measure(together, solved, k, False))
+
+
+def _plate_with_plate(path: Path, gap: float = 0.0) -> Path:
+    """A 2 x 2 x 0.05 plate with a 0.6 x 0.6 x 0.05 plate lying on it (``gap`` above it)."""
+    big = trimesh.creation.box(extents=(2.0, 2.0, 0.05))
+    small = trimesh.creation.box(extents=(0.6, 0.6, 0.05))
+    small.apply_translation((0.55, 0.0, 0.05 + gap))
+    trimesh.util.concatenate([big, small]).export(path)
+    return path
+
+
+def test_touching_shells_crack_together(tmp_path):
+    # Separate shells closer than a sim edge are one surface for the impact: its stress and
+    # its star run from the big plate onto the small plate lying on it.
+    from crackbake.simulate.stress import ImpactSource, stress_field
+
+    path = _plate_with_plate(tmp_path / "plates.obj")
+    mesh = load_mesh(path)
+    sim = build_simmesh(mesh, target_faces=40000)
+    on_small = sim.vertices[sim.faces].mean(axis=1)[:, 2] > 0.03
+    src = ImpactSource((0.0, 0.0, 0.025), 0.5)
+    field = stress_field(sim, mesh, [src])
+    assert np.abs(field.stress[on_small]).max() > 0.5  # the impact's stress crossed over
+    network, _ = _solve(path, [((0.0, 0.0, 0.025), 0.5)], 40000)
+    pts = np.concatenate(polylines(network))
+    top = pts[pts[:, 2] > 0.074]  # on the small plate's top face
+    assert len(top) > 20
+    # Most of its crack length runs radially from the impact, as on the big plate (a radial
+    # segment's distance from the impact grows as fast as its length).
+    radial = total = 0.0
+    for p in polylines(network):
+        q = p[p[:, 2] > 0.074]
+        if len(q) < 2:
+            continue
+        seg = np.linalg.norm(np.diff(q, axis=0), axis=1)
+        grow = np.abs(np.diff(np.linalg.norm(q[:, :2], axis=1)))
+        radial += seg[grow >= np.cos(np.radians(45.0)) * seg].sum()
+        total += seg.sum()
+    assert radial > 0.5 * total
+    # A small plate held off the big one (a gap of several sim edges) is left alone.
+    apart = _plate_with_plate(tmp_path / "apart.obj", gap=0.2)
+    mesh = load_mesh(apart)
+    sim = build_simmesh(mesh, target_faces=40000)
+    far = sim.vertices[sim.faces].mean(axis=1)[:, 2] > 0.2
+    assert not stress_field(sim, mesh, [src]).stress[far].any()

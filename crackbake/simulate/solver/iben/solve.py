@@ -125,7 +125,7 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     h_node = hsum / np.maximum(hcnt, 1)
     width = int(np.bincount(F0.ravel(), minlength=n0).max()) + C.EXTRA_DEGREE
     G, gp = shadow_grid(X0, period, getattr(field, "shadow_radius", None))
-    gp = _impact_radii(gp, X0, field, period)
+    G, gp = _impact_grids(G, gp, X0, field, period)
     clen = np.zeros(min(1024, room))
     cnt = np.zeros(N_COUNTERS, np.int64)
     cnt[FIRST_CRACK] = -1
@@ -233,21 +233,48 @@ def _loop_params(s: State, mesh: SimpleNamespace, cal: SimpleNamespace,
     )
 
 
-def _impact_radii(gp: np.ndarray, X0: np.ndarray, field, period: float) -> np.ndarray:
-    """``gp`` with the per-impact table the kernels read the shadow radius from
-    (:func:`.shadow.radius_at`): ``K`` then ``centre (3), reach, radius`` per impact, when
-    there are several impacts whose radii differ (else ``gp`` itself, one radius for all)."""
+def _impact_grids(G: np.ndarray, gp: np.ndarray, X0: np.ndarray, field,
+                  period: float) -> tuple[np.ndarray, np.ndarray]:
+    """The shadow grid with one block per impact radius, when several impacts ask for
+    different radii (docs/solver.md, "Several impacts"); else ``G, gp`` themselves.
+
+    Each crack deposits its release into the block of the impact nearest to it (in reaches),
+    with that impact's radius and a cell of a third of it, as it would alone; a face reads the
+    sum of all blocks.  The base grid (the smallest radius, finest cells) comes first; the
+    layout of ``gp`` is in :mod:`.shadow` (``IMPACT_ROW``, ``BLOCK_ROW``).
+    """
     shadows = list(getattr(field, "impact_shadows", None) or [])
     impacts = list(getattr(field, "impacts", None) or [])
-    if period > 0.0 or len(shadows) < 2 or len(shadows) != len(impacts):
-        return gp
+    if period > 0.0 or len(shadows) < 2 or len(shadows) != len(impacts) or G.shape[0] < 2:
+        return G, gp
     diag = float(np.linalg.norm(X0.max(0) - X0.min(0))) or 1.0
     radii = [min(float(r), C.SHADOW_REL * diag) for r in shadows]
     if max(radii) == min(radii):
-        return gp
-    rows = [[*imp["point"], 0.5 * np.pi * float(imp["radius"]), r]
-            for imp, r in zip(impacts, radii, strict=True)]
-    return np.concatenate([gp, [float(len(rows))], np.asarray(rows, np.float64).ravel()])
+        return G, gp
+    blocks: dict[float, tuple] = {}  # radius -> (block, grid, its gp)
+    rows = []
+    for imp, r in zip(impacts, radii, strict=True):
+        block = -1
+        if r > gp[4]:
+            if r not in blocks:
+                Gk, gpk = shadow_grid(X0, 0.0, r)
+                if Gk.shape[1] <= G.shape[1] and Gk.shape[2] <= G.shape[2]:
+                    blocks[r] = (len(blocks), Gk, gpk)
+            if r in blocks:
+                block = blocks[r][0]
+            else:
+                r = float(gp[4])
+        rows.append([*imp["point"], 0.5 * np.pi * float(imp["radius"]), r, float(block)])
+    table = [float(len(rows)), *np.asarray(rows, np.float64).ravel(), float(G.shape[0])]
+    stacked = [G]
+    offset = G.shape[0]
+    for _, Gk, gpk in sorted(blocks.values(), key=lambda b: b[0]):
+        pad = np.zeros((Gk.shape[0], G.shape[1], G.shape[2], 6))
+        pad[:, :Gk.shape[1], :Gk.shape[2]] = Gk
+        stacked.append(pad)
+        table += [*gpk[:4], float(offset), *(float(x) for x in Gk.shape[:3])]
+        offset += Gk.shape[0]
+    return np.concatenate(stacked), np.concatenate([gp, np.asarray(table, np.float64)])
 
 
 def _stage_impacts(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, field,
