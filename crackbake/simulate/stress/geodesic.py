@@ -133,22 +133,35 @@ def impact_distance(
 
     link = float(getattr(sim, "edge_length", 0.0) or 0.0)
     if link > 0.0:
-        d_sub = _hop_shells(vertices[nodes], sub_faces, d_sub, link, limit)
+        shell = _shells(faces, len(vertices))
+        if shell.max() > 0:
+            d_sub = _hop_shells(vertices[nodes], sub_faces, d_sub, link, limit, shell[nodes])
     distance = np.full(len(vertices), np.inf)
     distance[nodes] = d_sub
     distance[~np.isfinite(distance)] = np.inf
     return distance, snapped, face
 
 
+def _shells(faces: np.ndarray, n: int) -> np.ndarray:
+    """Connected piece (shell) of each of ``n`` nodes over the faces' edges, (n,) int."""
+    from scipy.sparse.csgraph import connected_components
+
+    e = edges(faces, n)[0]
+    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
 def _hop_shells(vertices: np.ndarray, faces: np.ndarray, d: np.ndarray, link: float,
-                limit: float) -> np.ndarray:
+                limit: float, shell: np.ndarray) -> np.ndarray:
     """Carry the distance ``d`` (N,) across to separate shells that touch the reached ones.
 
     Shells closer than ``link`` (a sim edge) to a reached node are one surface for the impact
     (a nail on a finger, a plate lying on another): each node of an unreached shell within
     ``link`` of a reached node starts at that node's distance plus the gap, and the distance
     runs on over its shell along edge paths (Dijkstra, a few percent long); shells reached so
-    may reach further ones.  Nodes past ``limit`` stay ``inf``.
+    may reach further ones.  Nodes past ``limit`` stay ``inf``.  ``shell`` (N,) is each node's
+    shell over the whole sim mesh: parts of one shell that the patch cut apart (the two walls of
+    a fold) are not joined, their distance runs round through the shell itself.
     """
     from scipy.sparse.csgraph import connected_components, dijkstra
     from scipy.spatial import cKDTree
@@ -167,6 +180,10 @@ def _hop_shells(vertices: np.ndarray, faces: np.ndarray, d: np.ndarray, link: fl
         done[comp[reached]] = True
         todo = ~done[comp]
         if not reached.any() or not todo.any():
+            break
+        # Seeds: unreached nodes within `link` of a reached node of another shell.
+        todo &= ~np.isin(shell, np.unique(shell[reached]))
+        if not todo.any():
             break
         tree = cKDTree(vertices[reached])
         gap, near = tree.query(vertices[todo], distance_upper_bound=link)
