@@ -300,7 +300,7 @@ def solve(
         Sim mesh, stress field and the solver's full result.
     """
     from crackbake.simulate.simmesh import build_simmesh, onto_asset
-    from crackbake.simulate.stress import impact_detail, stress_field
+    from crackbake.simulate.stress import impact_refinement, stress_field
 
     if sources is None:
         sources = stress_sources(params, mesh, relative)
@@ -317,12 +317,16 @@ def solve(
             logger.info("stress field on %d simulation faces", len(sim.faces))
             t = time.perf_counter()
             field = stress_field(sim, mesh, sources, seed=params.seed)
-        finer = None if relative.get("sim_size_set") else impact_detail(field, sim.edge_length)
-        if finer is not None:  # an impact on a thin feature: its star needs a finer sim mesh
-            logger.info("impact on a thin feature: sim edge %.4g -> %.4g", sim.edge_length, finer)
+        local = None if relative.get("sim_size_set") else impact_refinement(field, sim)
+        if local is not None:
+            # An impact on a thin feature: its star needs a finer sim mesh, round it only (the
+            # other impacts' stars keep theirs).
+            logger.info("impact(s) on a thin feature: sim edge %.4g -> %s within %s",
+                        sim.edge_length, ", ".join(f"{h:.4g}" for h in local.edges),
+                        ", ".join(f"{r:.3g}" for r in local.radii))
             with warnings.catch_warnings(record=True) as second:
-                sim = build_simmesh(mesh, detail=finer, seed=params.seed, proxy=sim.proxy,
-                                    proxy_above=params.proxy_above)
+                sim = build_simmesh(mesh, detail=sim.edge_length, seed=params.seed,
+                                    proxy=sim.proxy, proxy_above=params.proxy_above, local=local)
                 field = stress_field(sim, mesh, sources, seed=params.seed)
     finally:
         _warn_once(first, second)

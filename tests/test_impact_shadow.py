@@ -96,10 +96,14 @@ def test_run_refines_only_a_default_size_sim_mesh(tmp_path):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             _, _, solved = solve(mesh, resolved, relative, {})
-        edges[name] = (solved.sim.edge_length, solved.field.shadow_radius)
-    # Default: the capsule's circle (0.63 / 15 = 0.042) over 4 edges, the 2x cap not reached.
-    edge, shadow = edges["default"]
+        sim = solved.sim
+        edges[name] = (sim.edge_at(pole), solved.field.shadow_radius, sim.edge_length,
+                       sim.edge_at(sq[0]))
+    # Default: the capsule's circle (0.63 / 15 = 0.042) over 4 edges, the 2x cap not reached,
+    # round the impact only: the square keeps the default edge.
+    edge, shadow, coarse, far = edges["default"]
     assert edge == pytest.approx(shadow / IMPACT_SHADOW_MIN_EDGES, rel=0.1)
+    assert far == coarse > 1.2 * edge
     # Given by the user: kept as asked even though the shadow spans fewer edges.
-    edge, shadow = edges["given"]
+    edge, shadow, _, _ = edges["given"]
     assert shadow / edge < IMPACT_SHADOW_MIN_EDGES

@@ -37,6 +37,7 @@ __all__ = [
     "arm_straightness",
     "impact_reach",
     "length_beyond",
+    "own_cracks",
     "polylines",
     "radial_arms",
     "star_metrics",
@@ -62,6 +63,46 @@ def polylines(network: Any) -> list[np.ndarray]:
     else:
         cracks = list(network)
     return [np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in cracks if len(p) >= 2]
+
+
+def own_cracks(
+    polys: list[np.ndarray], impact: np.ndarray, reach: float, others: list
+) -> list[np.ndarray]:
+    """The parts of the polylines nearer (in reaches) to ``impact`` than to any of ``others``.
+
+    With several impacts on one surface each star is measured on its own cracks: the runs of
+    points whose straight distance over the impact's reach is at most that to every other
+    impact (a power-free Voronoi cell scaled by the reaches), cut where a polyline leaves it.
+
+    Parameters
+    ----------
+    polys : list of (N_i, 3) float arrays
+    impact : (3,) array_like
+    reach : float
+        This impact's reach, mesh units.
+    others : list of (point (3,), reach)
+        The other impacts.
+
+    Returns
+    -------
+    list of (K_j, 3) float arrays, each with at least 2 points.
+    """
+    if not others:
+        return polys
+    c = np.asarray(impact, dtype=np.float64).reshape(3)
+    pts = np.asarray([o[0] for o in others], dtype=np.float64).reshape(-1, 3)
+    reaches = np.asarray([o[1] for o in others], dtype=np.float64)
+    out = []
+    for p in polys:
+        mine = np.linalg.norm(p - c, axis=1) / reach
+        theirs = (np.linalg.norm(p[:, None] - pts[None], axis=2) / reaches).min(axis=1)
+        own = mine <= theirs
+        # Runs of owned points (a crack crossing into another star's cell is cut there).
+        edges = np.flatnonzero(np.diff(np.r_[0, own.astype(np.int8), 0]))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a >= 2:
+                out.append(p[a:b])
+    return out
 
 
 def _interpolated(tri: np.ndarray, d: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -315,6 +356,7 @@ def star_metrics(
     vertices: np.ndarray | None = None,
     faces: np.ndarray | None = None,
     bins: int = 5,
+    others: list | None = None,
 ) -> dict:
     """Every star measure of one impact.
 
@@ -330,6 +372,9 @@ def star_metrics(
         :func:`surface_distance`); without it distances are straight (a plate).
     bins : int
         Annuli of the density profile.
+    others : list of (point (3,), reach), optional
+        The other impacts of the run: the star is measured on its own cracks only
+        (:func:`own_cracks`).
 
     Returns
     -------
@@ -341,6 +386,8 @@ def star_metrics(
         ``beyond`` (mesh units), ``length`` (total, mesh units).
     """
     polys = polylines(network)
+    if others:
+        polys = own_cracks(polys, impact, reach, others)
     flat = np.concatenate(polys) if polys else np.zeros((0, 3))
     d_all = surface_distance(flat, impact, vertices, faces, max_distance=2.0 * reach)
     split = np.cumsum([len(p) for p in polys])[:-1]

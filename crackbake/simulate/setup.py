@@ -180,4 +180,8 @@ def with_spacing(field, params: RunParams, diagonal: float):
     if current is not None:
         radius = min(radius, float(current))
     field.shadow_radius = radius
+    shadows = getattr(field, "impact_shadows", None)
+    if shadows:
+        field.impact_shadows = [min(float(r), float(params.spacing) * float(diagonal))
+                                for r in shadows]
     return field

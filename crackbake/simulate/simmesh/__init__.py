@@ -27,6 +27,7 @@ the asset after the solve.
 
 from crackbake.simulate.simmesh.build import (
     MAX_SIM_FACES,
+    Local,
     SimMesh,
     asset_barycentric,
     build_simmesh,
@@ -36,6 +37,7 @@ from crackbake.simulate.simmesh.proxy import Proxy, onto_asset
 
 __all__ = [
     "MAX_SIM_FACES",
+    "Local",
     "Proxy",
     "SimMesh",
     "asset_barycentric",

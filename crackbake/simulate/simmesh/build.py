@@ -52,6 +52,9 @@ class SimMesh:
         refined in the asset's own faces.  With a proxy the nodes lie near the asset surface,
         ``node_face``/``node_bary`` give the closest asset point and ``asset_face`` the asset
         face closest to each sim face's centroid.
+    local : Local or None
+        Balls refined to a finer edge length than ``edge_length`` (:func:`build_simmesh`'s
+        ``local``), None when the whole mesh has one.
     """
 
     vertices: np.ndarray
@@ -62,6 +65,53 @@ class SimMesh:
     boundary: np.ndarray
     edge_length: float
     proxy: Proxy | None = None
+    local: Local | None = None
+
+    def edge_at(self, point) -> float:
+        """Target edge length at ``point`` (3,), mesh units: the finest of the refined balls
+        holding it (:class:`Local`), else ``edge_length``."""
+        return self.edge_length if self.local is None else self.local.edge_at(
+            np.asarray(point, np.float64).reshape(1, 3), self.edge_length)[0]
+
+
+@dataclass(frozen=True, eq=False)
+class Local:
+    """Balls of the surface refined finer than the rest of the sim mesh (an impact on a thin
+    feature: docs/solver.md, "Several impacts").
+
+    Attributes
+    ----------
+    centres : (K, 3) float64
+        Ball centres, mesh units.
+    radii : (K,) float64
+        Ball radii (straight distance), mesh units.
+    edges : (K,) float64
+        Target edge length inside each ball, mesh units.
+    """
+
+    centres: np.ndarray
+    radii: np.ndarray
+    edges: np.ndarray
+
+    def ball_of(self, points: np.ndarray, edge: float) -> np.ndarray:
+        """The ball (index) whose edge length each of ``points`` (P, 3) takes, -1 where none
+        is finer than ``edge``, (P,) int64."""
+        best = np.full(len(points), float(edge))
+        out = np.full(len(points), -1, np.int64)
+        for k, (c, r, h) in enumerate(zip(self.centres, self.radii, self.edges, strict=True)):
+            take = (np.linalg.norm(points - c, axis=1) <= r) & (h < best)
+            best[take] = h
+            out[take] = k
+        return out
+
+    def edge_at(self, points: np.ndarray, edge: float) -> np.ndarray:
+        """Target edge length at each of ``points`` (P, 3): the smallest of ``edge`` and the
+        edges of the balls holding the point, (P,)."""
+        out = np.full(len(points), float(edge))
+        for c, r, h in zip(self.centres, self.radii, self.edges, strict=True):
+            inside = np.linalg.norm(points - c, axis=1) <= r
+            out[inside] = np.minimum(out[inside], h)
+        return out
 
 
 
@@ -161,6 +211,7 @@ def build_simmesh(
     jitter: float = 0.15,
     proxy_above: int | None = None,
     proxy: Proxy | None = None,
+    local: Local | None = None,
 ) -> SimMesh:
     """Build the simulation mesh: a conforming, welded refinement inside each asset face, or
     inside the faces of a decimated proxy when the asset is far denser than wanted.
@@ -185,6 +236,10 @@ def build_simmesh(
     proxy : Proxy, optional
         A proxy already decimated for this mesh (``SimMesh.proxy`` of an earlier build), to
         refine again at another edge length without decimating twice.
+    local : Local, optional
+        Balls meshed finer: an asset (or proxy) face whose centroid lies in a ball gets that
+        ball's edge length (the faces' shared edges take the mean of their point requests and
+        Triangle's quality bound grades the transition).
 
     Returns
     -------
@@ -201,10 +256,10 @@ def build_simmesh(
     if proxy is None:
         wv, wf, keep = _welded_surface(mesh.vertices, mesh.faces, warn=True)
         if len(wf) <= (proxy_limit(wanted) if proxy_above is None else proxy_above):
-            return _refine(wv, wf, keep, h, rng, jitter)
+            return _refine(wv, wf, keep, h, rng, jitter, local)
         proxy = decimate(wv, wf, keep, max(int(wanted), 100))
     pv, pf, pkeep = _welded_surface(proxy.vertices, proxy.faces, warn=False)
-    sim = _refine(pv, pf, pkeep, h, rng, jitter)
+    sim = _refine(pv, pf, pkeep, h, rng, jitter, local)
     centroid = sim.vertices[sim.faces].mean(axis=1)
     asset_face = proxy.onto_asset(centroid)[0]
     node_face, node_bary, _ = proxy.onto_asset(sim.vertices)
@@ -232,31 +287,63 @@ def _welded_surface(vertices: np.ndarray, faces: np.ndarray, warn: bool):
 
 
 def _refine(wv: np.ndarray, wf: np.ndarray, keep: np.ndarray, h: float,
-            rng: np.random.Generator, jitter: float) -> SimMesh:
+            rng: np.random.Generator, jitter: float, local: Local | None = None) -> SimMesh:
     """The sim mesh refined at edge length ``h`` inside the welded faces ``wf`` (rows ``keep``
-    of the mesh they came from)."""
+    of the mesh they came from), finer inside the balls of ``local``."""
     n_v = len(wv)
     face_edge, forward, ev0, ev1 = _welded_edges(wf, n_v)
     n_e = len(ev0)
-    corners = face_frames_2d(wv[wf], h)
-    n_mid = edge_point_counts(corners, face_edge, n_e, rng)
-
-    # Edge points, by parameter t along lo -> hi, lightly jittered along the edge.
-    pt_edge = np.repeat(np.arange(n_e), n_mid)
-    pt_k = np.arange(len(pt_edge)) - (np.cumsum(n_mid) - n_mid)[pt_edge] + 1
-    t_edge = (pt_k + 0.5 * jitter * rng.uniform(-1.0, 1.0, len(pt_edge))) / (n_mid + 1)[pt_edge]
-
-    # Interior points of every face (none where the inradius is below the margin).
-    l_face, l_xy = lattice_points(corners, rng, jitter)
+    corners, pt_edge, t_edge, l_face, l_xy = _layout(wv[wf], face_edge, n_e, h, rng, jitter)
+    h_face = h
+    if local is not None:
+        h_face = local.edge_at(wv[wf].mean(axis=1), h)
+        ball = local.ball_of(wv[wf].mean(axis=1), h)
+        base = int(rng.integers(1 << 62)) if (ball >= 0).any() else 0
+        for k in np.unique(ball[ball >= 0]):
+            # Faces outside the balls keep exactly the points the uniform layout gives them
+            # (same draws), so a star far from a refined ball sees the same sim mesh as
+            # without it; each ball's faces and their edges draw from a stream of their own,
+            # seeded by its centre, so a ball is meshed the same whatever other balls exist.
+            fine = ball == k
+            key = np.ascontiguousarray(local.centres[k], np.float64).view(np.uint32)
+            sub = np.random.default_rng([base, *(int(x) for x in key)])
+            f_corners, f_edge, f_t, f_face, f_xy = _layout(
+                wv[wf], face_edge, n_e, np.where(fine, h_face, h), sub, jitter)
+            touch = np.zeros(n_e, dtype=bool)
+            touch[face_edge[fine].ravel()] = True
+            corners = np.where(fine[:, None, None], f_corners, corners)
+            old_pt, new_pt = ~touch[pt_edge], touch[f_edge]
+            pt_edge = np.concatenate([pt_edge[old_pt], f_edge[new_pt]])
+            t_edge = np.concatenate([t_edge[old_pt], f_t[new_pt]])
+            old_l, new_l = ~fine[l_face], fine[f_face]
+            l_face = np.concatenate([l_face[old_l], f_face[new_l]])
+            l_xy = np.concatenate([l_xy[old_l], f_xy[new_l]])
     fs = FaceSet(wf, face_edge, forward, corners, l_face, l_xy,
-                 np.linalg.norm(wv[ev1] - wv[ev0], axis=1), h, n_v)
+                 np.linalg.norm(wv[ev1] - wv[ev0], axis=1), float(np.min(h_face)), n_v)
     # Triangulate every face that gets points; faces with none are kept as they are.
     has_pts = np.zeros(n_e, dtype=bool)
     has_pts[pt_edge] = True
     todo = np.flatnonzero(has_pts[face_edge].any(axis=1)
                           | (np.bincount(l_face, minlength=len(wf)) > 0))
     ref = refine_faces(fs, pt_edge, t_edge, todo)
-    return _assemble(fs, wv, ref, ev0, ev1, keep)
+    return replace(_assemble(fs, wv, ref, ev0, ev1, keep), edge_length=h, local=local)
+
+
+def _layout(tri: np.ndarray, face_edge: np.ndarray, n_e: int, h, rng: np.random.Generator,
+            jitter: float):
+    """The points of a refinement at edge length ``h`` (one, or (R,) per face): the faces'
+    2-D corners (R, 3, 2), the edge points' edges (Q,) and parameters along lo -> hi (Q,),
+    the lattice points' faces (P,) and 2-D positions (P, 2).  Draws from ``rng`` in a fixed
+    order: edge counts, edge jitter, lattice."""
+    corners = face_frames_2d(tri, h)
+    n_mid = edge_point_counts(corners, face_edge, n_e, rng)
+    # Edge points, by parameter t along lo -> hi, lightly jittered along the edge.
+    pt_edge = np.repeat(np.arange(n_e), n_mid)
+    pt_k = np.arange(len(pt_edge)) - (np.cumsum(n_mid) - n_mid)[pt_edge] + 1
+    t_edge = (pt_k + 0.5 * jitter * rng.uniform(-1.0, 1.0, len(pt_edge))) / (n_mid + 1)[pt_edge]
+    # Interior points of every face (none where the inradius is below the margin).
+    l_face, l_xy = lattice_points(corners, rng, jitter)
+    return corners, pt_edge, t_edge, l_face, l_xy
 
 
 def _manifold_copy(wv: np.ndarray, wf_all: np.ndarray, keep: np.ndarray):

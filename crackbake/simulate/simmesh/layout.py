@@ -14,8 +14,10 @@ _DENSITY = 2.0 / np.sqrt(3.0)  # lattice points per unit area, in target lengths
 _ROW = np.sqrt(3.0) / 2.0  # lattice row spacing, target lengths
 
 
-def face_frames_2d(tri: np.ndarray, h: float) -> np.ndarray:
+def face_frames_2d(tri: np.ndarray, h) -> np.ndarray:
     """Corners of each face in its own plane, in target lengths: (R, 3, 2), counter-clockwise.
+
+    ``h`` is the target edge length, mesh units: one for all faces, or (R,) per face.
 
     Corner 0 at the origin, corner 1 on the +x axis, corner 2 above it.
     """

@@ -15,6 +15,7 @@ from crackbake.simulate.stress.fields import (
     NOISE_WAVES,
     StressField,
     impact_detail,
+    impact_refinement,
     stress_field,
 )
 from crackbake.simulate.stress.geodesic import impact_distance, iso_length
@@ -42,6 +43,7 @@ __all__ = [
     "WeightSource",
     "impact_detail",
     "impact_distance",
+    "impact_refinement",
     "iso_length",
     "load_weight_map",
     "stress_field",

@@ -58,6 +58,10 @@ IMPACT_SHADOW_EDGES = 2.0
 IMPACT_SHADOW_MIN_EDGES = 4.0
 #: ... by at most this factor in edge length (2: up to 4x the sim faces).
 IMPACT_REFINE_MAX = 2.0
+#: ... inside the ball of this many reaches round the impact only (straight distance): the
+#: star and the cracks a little past its reach; the rest of the surface, another impact's star
+#: included, keeps the sim mesh it had (:func:`impact_refinement`).
+IMPACT_REFINE_REACH = 1.5
 
 
 @dataclass(eq=False)
@@ -81,6 +85,15 @@ class StressField:
         reach / :data:`IMPACT_SHADOW_ARMS` where that is less (a thin feature), but at least
         :data:`IMPACT_SHADOW_EDGES` sim edge lengths.  ``None`` (the solver's own, from the
         mesh size) without impacts.
+    impact_shadows : list of float
+        The shadow radius each impact asks for (same rules), mesh units, in impact order: with
+        several impacts the solver gives each crack the radius of the impact nearest to it (in
+        reaches), so a thin feature's narrow shadow does not spread to a broad impact's star.
+    impact_share : (K, M) float32 or None
+        With K >= 2 impacts, the share of each face's stress that impact k contributes (its
+        raw tensor norm over the sum of all additive contributions' norms): the solver loads
+        the impacts one after the other in this order (a later star's cracks stop at an
+        earlier star's, as in real glass).  None with fewer than two impacts.
     """
 
     stress: np.ndarray
@@ -88,6 +101,8 @@ class StressField:
     weight: np.ndarray
     impacts: list[dict] = field(default_factory=list)
     shadow_radius: float | None = None
+    impact_shadows: list[float] = field(default_factory=list)
+    impact_share: np.ndarray | None = None
 
 
 
@@ -193,6 +208,52 @@ def impact_detail(field: StressField, edge_length: float) -> float | None:
     return max(want, edge_length / IMPACT_REFINE_MAX)
 
 
+def impact_refinement(field: StressField, sim):
+    """Where the sim mesh should be finer for the impacts' stars, or None where it will do.
+
+    Per impact, as :func:`impact_detail` with the edge length the sim mesh has at the impact
+    (``sim.edge_at``) and that impact's own shadow radius (``StressField.impact_shadows``),
+    inside a ball of :data:`IMPACT_REFINE_REACH` reaches round it.
+
+    Returns
+    -------
+    crackbake.simulate.simmesh.Local or None
+    """
+    from crackbake.simulate.simmesh import Local
+
+    shadows = list(field.impact_shadows or [])
+    if len(shadows) != len(field.impacts):
+        return None
+    rows = []
+    for info, shadow in zip(field.impacts, shadows, strict=True):
+        edge = _edge_at(sim, info["point"])
+        want = shadow / IMPACT_SHADOW_MIN_EDGES
+        if edge <= 0.0 or want >= edge * (1.0 - 1e-9):
+            continue
+        reach = 0.5 * np.pi * float(info["radius"])
+        rows.append((info["point"], IMPACT_REFINE_REACH * reach,
+                     max(want, edge / IMPACT_REFINE_MAX)))
+    if not rows:
+        return None
+    old = getattr(sim, "local", None)
+    centres = np.asarray([r[0] for r in rows], np.float64).reshape(-1, 3)
+    radii = np.asarray([r[1] for r in rows], np.float64)
+    edges = np.asarray([r[2] for r in rows], np.float64)
+    if old is not None:  # a ball refined before stays refined
+        centres = np.concatenate([old.centres, centres])
+        radii = np.concatenate([old.radii, radii])
+        edges = np.concatenate([old.edges, edges])
+    return Local(centres=centres, radii=radii, edges=edges)
+
+
+def _edge_at(sim, point) -> float:
+    """The sim mesh's target edge length at ``point`` (its local refinement, if any)."""
+    at = getattr(sim, "edge_at", None)
+    if at is not None:
+        return float(at(point))
+    return float(getattr(sim, "edge_length", 0.0) or 0.0)
+
+
 def _impact_shadow(geo: _Geometry, dist: np.ndarray, radius: float, edge: float) -> float:
     """The shadow radius an impact of ``radius`` asks for (``StressField.shadow_radius``), mesh
     units; ``dist`` (N,) its geodesic distance, ``edge`` the sim edge length."""
@@ -223,6 +284,7 @@ def _impact_field(
             stacklevel=3,
         )
     nodal = dist[geo.faces]  # (M, 3)
+    _warn_small_piece(geo, nodal, snapped, radius, _edge_at(sim, snapped))
     d_face = nodal.mean(axis=1)  # inf when any corner is out of reach
     # Inside the source face the surface is flat, so the straight distance is the geodesic one.
     d_face[face] = np.linalg.norm(geo.centroid[face] - snapped)
@@ -260,8 +322,43 @@ def _impact_field(
         "radius": float(radius),
         "strength": float(src.strength),
     }
-    edge = float(getattr(sim, "edge_length", 0.0) or 0.0)
-    return stress, info, _impact_shadow(geo, dist, radius, edge)
+    return stress, info, _impact_shadow(geo, dist, radius, _edge_at(sim, snapped))
+
+
+#: An impact whose reachable surface within its reach is under this share of a flat star's
+#: (``pi reach^2``) and ends there (a small separate piece) gets a warning.
+SMALL_PIECE_SHARE = 0.25
+
+
+def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, radius: float,
+                      edge: float) -> None:
+    """Warn when the surface the impact can reach is a piece too small for its star.
+
+    ``nodal`` (M, 3) is the impact's geodesic distance at each face's corners (``inf`` past
+    the reach or on other pieces).  The piece counts as small when every point it reaches lies
+    more than two sim edges inside the reach (the piece ends before the star would) and its
+    area is under :data:`SMALL_PIECE_SHARE` of ``pi reach^2``.
+    """
+    reach = 0.5 * np.pi * radius
+    finite = np.isfinite(nodal).all(axis=1)
+    if not finite.any():
+        return
+    far = float(nodal[finite].max())
+    area = float(geo.area[finite].sum())
+    flat = np.pi * reach * reach
+    if far >= reach - 2.0 * edge or area >= SMALL_PIECE_SHARE * flat:
+        return
+    corners = geo.vertices[geo.faces[finite]].reshape(-1, 3)
+    size = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
+    at = ", ".join(f"{float(x):.4g}" for x in snapped)
+    warnings.warn(
+        f"the impact at ({at}) lands on a separate piece {size:.3g} across (area {area:.3g}, "
+        f"{area / flat:.0%} of its star's): the star cannot grow past that piece; give another "
+        f"--impact point on a larger part, or a radius of about {2.0 * far / np.pi:.3g} (this "
+        "piece's reach) for a star that fits it",
+        CrackbakeWarning,
+        stacklevel=4,
+    )
 
 
 def _directional_field(geo: _Geometry, src: DirectionalSource) -> np.ndarray:
@@ -427,6 +524,8 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
     weight = np.ones(m)
     impacts: list[dict] = []
     shadows: list[float] = []
+    impact_norms: list[np.ndarray] = []  # per impact, its raw tensor norm per face
+    impact_sum = None
     noises: list[NoiseSource] = []
     bary_cache: list = []
     for src in sources:
@@ -436,6 +535,8 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
             stress += s
             impacts.append(info)
             shadows.append(shadow)
+            impact_norms.append(np.sqrt(np.einsum("eab,eab->e", s, s)))
+            impact_sum = s if impact_sum is None else impact_sum + s
         elif isinstance(src, ShrinkSource):
             plane = _plane_identity(normal)
             stress += src.strength * plane
@@ -451,6 +552,8 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
         else:
             raise TypeError(f"not a stress source: {type(src).__name__}")
 
+    share = (_impact_share(stress - impact_sum, impact_norms) if len(impact_norms) >= 2
+             else None)
     stress *= weight[:, None, None]
     growth *= weight[:, None, None]
     for i, src in enumerate(noises):
@@ -467,4 +570,14 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
     stress[flat] = 0.0
     growth[flat] = 0.0
     return StressField(stress=stress, growth=growth, weight=weight, impacts=impacts,
-                       shadow_radius=min(shadows) if shadows else None)
+                       shadow_radius=min(shadows) if shadows else None,
+                       impact_shadows=shadows, impact_share=share)
+
+
+def _impact_share(rest: np.ndarray, norms: list[np.ndarray]) -> np.ndarray:
+    """Per impact, its share of each face's stress, (K, M) float32: its tensor norm over the
+    sum of every impact's norm and the norm of ``rest`` (M, 3, 3), what the other additive
+    sources (shrinkage, tension, curvature) added."""
+    norm = np.stack(norms)  # (K, M)
+    den = norm.sum(axis=0) + np.sqrt(np.einsum("eab,eab->e", rest, rest))
+    return np.where(den > 0, norm / np.where(den > 0, den, 1.0), 0.0).astype(np.float32)

@@ -131,10 +131,77 @@ def impact_distance(
         )
         d_sub = _edge_dijkstra(vertices[nodes], sub_faces, sub_face, snapped, limit)
 
+    link = float(getattr(sim, "edge_length", 0.0) or 0.0)
+    if link > 0.0:
+        shell = _shells(faces, len(vertices))
+        if shell.max() > 0:
+            d_sub = _hop_shells(vertices[nodes], sub_faces, d_sub, link, limit, shell[nodes])
     distance = np.full(len(vertices), np.inf)
     distance[nodes] = d_sub
     distance[~np.isfinite(distance)] = np.inf
     return distance, snapped, face
+
+
+def _shells(faces: np.ndarray, n: int) -> np.ndarray:
+    """Connected piece (shell) of each of ``n`` nodes over the faces' edges, (n,) int."""
+    from scipy.sparse.csgraph import connected_components
+
+    e = edges(faces, n)[0]
+    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+def _hop_shells(vertices: np.ndarray, faces: np.ndarray, d: np.ndarray, link: float,
+                limit: float, shell: np.ndarray) -> np.ndarray:
+    """Carry the distance ``d`` (N,) across to separate shells that touch the reached ones.
+
+    Shells closer than ``link`` (a sim edge) to a reached node are one surface for the impact
+    (a nail on a finger, a plate lying on another): each node of an unreached shell within
+    ``link`` of a reached node starts at that node's distance plus the gap, and the distance
+    runs on over its shell along edge paths (Dijkstra, a few percent long); shells reached so
+    may reach further ones.  Nodes past ``limit`` stay ``inf``.  ``shell`` (N,) is each node's
+    shell over the whole sim mesh: parts of one shell that the patch cut apart (the two walls of
+    a fold) are not joined, their distance runs round through the shell itself.
+    """
+    from scipy.sparse.csgraph import connected_components, dijkstra
+    from scipy.spatial import cKDTree
+
+    n = len(vertices)
+    e = edges(faces, n)[0]
+    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    n_comp, comp = connected_components(graph, directed=False)
+    if n_comp < 2:
+        return d
+    d = d.copy()
+    length = np.maximum(np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1), 1e-300)
+    for _ in range(n_comp):
+        reached = np.isfinite(d)
+        done = np.zeros(n_comp, dtype=bool)
+        done[comp[reached]] = True
+        todo = ~done[comp]
+        if not reached.any() or not todo.any():
+            break
+        # Seeds: unreached nodes within `link` of a reached node of another shell.
+        todo &= ~np.isin(shell, np.unique(shell[reached]))
+        if not todo.any():
+            break
+        tree = cKDTree(vertices[reached])
+        gap, near = tree.query(vertices[todo], distance_upper_bound=link)
+        hit = np.isfinite(gap)
+        if not hit.any():
+            break
+        seeds = np.flatnonzero(todo)[hit]
+        start = d[np.flatnonzero(reached)[near[hit]]] + gap[hit]
+        # One virtual source at n, joined to every seed by its start distance.
+        inside = todo[e[:, 0]]
+        rows = np.concatenate([e[inside, 0], np.full(len(seeds), n)])
+        cols = np.concatenate([e[inside, 1], seeds])
+        w = np.concatenate([length[inside], np.maximum(start, 1e-300)])
+        g = sp.coo_matrix((w, (rows, cols)), shape=(n + 1, n + 1)).tocsr()
+        hop = dijkstra(g, directed=False, indices=n, limit=limit)[:n]
+        d[todo] = hop[todo]
+        d[~np.isfinite(d)] = np.inf
+    return d
 
 
 def iso_length(

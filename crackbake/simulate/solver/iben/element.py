@@ -4,6 +4,9 @@ The formulas are those of :mod:`crackbake.simulate.solver.fem` (tested against i
 tests/test_iben.py), written per element for use inside the loop: corner forces
 ``f_i = -A S± g_i`` are rebuilt from the stored principal split ``pr`` whenever a node needs
 them, which is cheaper in memory than storing them and costs only a few flops.
+
+With several impacts the shadow is a stack of grid blocks (:mod:`.shadow`); faces read it
+through :func:`.shadow.face_shadow` only.
 """
 
 from __future__ import annotations

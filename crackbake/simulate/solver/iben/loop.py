@@ -27,7 +27,7 @@ from crackbake.simulate.solver.iben.heap import heap_pop
 from crackbake.simulate.solver.iben.relax import region, relax
 from crackbake.simulate.solver.iben.rules import bridge, footprint_fails, near_other, smooth_dir
 from crackbake.simulate.solver.iben.separation import node_update
-from crackbake.simulate.solver.iben.shadow import shadow_add
+from crackbake.simulate.solver.iben.shadow import radius_scale, shadow_add
 from crackbake.simulate.solver.iben.state import (
     ABORTED,
     BRIDGED,
@@ -120,10 +120,17 @@ def _update_faces(s, w, faces, count):
 
 
 @njit(cache=True, inline="always")
+def _scale(s, n):
+    """The shadow radius at node ``n`` over the grid's (1.0 with one radius): the world
+    lengths of the rules follow the nearest impact's radius (docs/solver.md)."""
+    return radius_scale(s.X[n, 0], s.X[n, 1], s.X[n, 2], s.gp)
+
+
+@njit(cache=True, inline="always")
 def _bridge(s, p, w, n):
     """Ligament failure at free tip ``n`` (:func:`crackbake.simulate.solver.iben.rules.bridge`)."""
     cid = s.crack_of[n]
-    if bridge(s, w, n, cid, p.lig_rad, p.lig_cos, s.clen[cid]):
+    if bridge(s, w, n, cid, p.lig_rad * _scale(s, n), p.lig_cos, s.clen[cid]):
         s.cnt[BRIDGED] += 1
         return True
     return False
@@ -220,8 +227,8 @@ def crack_event(s, p, w, c):
         # No new crack right beside an existing one (permanently: cracks never heal), nor
         # where the near-crack rule would end both its tips at once; such starts only
         # multiplied short cracks as the mesh refined.
-        near = near_other(s, w, c, -1, w.geo[2, 0], w.geo[2, 1], w.geo[2, 2], p.near_rad,
-                          p.near_cos, p.nuc_any)
+        near = near_other(s, w, c, -1, w.geo[2, 0], w.geo[2, 1], w.geo[2, 2],
+                          p.near_rad * _scale(s, c), p.near_cos, p.nuc_any)
         if near > 0:
             s.nver[c] += 1
             cnt[NUC_NEAR] += 1
@@ -288,6 +295,7 @@ def record(s, p, w, c, nucleate, interior, sig_n):
         s.corig[cid, 2] = xc2
         s.corig[cid, 3] = cnt[STEP]
         s.corig[cid, 4] = 0.0 if interior else 1.0
+    dir_len = p.dir_len * _scale(s, c)
     release = s.val[c] / s.hn[c]
     excess = s.val[c] - s.taun[c]
     s.crack_of[c] = -1
@@ -316,7 +324,7 @@ def record(s, p, w, c, nucleate, interior, sig_n):
         # A new crack's first segments start its direction afresh (c may lie on another).
         smooth_dir(pid[c], pid[t], wrap(X[t, 0] - xc0, s.gp[5]),
                    wrap(X[t, 1] - xc1, s.gp[6]), X[t, 2] - xc2,
-                   0.0 if nucleate else p.dir_len, pdir)
+                   0.0 if nucleate else dir_len, pdir)
         d0 = wrap(X[t, 0] - xc0, s.gp[5])
         d1 = wrap(X[t, 1] - xc1, s.gp[6])
         d2 = X[t, 2] - xc2
@@ -360,14 +368,18 @@ def end_near_tips(s, p, w, cid):
     ``w.near_end``; whether it rather breaks through is decided after the region's update."""
     w.near_end[0] = False
     w.near_end[1] = False
-    if p.tip_near and s.clen[cid] >= p.near_rad:
-        for side in range(2):
-            t = w.tip[side]
-            if t >= 0 and w.free_tip[side]:
-                q = s.pid[t]
-                if near_other(s, w, t, cid, s.pdir[q, 0], s.pdir[q, 1], s.pdir[q, 2], p.near_rad,
-                              p.near_cos, 0.0) > 0:
-                    w.near_end[side] = True
+    if not p.tip_near:
+        return
+    for side in range(2):
+        t = w.tip[side]
+        if t >= 0 and w.free_tip[side]:
+            near_rad = p.near_rad * _scale(s, t)
+            if s.clen[cid] < near_rad:
+                continue
+            q = s.pid[t]
+            if near_other(s, w, t, cid, s.pdir[q, 0], s.pdir[q, 1], s.pdir[q, 2], near_rad,
+                          p.near_cos, 0.0) > 0:
+                w.near_end[side] = True
 
 
 @njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)

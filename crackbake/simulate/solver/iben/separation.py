@@ -1,4 +1,7 @@
-"""Per-node separation tensors of the iben loop (the crack criterion and direction)."""
+"""Per-node separation tensors of the iben loop (the crack criterion and direction).
+
+The shadow (several impacts: a stack of grid blocks) is read through :mod:`.shadow` only.
+"""
 
 from __future__ import annotations
 

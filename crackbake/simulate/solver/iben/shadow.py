@@ -15,6 +15,9 @@ def shadow_at(x0, x1, x2, G, gp, out):
         out[q] = 0.0
     if G.shape[0] < 2:
         return
+    if gp.shape[0] > 7:
+        _blocks_at(x0, x1, x2, G, gp, out)
+        return
     cs = gp[3]
     u0 = (x0 - gp[0]) / cs - 0.5
     u1 = (x1 - gp[1]) / cs - 0.5
@@ -55,15 +58,116 @@ def face_shadow(f, X, F, G, gp, out):
               (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, out)
 
 
+#: Several impacts (docs/solver.md, "Several impacts"): ``gp[7]`` = K, then K rows of
+#: ``centre (3), reach, radius, block`` (block -1: the base grid), then ``nx`` of the base grid
+#: and per extra block ``origin (3), cell, x offset, nx, ny, nz``; the blocks are stacked along
+#: the grid's first axis after the base grid.
+IMPACT_ROW = 6
+BLOCK_ROW = 8
+
+
+@njit(cache=True)
+def nearest_impact(x0, x1, x2, gp):
+    """Row of the impact nearest to a point in reaches (``gp`` with several impacts)."""
+    best = np.inf
+    k = 0
+    for i in range(int(gp[7])):
+        b = 8 + IMPACT_ROW * i
+        d = np.sqrt((x0 - gp[b]) ** 2 + (x1 - gp[b + 1]) ** 2 + (x2 - gp[b + 2]) ** 2) / gp[b + 3]
+        if d < best:
+            best = d
+            k = i
+    return k
+
+
+@njit(cache=True)
+def radius_at(x0, x1, x2, gp):
+    """The shadow radius at a point: ``gp[4]``, or with several impacts the radius of the
+    impact nearest to the point in reaches (docs/solver.md, "Several impacts")."""
+    if gp.shape[0] <= 7:
+        return gp[4]
+    return gp[8 + IMPACT_ROW * nearest_impact(x0, x1, x2, gp) + 4]
+
+
+@njit(cache=True)
+def radius_scale(x0, x1, x2, gp):
+    """:func:`radius_at` over ``gp[4]``: 1.0 exactly with one shadow radius, so the world
+    lengths the rules scale by it are unchanged bit for bit."""
+    if gp.shape[0] <= 7:
+        return 1.0
+    return radius_at(x0, x1, x2, gp) / gp[4]
+
+
+@njit(cache=True)
+def _block(gp, j):
+    """Origin (3), cell, x offset, nx, ny, nz of grid block ``j`` (-1: the base grid)."""
+    if j < 0:
+        base = 8 + IMPACT_ROW * int(gp[7])
+        return gp[0], gp[1], gp[2], gp[3], 0, int(gp[base]), -1, -1
+    b = 8 + IMPACT_ROW * int(gp[7]) + 1 + BLOCK_ROW * j
+    return (gp[b], gp[b + 1], gp[b + 2], gp[b + 3], int(gp[b + 4]), int(gp[b + 5]),
+            int(gp[b + 6]), int(gp[b + 7]))
+
+
+@njit(cache=True)
+def _block_at(x0, x1, x2, G, ox, oy, oz, cs, off, nx, ny, nz, out):
+    """Add a block's trilinear value at a point to out[6]."""
+    u0 = (x0 - ox) / cs - 0.5
+    u1 = (x1 - oy) / cs - 0.5
+    u2 = (x2 - oz) / cs - 0.5
+    i0 = min(max(int(np.floor(u0)), 0), nx - 2)
+    i1 = min(max(int(np.floor(u1)), 0), ny - 2)
+    i2 = min(max(int(np.floor(u2)), 0), nz - 2)
+    w0 = min(max(u0 - i0, 0.0), 1.0)
+    w1 = min(max(u1 - i1, 0.0), 1.0)
+    w2 = min(max(u2 - i2, 0.0), 1.0)
+    for a in range(2):
+        wa = w0 if a else 1.0 - w0
+        for b in range(2):
+            wb = w1 if b else 1.0 - w1
+            for c in range(2):
+                w = wa * wb * (w2 if c else 1.0 - w2)
+                if w == 0.0:
+                    continue
+                for q in range(6):
+                    out[q] += w * G[off + i0 + a, i1 + b, i2 + c, q]
+
+
+@njit(cache=True)
+def _blocks_at(x0, x1, x2, G, gp, out):
+    """Released stress at a point with several impacts: the sum over the base grid and every
+    impact's block (each holds the deposits of the cracks nearest its impact)."""
+    n_blocks = 0
+    for i in range(int(gp[7])):
+        n_blocks = max(n_blocks, int(gp[8 + IMPACT_ROW * i + 5]) + 1)
+    for j in range(-1, n_blocks):
+        ox, oy, oz, cs, off, nx, ny, nz = _block(gp, j)
+        if ny < 0:
+            ny = G.shape[1]
+            nz = G.shape[2]
+        _block_at(x0, x1, x2, G, ox, oy, oz, cs, off, nx, ny, nz, out)
+
+
 @njit(cache=True)
 def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
     """Deposit ``amount * n n^T * k(r)`` with a compact kernel around p into the grid.
 
-    ``k(r) = (1 - r²/R²)² / (16 R / 15)`` for ``r < R`` (R = ``gp[4]``): its integral across a
+    ``k(r) = (1 - r²/R²)² / (16 R / 15)`` for ``r < R`` (R = ``gp[4]``, or with several
+    impacts that of the impact nearest to p: :func:`radius_at`): its integral across a
     straight line is 1, so a long crack whose segments each deposit ``length x normal stress``
     releases exactly its normal stress on the crack line, fading to nothing at distance R.
     """
     if G.shape[0] < 2:
+        return
+    if gp.shape[0] > 7:
+        k = nearest_impact(p0, p1, p2, gp)
+        row = 8 + IMPACT_ROW * k
+        ox, oy, oz, cs, off, nx, ny, nz = _block(gp, int(gp[row + 5]))
+        if ny < 0:
+            ny = G.shape[1]
+            nz = G.shape[2]
+        _deposit(p0, p1, p2, amount, n0, n1, n2, G, ox, oy, oz, cs, gp[row + 4], off, nx, ny,
+                 nz)
         return
     cs = gp[3]
     rk = gp[4]
@@ -105,6 +209,32 @@ def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
                 G[ii, jj, k, 3] += w * t11
                 G[ii, jj, k, 4] += w * t12
                 G[ii, jj, k, 5] += w * t22
+
+
+@njit(cache=True)
+def _deposit(p0, p1, p2, amount, n0, n1, n2, G, ox, oy, oz, cs, rk, off, nx, ny, nz):
+    """:func:`shadow_add` into one block (origin, cell ``cs``, kernel radius ``rk``, first
+    row ``off``, dims ``nx, ny, nz``)."""
+    norm = amount / (16.0 * rk / 15.0)
+    lo0 = max(int(np.floor((p0 - rk - ox) / cs)), 0)
+    hi0 = min(int(np.floor((p0 + rk - ox) / cs)), nx - 1)
+    lo1 = max(int(np.floor((p1 - rk - oy) / cs)), 0)
+    hi1 = min(int(np.floor((p1 + rk - oy) / cs)), ny - 1)
+    lo2 = max(int(np.floor((p2 - rk - oz) / cs)), 0)
+    hi2 = min(int(np.floor((p2 + rk - oz) / cs)), nz - 1)
+    t = (n0 * n0, n0 * n1, n0 * n2, n1 * n1, n1 * n2, n2 * n2)
+    for i in range(lo0, hi0 + 1):
+        d0 = ox + (i + 0.5) * cs - p0
+        for j in range(lo1, hi1 + 1):
+            d1 = oy + (j + 0.5) * cs - p1
+            for k in range(lo2, hi2 + 1):
+                d2 = oz + (k + 0.5) * cs - p2
+                r2 = (d0 * d0 + d1 * d1 + d2 * d2) / (rk * rk)
+                if r2 >= 1.0:
+                    continue
+                w = norm * (1.0 - r2) * (1.0 - r2)
+                for q in range(6):
+                    G[off + i, j, k, q] += w * t[q]
 
 
 @njit(cache=True)

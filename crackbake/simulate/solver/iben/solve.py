@@ -80,6 +80,7 @@ def solve_iben(sim, field, params: SolverParams) -> SolverResult:
         ``nucleations_near`` (refused beside an existing crack), ``tips_ended_near`` (by the
         near-crack rule), ``ligaments_broken`` (steps a tip took through a ligament),
         ``tips_arrested`` (free tips left below the toughness), ``shadow_radius``,
+        ``impact_steps`` (with several impacts, the step each one landed at, in order),
         ``stopped`` (why the run ended: ``max steps``, ``max cracks``, ``saturated`` or
         ``at rest``), ``loop_seconds`` (the crack loop alone), ``seconds``; and
         ``origins``, where and when each crack started and its length.
@@ -90,9 +91,11 @@ def solve_iben(sim, field, params: SolverParams) -> SolverResult:
     s, mesh = _setup(sim, field, params)
     cal = _calibrate(s, mesh, params)
     cal.sep0 = _relative(s.val[: mesh.n0], s.taun[: mesh.n0])  # before the loop changes them
+    stages = _stage_impacts(s, mesh, cal, field, params)
     p = _loop_params(s, mesh, cal, params)
     t_loop = time.perf_counter()
-    s = _run_chunks(s, p, mesh.has_growth) if cal.tau > 0 else s
+    mesh.landed = [0] if stages else []
+    s = _run_chunks(s, p, mesh.has_growth, stages, mesh.landed) if cal.tau > 0 else s
     loop_seconds = time.perf_counter() - t_loop
     return _result(s, mesh, cal, params, loop_seconds, t0)
 
@@ -122,6 +125,7 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     h_node = hsum / np.maximum(hcnt, 1)
     width = int(np.bincount(F0.ravel(), minlength=n0).max()) + C.EXTRA_DEGREE
     G, gp = shadow_grid(X0, period, getattr(field, "shadow_radius", None))
+    G, gp = _impact_grids(G, gp, X0, field, period)
     clen = np.zeros(min(1024, room))
     cnt = np.zeros(N_COUNTERS, np.int64)
     cnt[FIRST_CRACK] = -1
@@ -147,7 +151,8 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     )
     incidence(m0, s.F, s.NF, s.NFc)
     mesh = SimpleNamespace(X0=X0, F0=F0, S0=S0, n0=n0, m0=m0, bnd=bnd, h_node=h_node,
-                           has_growth=has_growth, seed=params.seed % (1 << 52))
+                           has_growth=has_growth, seed=params.seed % (1 << 52),
+                           asset_face=None)
     _update_all(s, mesh, s.S)
     if np.any(s.area[:m0] <= 0):
         raise CrackbakeError("the simulation mesh has zero-area faces; clean the mesh first")
@@ -191,6 +196,7 @@ def _calibrate(s: State, mesh: SimpleNamespace, params: SolverParams) -> SimpleN
         _update_all(s, mesh, s.S)
     fac = flaw(params.seed, mesh.X0) * footprint_factor(mesh.X0, norm0, bnd)
     s.taun[:] = grown(tau * h_node * fac, len(s.taun))
+    mesh.fac = fac
     # The near-crack rule is for localized fields only (the footprint factor's criterion).
     return SimpleNamespace(tau=tau, localized=not surface_wide(norm0, bnd))
 
@@ -227,9 +233,93 @@ def _loop_params(s: State, mesh: SimpleNamespace, cal: SimpleNamespace,
     )
 
 
-def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
+def _impact_grids(G: np.ndarray, gp: np.ndarray, X0: np.ndarray, field,
+                  period: float) -> tuple[np.ndarray, np.ndarray]:
+    """The shadow grid with one block per impact radius, when several impacts ask for
+    different radii (docs/solver.md, "Several impacts"); else ``G, gp`` themselves.
+
+    Each crack deposits its release into the block of the impact nearest to it (in reaches),
+    with that impact's radius and a cell of a third of it, as it would alone; a face reads the
+    sum of all blocks.  The base grid (the smallest radius, finest cells) comes first; the
+    layout of ``gp`` is in :mod:`.shadow` (``IMPACT_ROW``, ``BLOCK_ROW``).
+    """
+    shadows = list(getattr(field, "impact_shadows", None) or [])
+    impacts = list(getattr(field, "impacts", None) or [])
+    if period > 0.0 or len(shadows) < 2 or len(shadows) != len(impacts) or G.shape[0] < 2:
+        return G, gp
+    diag = float(np.linalg.norm(X0.max(0) - X0.min(0))) or 1.0
+    radii = [min(float(r), C.SHADOW_REL * diag) for r in shadows]
+    if max(radii) == min(radii):
+        return G, gp
+    blocks: dict[float, tuple] = {}  # radius -> (block, grid, its gp)
+    rows = []
+    for imp, r in zip(impacts, radii, strict=True):
+        block = -1
+        if r > gp[4]:
+            if r not in blocks:
+                Gk, gpk = shadow_grid(X0, 0.0, r)
+                if Gk.shape[1] <= G.shape[1] and Gk.shape[2] <= G.shape[2]:
+                    blocks[r] = (len(blocks), Gk, gpk)
+            if r in blocks:
+                block = blocks[r][0]
+            else:
+                r = float(gp[4])
+        rows.append([*imp["point"], 0.5 * np.pi * float(imp["radius"]), r, float(block)])
+    table = [float(len(rows)), *np.asarray(rows, np.float64).ravel(), float(G.shape[0])]
+    stacked = [G]
+    offset = G.shape[0]
+    for _, Gk, gpk in sorted(blocks.values(), key=lambda b: b[0]):
+        pad = np.zeros((Gk.shape[0], G.shape[1], G.shape[2], 6))
+        pad[:, :Gk.shape[1], :Gk.shape[2]] = Gk
+        stacked.append(pad)
+        table += [*gpk[:4], float(offset), *(float(x) for x in Gk.shape[:3])]
+        offset += Gk.shape[0]
+    return np.concatenate(stacked), np.concatenate([gp, np.asarray(table, np.float64)])
+
+
+def _stage_impacts(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, field,
+                   params: SolverParams) -> list[np.ndarray]:
+    """Several impacts land one after the other (docs/solver.md, "Several impacts").
+
+    The first impact's share of the stress (and whatever else the field holds) is loaded now;
+    the others' are returned, (M0, 3, 3) each in impact order, for :func:`_run_chunks` to add
+    once the cracks are at rest.  Each impact's toughness is calibrated on its own share, so a
+    star's toughness does not depend on the other impacts; faces are tracked by their initial
+    sim face through the splits (``s.AF``, mapped back to the asset in :func:`_result`).
+    """
+    share = getattr(field, "impact_share", None)
+    if share is None or len(share) < 2:
+        return []
+    share = np.asarray(share, dtype=np.float64)
+    n0, m0, h_node, bnd = mesh.n0, mesh.m0, mesh.h_node, mesh.bnd
+    loads = [mesh.S0 * share[k][:, None, None] for k in range(len(share))]
+    # Per impact the toughness of that impact alone; nodes mix them by their faces' shares.
+    tau_node = np.zeros(n0)
+    weight = np.zeros(n0)
+    count = np.maximum(np.bincount(mesh.F0.ravel(), minlength=n0), 1)
+    for k, load in enumerate(loads):
+        _update_all(s, mesh, load)
+        ref = percentile_ref(s.val[:n0] / np.maximum(h_node, 1e-300), bnd)
+        tau_k = params.toughness * ref if ref > 0.0 else cal.tau
+        node_share = np.bincount(mesh.F0.ravel(), np.repeat(share[k], 3), minlength=n0) / count
+        tau_node += node_share * tau_k
+        weight += node_share
+    tau_node += np.clip(1.0 - weight, 0.0, None) * cal.tau
+    s.taun[:n0] = tau_node * h_node * mesh.fac
+    s.S[:m0] = mesh.S0 - sum(loads[1:])
+    mesh.asset_face = s.AF[:m0].copy()
+    s.AF[:m0] = np.arange(m0)
+    _update_all(s, mesh, s.S)
+    return loads[1:]
+
+
+def _run_chunks(s: State, p: LoopParams, has_growth: bool,
+                stages: list[np.ndarray] | None = None, landed: list | None = None) -> State:
     """Run the compiled loop to its end in chunks of about a tenth of a second (so progress
-    stays responsive without a clock inside the compiled loop); grow the state when full."""
+    stays responsive without a clock inside the compiled loop); grow the state when full.
+    Each of ``stages`` (per initial sim face, through ``s.AF``) is added to the stress once
+    the loop is done, and the loop runs on; the step it lands at is appended to ``landed``."""
+    stages = list(stages or [])
     rebuild(s, bool(C.TIP_FIRST))
     w = work(s)
     chunk = 64
@@ -256,6 +346,16 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool) -> State:
             logger.info("iben: %d crack events, %d cracks, %d/%d steps", s.cnt[EVENTS],
                         s.cnt[CRACKS], s.cnt[STEP], p.max_steps)
             last_msg = now
+        if code == DONE and stages and s.cnt[STEP] < p.max_steps:
+            nf = int(s.cnt[FACES])
+            s.S[:nf] += stages.pop(0)[s.AF[:nf]]
+            if landed is not None:
+                landed.append(int(s.cnt[STEP]))
+            update_all(int(s.cnt[NODES]), nf, s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr, s.NF,
+                       s.NFc, s.rho, s.val, s.vec, s.crack_of, s.G, s.gp, p.grain, p.seed,
+                       s.tipn)
+            requeue_all(s, p.tip_first)
+            continue
         if code == DONE:
             return s
 
@@ -273,7 +373,14 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
     _update_all(s, mesh, s.S, nn, nf)
     steps = int(cnt[STEP])
     alive = s.seg_alive[:ns]
-    cracks = chain(s.segp[:ns][alive], s.seg_info[:ns][alive], s.X, s.onb, steps, params,
+    info = s.seg_info[:ns][alive]
+    asset_face = s.AF[:nf].copy()
+    if mesh.asset_face is not None:  # staged impacts tracked the initial sim faces
+        asset_face = mesh.asset_face[asset_face]
+        info = info.copy()
+        af = info[:, 0].astype(np.int64)
+        info[:, 0] = np.where(af >= 0, mesh.asset_face[np.maximum(af, 0)], -1)
+    cracks = chain(s.segp[:ns][alive], info, s.X, s.onb, steps, params,
                    mesh.X0, float(s.gp[5]))
     sep = _relative(s.val[:nn], s.taun[:nn])
     pr = s.pr[:nf]
@@ -283,7 +390,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
     ncrack = int(cnt[CRACKS])
     return SolverResult(
         cracks=cracks, vertices=s.X[:nn].copy(), faces=s.F[:nf].copy(),
-        asset_face=s.AF[:nf].copy(), stress_initial=mesh.S0.copy(), stress_final=s_final,
+        asset_face=asset_face, stress_initial=mesh.S0.copy(), stress_final=s_final,
         separation=sep, separation_initial=cal.sep0, steps=steps,
         origins=np.column_stack([s.corig[:ncrack], s.clen[:ncrack]]),
         stats={
@@ -305,6 +412,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
             "ligaments_broken": int(cnt[BRIDGED]),
             "tips_arrested": int(np.count_nonzero(s.crack_of[:nn] >= 0)),
             "shadow_radius": float(s.gp[4]),
+            "impact_steps": list(getattr(mesh, "landed", [])),
             "loop_seconds": loop_seconds,
             "seconds": time.perf_counter() - t0,
         },

@@ -1,4 +1,7 @@
-"""Whole-mesh updates, the node -> face table and the failure heap of the iben loop."""
+"""Whole-mesh updates, the node -> face table and the failure heap of the iben loop.
+
+The shadow (several impacts: a stack of grid blocks) is read through :mod:`.shadow` only.
+"""
 
 from __future__ import annotations
 
