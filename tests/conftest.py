@@ -1,6 +1,6 @@
 """Shared test factories and the session's EGL context.
 
-Factories build meshes in memory (the project's tests never read ``../shared``):
+Factories build meshes in memory (the tests read nothing outside the repository):
 
 * :func:`plate_mesh`: a square plate as a :class:`crackbake.io.mesh.Mesh`, an n x n grid of
   squares (2 n^2 triangles), optionally with moved inner vertices, UVs = (x, y) / size;
@@ -49,7 +49,8 @@ def pytest_terminal_summary(terminalreporter):
     outcome = {}
     for reports in terminalreporter.stats.values():
         for rep in reports:
-            if getattr(rep, "keywords", None) and "reference" in rep.keywords:
+            # stats also holds deselected items and warnings: only test reports have "when"
+            if getattr(rep, "when", None) and "reference" in rep.keywords:
                 if rep.outcome != "passed":
                     outcome[rep.nodeid] = rep.outcome
                 elif rep.when == "call":

@@ -42,7 +42,7 @@ def directional_field(sim, direction=(1.0, 0.0, 0.0), s: float = 1.0) -> SimpleN
 
 
 def impact_field(sim, centre, radius: float) -> SimpleNamespace:
-    """Glass impact: w (r r^T + 1.25 c c^T), w = 2 cos(d / r) inside pi r / 2 (method.md §A2)."""
+    """Glass impact: w (r r^T + 1.25 c c^T), w = 2 cos(d / r) inside pi r / 2 (docs/method.md)."""
     cen = sim.vertices[sim.faces].mean(1)
     rel = cen - np.asarray(centre)
     dist = np.linalg.norm(rel, axis=1)
