@@ -12,10 +12,11 @@ PY311    ?= python3.11
 BPY_VENV := .venv-blender
 BPY      := $(BPY_VENV)/bin/python
 BPY_PIN  := bpy==5.0.1
-BPY_STAMP := $(BPY_VENV)/.installed
+# the stamps name the pinned versions, so changing a pin re-installs
+BPY_STAMP := $(BPY_VENV)/.installed-$(subst ==,-,$(BPY_PIN))
 NODE_DIR := .node
 GLTFV_PIN := gltf-validator@2.0.0-dev.3.10
-GLTFV    := $(NODE_DIR)/node_modules/gltf-validator/package.json
+GLTFV    := $(NODE_DIR)/.installed-$(subst @,-,$(GLTFV_PIN))
 
 .PHONY: demo test check setup syslibs references lint bench clean
 
@@ -50,7 +51,7 @@ syslibs:
 demo: setup
 	$(VENV)/bin/crackbake examples/spot.obj --preset glass --impact 0.334,0.044,0.287 --res 2048 -o spot_cracks
 	@echo
-	@echo "Outputs are in ./spot_cracks/ (README 'Output files'):"
+	@echo "Outputs are in ./spot_cracks/ (docs/outputs.md):"
 	@echo "  spot_cracks.exr  EXR master: crack.<map>.V layers + crack.normal (linear, mesh units)"
 	@echo "  spot_stress.exr  initial and final stress in the tangent frame (crackbake inspect it)"
 	@echo "  spot_basecolor/normal/orm/data.png  glTF texture set; spot_mask.png, spot_depth.png"
@@ -72,6 +73,7 @@ $(BPY_STAMP):
 $(GLTFV):
 	@command -v npm >/dev/null 2>&1 || { echo "make test needs Node.js and npm for the Khronos glTF validator (apt-get install -y nodejs npm)"; exit 1; }
 	npm install --prefix $(NODE_DIR) --no-audit --no-fund --loglevel=error $(GLTFV_PIN)
+	@touch $(GLTFV)
 
 # Every test, the reference checks included: CRACKBAKE_REFERENCE=require turns a skipped
 # reference check (Blender, glTF validator: pytest marker `reference`) into a failure.
