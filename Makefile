@@ -77,7 +77,10 @@ $(GLTFV):
 
 # Every test, the reference checks included: CRACKBAKE_REFERENCE=require turns a skipped
 # reference check (Blender, glTF validator: pytest marker `reference`) into a failure.
-test: setup references
+# The two set-ups overlap: the reference downloads (bpy is a 300 MB wheel) wait on the network
+# while the kernel precompile keeps both cores busy.
+test:
+	@$(MAKE) --no-print-directory -j2 setup references
 	$(VPY) -m ruff check crackbake tests benchmarks examples
 	CRACKBAKE_BLENDER_PYTHON=$(abspath $(BPY)) CRACKBAKE_GLTF_VALIDATOR=$(abspath $(NODE_DIR)) \
 	  CRACKBAKE_REFERENCE=require $(VPY) -m pytest -q
