@@ -5,7 +5,20 @@ VPY      := $(VENV)/bin/python
 STAMP    := $(VENV)/.installed
 APT_PKGS := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgbm1
 
-.PHONY: demo test check setup syslibs lint bench clean
+# The reference readers `make test` checks the outputs with (docs/development.md): Blender as a
+# module (its bpy wheel is built for Python 3.11 only and pins numpy<2, so it gets an environment
+# of its own) and the Khronos glTF validator from npm.  Both are cached in ignored folders.
+PY311    ?= python3.11
+BPY_VENV := .venv-blender
+BPY      := $(BPY_VENV)/bin/python
+BPY_PIN  := bpy==5.0.1
+# the stamps name the pinned versions, so changing a pin re-installs
+BPY_STAMP := $(BPY_VENV)/.installed-$(subst ==,-,$(BPY_PIN))
+NODE_DIR := .node
+GLTFV_PIN := gltf-validator@2.0.0-dev.3.10
+GLTFV    := $(NODE_DIR)/.installed-$(subst @,-,$(GLTFV_PIN))
+
+.PHONY: demo test check setup syslibs references lint bench clean
 
 setup: syslibs $(STAMP)
 
@@ -38,7 +51,7 @@ syslibs:
 demo: setup
 	$(VENV)/bin/crackbake examples/spot.obj --preset glass --impact 0.334,0.044,0.287 --res 2048 -o spot_cracks
 	@echo
-	@echo "Outputs are in ./spot_cracks/ (README 'Output files'):"
+	@echo "Outputs are in ./spot_cracks/ (docs/outputs.md):"
 	@echo "  spot_cracks.exr  EXR master: crack.<map>.V layers + crack.normal (linear, mesh units)"
 	@echo "  spot_stress.exr  initial and final stress in the tangent frame (crackbake inspect it)"
 	@echo "  spot_basecolor/normal/orm/data.png  glTF texture set; spot_mask.png, spot_depth.png"
@@ -47,14 +60,35 @@ demo: setup
 	@echo "  cracks.json      crack network sidecar (re-bake it with --cracks)  cracks.obj  polylines"
 	@echo "  manifest.json    inputs, parameters, files, timings"
 
-test: setup
-	$(VPY) -m ruff check crackbake tests benchmarks examples
-	$(VPY) -m pytest -q
+references: $(BPY_STAMP) $(GLTFV)
 
-# The quick loop while editing: ruff and every test not marked slow.
+$(BPY_STAMP):
+	@command -v $(PY311) >/dev/null 2>&1 || { echo "make test needs $(PY311) for Blender's bpy wheel (built for Python 3.11 only); install it or pass PY311=/path/to/python3.11"; exit 1; }
+	@test -x $(BPY) || $(PY311) -m venv $(BPY_VENV)
+	$(BPY) -m pip install --quiet --upgrade pip
+	$(BPY) -m pip install --quiet $(BPY_PIN)
+	$(BPY) -c "import bpy"
+	@touch $(BPY_STAMP)
+
+$(GLTFV):
+	@command -v npm >/dev/null 2>&1 || { echo "make test needs Node.js and npm for the Khronos glTF validator (apt-get install -y nodejs npm)"; exit 1; }
+	npm install --prefix $(NODE_DIR) --no-audit --no-fund --loglevel=error $(GLTFV_PIN)
+	@touch $(GLTFV)
+
+# Every test, the reference checks included: CRACKBAKE_REFERENCE=require turns a skipped
+# reference check (Blender, glTF validator: pytest marker `reference`) into a failure.
+# The two set-ups overlap: the reference downloads (bpy is a 300 MB wheel) wait on the network
+# while the kernel precompile keeps both cores busy.
+test:
+	@$(MAKE) --no-print-directory -j2 setup references
+	$(VPY) -m ruff check crackbake tests benchmarks examples
+	CRACKBAKE_BLENDER_PYTHON=$(abspath $(BPY)) CRACKBAKE_GLTF_VALIDATOR=$(abspath $(NODE_DIR)) \
+	  CRACKBAKE_REFERENCE=require $(VPY) -m pytest -q
+
+# The quick loop while editing: ruff and every test not marked slow or reference.
 check: setup
 	$(VPY) -m ruff check crackbake tests benchmarks examples
-	$(VPY) -m pytest -q -m "not slow"
+	$(VPY) -m pytest -q -m "not slow and not reference"
 
 bench: setup
 	$(VPY) benchmarks/bench_bake.py
@@ -63,5 +97,7 @@ bench: setup
 	$(VPY) benchmarks/bench_scale.py
 	$(VPY) benchmarks/bench_compile.py
 
+# numba's kernel cache (*.nbi, *.nbc) lives in the __pycache__ folders beside the sources.
 clean:
-	rm -rf $(VENV) build dist *.egg-info spot_cracks
+	rm -rf $(VENV) $(BPY_VENV) $(NODE_DIR) build dist *.egg-info spot_cracks .pytest_cache
+	find crackbake tests benchmarks examples -name __pycache__ -type d -prune -exec rm -rf {} +

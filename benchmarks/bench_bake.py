@@ -158,8 +158,10 @@ def bare_exr_writes(planes: dict[str, np.ndarray], folder: Path) -> dict[str, fl
 def child(mesh_name: str, res: int) -> dict:
     from crackbake.bake.raster import bake_cracks
     from crackbake.bake.uv import prepare_uvs
-    from crackbake.exchange import GLB_TEXTURE_MAX, base_color, write_exr, write_glb, write_png
+    from crackbake.exchange import GLB_TEXTURE_MAX, base_color, write_exr, write_glb
     from crackbake.exchange.layers import crack_planes
+    from crackbake.exchange.pngenc import png_bytes, write_bytes
+    from crackbake.exchange.targets import quantise
     from crackbake.io.mesh import load_mesh
     from crackbake.network import segments
 
@@ -214,9 +216,10 @@ def child(mesh_name: str, res: int) -> dict:
         row["bare_oiio"] = min(b["oiio"] for b in bares)
         row["exr_vs_bare"] = row["exr"] / min(row["bare_openexr"], row["bare_oiio"])
         t = time.perf_counter()
-        write_png(tmp / "mask.png", maps.mask, bits=8)
-        depth = maps.depth / max(float(maps.depth.max()), 1e-30)
-        write_png(tmp / "depth.png", depth, bits=16)
+        # the path real runs take: quantise, then the in-memory encoder
+        write_bytes(tmp / "mask.png", png_bytes(quantise(maps.mask, 8)))
+        scale = max(float(maps.depth.max()), 1e-30)
+        write_bytes(tmp / "depth.png", png_bytes(quantise(maps.depth, 16, scale)))
         row["png"] = time.perf_counter() - t
         t = time.perf_counter()
         write_glb(tmp / "m.glb", uvm.vertices, uvm.faces, uvm.uv, uvm.normals,

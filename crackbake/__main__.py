@@ -1,6 +1,6 @@
 """``python -m crackbake``: the ``crackbake`` command."""
 
-from crackbake.cli import main
+from crackbake.entry import main
 
 if __name__ == "__main__":
-    main(prog_name="crackbake")
+    main()

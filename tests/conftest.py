@@ -1,6 +1,6 @@
 """Shared test factories and the session's EGL context.
 
-Factories build meshes in memory (the project's tests never read ``../shared``):
+Factories build meshes in memory (the tests read nothing outside the repository):
 
 * :func:`plate_mesh`: a square plate as a :class:`crackbake.io.mesh.Mesh`, an n x n grid of
   squares (2 n^2 triangles), optionally with moved inner vertices, UVs = (x, y) / size;
@@ -13,6 +13,7 @@ checked for a pending GL error afterwards, as moderngl's own test suite does.
 
 from __future__ import annotations
 
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -21,6 +22,44 @@ from scipy.spatial import Delaunay
 
 from crackbake.geometry import vertex_normals, weld_by_position, welded_vertex_normals
 from crackbake.io.mesh import Mesh
+
+# ------------------------------------------------------------------ reference checks
+# Tests marked ``reference`` check outputs with a real client (Blender's bpy, the Khronos glTF
+# validator) and skip when it is missing.  ``make test`` installs both and sets
+# CRACKBAKE_REFERENCE=require, so there a skipped reference check fails the run instead.
+
+
+def _references_required() -> bool:
+    return os.environ.get("CRACKBAKE_REFERENCE", "") == "require"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    report = outcome.get_result()
+    if report.skipped and item.get_closest_marker("reference") and _references_required():
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else report.longrepr
+        report.outcome = "failed"
+        report.longrepr = (f"reference check skipped under CRACKBAKE_REFERENCE=require "
+                           f"(make test installs it: make references): {reason}")
+
+
+def pytest_terminal_summary(terminalreporter):
+    """One line: how many reference checks ran, so a CI log shows none was left out."""
+    outcome = {}
+    for reports in terminalreporter.stats.values():
+        for rep in reports:
+            # stats also holds deselected items and warnings: only test reports have "when"
+            if getattr(rep, "when", None) and "reference" in rep.keywords:
+                if rep.outcome != "passed":
+                    outcome[rep.nodeid] = rep.outcome
+                elif rep.when == "call":
+                    outcome.setdefault(rep.nodeid, "passed")
+    if outcome:
+        counts = {k: list(outcome.values()).count(k) for k in sorted(set(outcome.values()))}
+        terminalreporter.write_line(
+            "reference checks (Blender, glTF validator): "
+            + ", ".join(f"{n} {k}" for k, n in counts.items()))
 
 
 def grid_faces(nx: int, ny: int) -> np.ndarray:

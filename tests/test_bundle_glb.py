@@ -156,6 +156,7 @@ v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])))
 """
 
 
+@pytest.mark.reference
 @pytest.mark.skipif(_validator() is None, reason="node + gltf-validator not found "
                     "(npm install gltf-validator; CRACKBAKE_GLTF_VALIDATOR=its folder)")
 @pytest.mark.parametrize("surface", [True, False])

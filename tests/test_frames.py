@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 from conftest import tiny_network
 from PIL import Image
-from test_png_tags import COLOUR_CHUNKS, png_chunks
+from test_pngenc import COLOUR_CHUNKS, png_chunks
 
 from crackbake.cli import main
 from crackbake.errors import CrackbakeError
@@ -58,7 +58,7 @@ def test_frames_grow_monotonically_to_the_mask(tmp_path):
     assert np.count_nonzero(_box(mask, first)) > 0
     for box in (late_a, late_b):
         assert np.count_nonzero(_box(frames[2], box)) == 0 < np.count_nonzero(_box(mask, box))
-    assert not COLOUR_CHUNKS & set(png_chunks(out / names[0]))  # data, like the mask
+    assert not COLOUR_CHUNKS & set(png_chunks((out / names[0]).read_bytes()))  # data, like the mask
 
 
 @pytest.mark.parametrize("n", [1, 0, -3])

@@ -192,6 +192,7 @@ def _check_blender_pass(info, layer, want):
         np.testing.assert_array_equal(g, p, err_msg=layer.role)
 
 
+@pytest.mark.reference
 def test_crack_layout_through_blender(tmp_path):
     roles = crack_roles()
     path = tmp_path / "a_cracks.exr"
@@ -206,6 +207,7 @@ def test_crack_layout_through_blender(tmp_path):
         _check_blender_pass(passes[role], layer, want)
 
 
+@pytest.mark.reference
 def test_stress_layout_through_blender(tmp_path):
     fields = stress_fields()
     path = tmp_path / "a_stress.exr"
@@ -220,6 +222,7 @@ def test_stress_layout_through_blender(tmp_path):
         _check_blender_pass(info, layers[f"{info['layer']}.{info['pass']}"], want)
 
 
+@pytest.mark.reference
 def test_old_layout_is_invisible_to_blender(tmp_path):
     """Why the layout changed: two-part names give Blender's compositor no layer at all."""
     path = tmp_path / "old.exr"
@@ -265,6 +268,7 @@ def test_every_exr_a_run_writes_through_openimageio(run_exrs, kind):
     assert np.isfinite(pixels).all()
 
 
+@pytest.mark.reference
 @pytest.mark.parametrize("kind", ["crack", "stress"])
 def test_every_exr_a_run_writes_through_blender(run_exrs, kind, tmp_path):
     chans, _ = read_exr(run_exrs[kind])

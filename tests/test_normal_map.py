@@ -21,7 +21,8 @@ from test_bake import make_segments
 from crackbake.bake import normal_map
 from crackbake.bake.raster import bake_cracks
 from crackbake.errors import CrackbakeError
-from crackbake.exchange.png import write_png
+from crackbake.exchange.packing import normal_q
+from crackbake.exchange.pngenc import png_bytes
 
 RES = 256
 # Tilted plane: world point = ORIGIN + x E1 + y E2, plane coordinates (x, y) in [0, 1]^2.
@@ -216,8 +217,9 @@ def test_v_groove_normals_through_png_match_the_analytic_surface(gl_ctx, tmp_pat
     checked = crack & (d > 1e-3 * texel) & (np.abs(d - HW) > 1e-3 * texel)
     assert (crack & ~checked).sum() <= 4
     png16, png8 = tmp_path / "normal16.png", tmp_path / "normal8.png"
-    write_png(png16, maps.normal * 0.5 + 0.5, bits=16)
-    write_png(png8, maps.normal * 0.5 + 0.5, bits=8)
+    # the path a run's normal PNGs take: quantise to n * 0.5 + 0.5, then the encoder
+    png16.write_bytes(png_bytes(normal_q(maps.normal, 16, flip_y=False)))
+    png8.write_bytes(png_bytes(normal_q(maps.normal, 8, flip_y=False)))
     q16 = read_png16(png16)
     with Image.open(png8) as im:
         assert im.mode == "RGB"

@@ -1,9 +1,16 @@
-"""The in-memory PNG encoder (crackbake.exchange.pngenc): read back bit-exact by Pillow and by
-OpenImageIO, sRGB only when asked."""
+"""The PNG encoder every written PNG goes through (crackbake.exchange.pngenc): read back
+bit-exact by Pillow and by OpenImageIO; data maps carry no colour chunk, colour images an sRGB
+chunk alone.
+
+The chunks are read back from the file bytes (PNG chunk layout, independent of the encoder),
+and Pillow confirms what it makes of the tags.
+"""
 
 from __future__ import annotations
 
 import io
+import struct
+import zlib
 
 import numpy as np
 import pytest
@@ -11,6 +18,8 @@ from PIL import Image
 
 from crackbake.errors import CrackbakeError
 from crackbake.exchange.pngenc import png_bytes
+
+COLOUR_CHUNKS = {b"sRGB", b"gAMA", b"cHRM", b"iCCP"}
 
 
 def _oiio(data: bytes, tmp_path, nchan, fmt) -> np.ndarray:
@@ -24,6 +33,25 @@ def _oiio(data: bytes, tmp_path, nchan, fmt) -> np.ndarray:
     px = inp.read_image(0, 0, 0, nchan, fmt)
     inp.close()
     return px
+
+
+def png_chunks(data: bytes) -> dict[bytes, bytes]:
+    """Chunk type -> data of every chunk up to IEND, CRCs checked, in file order."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    out, i = {}, 8
+    while i < len(data):
+        (n,) = struct.unpack(">I", data[i : i + 4])
+        kind, body = data[i + 4 : i + 8], data[i + 8 : i + 8 + n]
+        (crc,) = struct.unpack(">I", data[i + 8 + n : i + 12 + n])
+        assert zlib.crc32(kind + body) == crc, kind
+        out.setdefault(kind, body)
+        i += 12 + n
+    return out
+
+
+def _image(shape, dtype=np.uint8):
+    top = np.iinfo(dtype).max
+    return np.random.default_rng(5).integers(0, top + 1, shape).astype(dtype)
 
 
 @pytest.mark.parametrize("shape", [(5, 7), (6, 4, 2), (9, 3, 3), (4, 11, 4)])
@@ -41,11 +69,42 @@ def test_round_trip_is_exact(tmp_path, shape, dtype):
         np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(data))), a)
 
 
-def test_srgb_chunk_only_when_asked():
-    a = np.zeros((2, 2, 3), np.uint8)
-    assert b"sRGB" in png_bytes(a, srgb=True)
-    plain = png_bytes(a)
-    assert all(c not in plain for c in (b"sRGB", b"gAMA", b"cHRM", b"iCCP"))
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("shape", [(6, 10), (6, 10, 3), (6, 10, 4)])
+def test_data_maps_are_untagged(dtype, shape):
+    data = png_bytes(_image(shape, dtype))
+    chunks = png_chunks(data)
+    assert not COLOUR_CHUNKS & set(chunks), sorted(chunks)
+    assert chunks[b"IHDR"][8] == 8 * np.dtype(dtype).itemsize
+    with Image.open(io.BytesIO(data)) as im:
+        assert not {"srgb", "gamma", "chromaticity", "icc_profile"} & set(im.info)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_colour_images_carry_an_srgb_chunk_alone(dtype):
+    data = png_bytes(_image((6, 10, 3), dtype), srgb=True)
+    chunks = png_chunks(data)
+    assert COLOUR_CHUNKS & set(chunks) == {b"sRGB"}
+    assert chunks[b"sRGB"] == b"\x00"  # rendering intent 0, perceptual
+    assert data.index(b"sRGB") < data.index(b"IDAT")  # colour chunks precede the image data
+    with Image.open(io.BytesIO(data)) as im:
+        assert "srgb" in im.info
+
+
+def test_values_are_the_same_whatever_the_tag(tmp_path):
+    for dtype in (np.uint8, np.uint16):
+        img = _image((6, 10, 3), dtype)
+        fmt = "uint8" if dtype == np.uint8 else "uint16"
+        a = _oiio(png_bytes(img), tmp_path, 3, fmt)
+        b = _oiio(png_bytes(img, srgb=True), tmp_path, 3, fmt)
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, img)
+
+
+def test_compression_level_trades_size():
+    y, x = np.mgrid[0:256, 0:256]
+    img = np.stack([x // 16 * 16, y // 16 * 16, np.zeros_like(x)], -1).astype(np.uint8)
+    assert len(png_bytes(img, level=0)) > 2 * len(png_bytes(img, level=9))
 
 
 def test_bad_input_is_refused():
@@ -53,3 +112,5 @@ def test_bad_input_is_refused():
         png_bytes(np.zeros((2, 2), np.float32))
     with pytest.raises(CrackbakeError, match="uint8 or uint16"):
         png_bytes(np.zeros((2, 2, 5), np.uint8))
+    with pytest.raises(CrackbakeError, match="uint8 or uint16"):
+        png_bytes(np.zeros((2, 2), np.int32))

@@ -76,6 +76,7 @@ def orientation_histogram(results, bins: int = 12) -> np.ndarray:
     return h / h.sum()
 
 
+@pytest.mark.slow
 def test_pattern_does_not_depend_on_the_asset_triangulation():
     """A 2-triangle plate and a 20,000-triangle plate crack alike under the same shrinkage.
 

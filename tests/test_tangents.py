@@ -279,6 +279,7 @@ def blender_compare(tmp_path: Path, mesh: UVMesh) -> dict:
     return res
 
 
+@pytest.mark.reference
 def test_blender_agrees_on_spot(tmp_path):
     m = load_mesh(SPOT)
     res = blender_compare(tmp_path, uvmesh(m.vertices, m.faces, m.uv, m.normals))
@@ -292,6 +293,7 @@ def test_blender_agrees_on_spot(tmp_path):
     assert res["same_input"]["max_angle_deg"] < 0.01, res
 
 
+@pytest.mark.reference
 @pytest.mark.parametrize("seed", [0, 1])
 def test_blender_agrees_on_zero_uv_faces_at_a_mirror_seam(tmp_path, seed):
     # Faces in random order and zero-UV-area faces along a welded mirror seam: MikkTSpace's
@@ -319,6 +321,7 @@ def test_blender_agrees_on_zero_uv_faces_at_a_mirror_seam(tmp_path, seed):
     assert res["same_input"]["max_angle_deg"] < 0.01, res
 
 
+@pytest.mark.reference
 def test_blender_agrees_on_mirrored_uvs(tmp_path):
     mesh = mirrored_dome()
     res = blender_compare(tmp_path, mesh)

@@ -42,7 +42,7 @@ def directional_field(sim, direction=(1.0, 0.0, 0.0), s: float = 1.0) -> SimpleN
 
 
 def impact_field(sim, centre, radius: float) -> SimpleNamespace:
-    """Glass impact: w (r r^T + 1.25 c c^T), w = 2 cos(d / r) inside pi r / 2 (method.md §A2)."""
+    """Glass impact: w (r r^T + 1.25 c c^T), w = 2 cos(d / r) inside pi r / 2 (docs/method.md)."""
     cen = sim.vertices[sim.faces].mean(1)
     rel = cen - np.asarray(centre)
     dist = np.linalg.norm(rel, axis=1)
@@ -252,18 +252,3 @@ def test_bad_parameters_are_refused():
     for bad in ({"toughness": 0.0}, {"tip_factor": 1.5}, {"relax_share": -0.1}):
         with pytest.raises(CrackbakeError):
             solve_thesis(sim, field, SolverParams(method="thesis", **bad))
-
-
-def test_100k_faces_in_seconds():
-    import time
-
-    small = plate(8)
-    solve_thesis(small, directional_field(small), SolverParams(method="thesis"))  # compile
-    sim = plate(224)  # ~100k faces
-    assert len(sim.faces) > 99_000
-    field = impact_field(sim, np.array([0.5, 0.5, 0.0]), 0.15)
-    t = time.perf_counter()
-    res = solve_thesis(sim, field, SolverParams(method="thesis"))
-    elapsed = time.perf_counter() - t
-    assert len(res.cracks) == 500
-    assert elapsed < 5.0, elapsed  # ~0.4 s on a 2-core box: mostly the once-only FEM set-up

@@ -1,17 +1,17 @@
 """GPU bake of the solver's stress fields into UV-space maps, in each texel's tangent frame.
 
-The simulation triangles are drawn in UV space (DESIGN.md §2: every sim triangle lies inside one
-asset face, so each of its corners has that face's UV at its barycentric coordinates; a node on
-a UV seam gets one UV per island).  The stress travels as a world-space tensor per simulation
-node (the area-weighted mean of its faces' tensors: nodes the solver split along a crack keep
-each side's own value, so the maps stay discontinuous exactly across cracks) and is linearly
-interpolated per texel.  Both fields go through one draw of the final (split) sim mesh: the
-initial field's node values are carried onto it (:func:`crackbake.bake.stress_fields.on_final_mesh`,
-exact because the split mesh refines the initial one).  Per texel the tensors are expressed in
-the texel's tangent frame.  A simulation grown on a decimated proxy
-(:mod:`crackbake.simulate.simmesh.proxy`) has nodes near the asset, not in its faces: there the
-asset's own faces are drawn, each UV-mesh vertex taking the values at its closest point on the
-final sim mesh (:func:`at_points`).  Per texel::
+The simulation triangles are drawn in UV space (docs/method.md, "The simulation mesh contract":
+every sim triangle lies inside one asset face, so each of its corners has that face's UV at its
+barycentric coordinates; a node on a UV seam gets one UV per island).  The stress travels as a
+world-space tensor per simulation node (the area-weighted mean of its faces' tensors: nodes the
+solver split along a crack keep each side's own value, so the maps stay discontinuous exactly
+across cracks) and is linearly interpolated per texel.  Both fields go through one draw of the
+final (split) sim mesh: the initial field's node values are carried onto it
+(:func:`crackbake.bake.stress_fields.on_final_mesh`, exact because the split mesh refines the
+initial one).  Per texel the tensors are expressed in the texel's tangent frame.  A simulation
+grown on a decimated proxy (:mod:`crackbake.simulate.simmesh.proxy`) has nodes near the asset, not
+in its faces: there the asset's own faces are drawn, each UV-mesh vertex taking the values at its
+closest point on the final sim mesh (:func:`at_points`).  Per texel::
 
     N  = normalize(interpolated shading normal)
     e1 = normalize(T - N (N . T))       tangent, along +u

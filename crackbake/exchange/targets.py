@@ -198,18 +198,6 @@ def _normal(maps, bits: int, normal_y: str) -> np.ndarray:
     return normal_q(maps.normal, bits, flip_y=normal_y == "dx")  # one pass, GIL released
 
 
-def _normal_numpy(normal: np.ndarray, bits: int, normal_y: str) -> np.ndarray:
-    """The reference for :func:`normal_q` (tests): ``n * h + h + 0.5`` truncated, h = top / 2."""
-    n = np.asarray(normal, np.float32)
-    half = np.float32(_full(bits) / 2)
-    q = n * half
-    q += half + np.float32(0.5)
-    if normal_y == "dx":
-        np.subtract(np.float32(_full(bits) + 1), q[..., 1], out=q[..., 1])  # -y h + h + 0.5
-    # Unit vectors give [0.5, top + 0.5]: the cast's truncation is the rounding, no clip needed.
-    return q.astype(_dtype(bits))
-
-
 def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.ndarray:
     """The pixels of one packed file.
 

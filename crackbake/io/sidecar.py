@@ -1,4 +1,6 @@
-"""The ``cracks.json`` sidecar (DESIGN.md §3): writing it byte-reproducibly, reading it back.
+"""The ``cracks.json`` sidecar: writing it byte-reproducibly, reading it back.
+
+Its format: docs/outputs.md, "cracks.json".
 
 Reading validates everything a hand-edited or stale sidecar can get wrong and refuses it with a
 one-line :class:`CrackbakeError` naming the crack and the fix.
@@ -47,7 +49,7 @@ def jsonable(value: Any) -> Any:
 
 
 def to_dict(network: CrackNetwork) -> dict:
-    """The sidecar as a dict, in the DESIGN.md §3 key order.
+    """The sidecar as a dict, in the key order docs/outputs.md shows.
 
     Parameters
     ----------

@@ -2,7 +2,7 @@
 
 The crack solver must not see the asset's triangulation (long thin game-asset triangles, or
 millions of scan faces), so it runs on a mesh of well-shaped, slightly irregular triangles at a
-target edge length (DESIGN.md §2).  It is built per asset face:
+target edge length (docs/method.md, "The simulation mesh contract").  It is built per asset face:
 
 * asset edges are split into nearly equal pieces, about one target length each for big faces
   and fewer where the asset faces are small, so the point density (and face count) does not

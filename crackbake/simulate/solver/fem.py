@@ -9,7 +9,7 @@ triangle made by a split inherits its parent's tensor unchanged (the rotation of
 Node forces follow O'Brien & Hodgins 1999 at rest: ``f_i = -A * S @ g_i`` with ``g_i`` the world
 gradient of barycentric coordinate ``i``; the separation tensor is
 ``0.5 * (-m(sum f+) + sum m(f+) + m(sum f-) - sum m(f-))`` with ``m(a) = a a^T / |a|``.
-See ../shared/research/method.md §A for the derivation.
+The formulas and where they come from: docs/method.md, "The formulas".
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Initial stress fields on the simulation mesh (method.md §A2, §B6).
+"""Initial stress fields on the simulation mesh (docs/method.md, "The formulas").
 
 Every source adds (or multiplies) a symmetric 3x3 **world-space** tensor per sim face lying in the
 face plane (``S @ n == 0``), tension positive: the convention of

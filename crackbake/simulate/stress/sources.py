@@ -1,7 +1,8 @@
 """Stress sources: what loads the surface, as frozen dataclasses validated on construction.
 
-Every source is linear in its strength (method.md §B6): a strength ``s`` is the principal stress
-it adds.  :func:`crackbake.simulate.stress.stress_field` turns a list of them into the field.
+Every source is linear in its strength (docs/method.md, "The formulas"): a strength ``s`` is
+the principal stress it adds.  :func:`crackbake.simulate.stress.stress_field` turns a list of
+them into the field.
 """
 
 from __future__ import annotations

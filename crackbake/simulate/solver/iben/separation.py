@@ -63,7 +63,7 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
     """Separation tensor (plus residual) of node ``n``; stores its largest eigenpair.
 
     The paper's ``ς = ½(−m(Σf⁺) + Σm(f⁺) + m(Σf⁻) − Σm(f⁻))`` sees how the mesh is laid out
-    (method.md §A5 is silent on this): under isotropic stress ``Σm(f)`` equals
+    (the paper is silent on this): under isotropic stress ``Σm(f)`` equals
     ``½ Σ L n̂n̂ᵀ`` over the fan's outer edges, whose anisotropy is pure mesh layout.  A sim mesh
     refining a regular asset grid has whole straight lines of edges along the asset's edges and
     diagonals, and cracks followed them.  So a second tensor ``ς̄`` replaces each corner's

@@ -1,6 +1,6 @@
 """``--method thesis``: the 2023 NCCA MSc variant (Tan-Mulligan) of Iben & O'Brien's cracks.
 
-What it does (method.md §C, with the published file's defects fixed):
+What it does (docs/method.md, "The thesis variant", with the published file's defects fixed):
 
 1. Node forces and separation tensors are computed **once** from the initial stress
    (:mod:`crackbake.simulate.solver.fem`; the radial/hoop field and its unit vectors are the stress

@@ -40,11 +40,11 @@ DEFAULT_CRACK_STEPS = 25
 def relative_toughness(values: np.ndarray, boundary: np.ndarray, toughness: float) -> float:
     """Absolute failure threshold ``tau`` from the relative ``--toughness``.
 
-    Separation values scale with stress x edge length (method.md §B2), so ``tau`` is given
-    relative to a reference separation of this field on this mesh: the **mean of the positive
+    Separation values scale with stress x edge length (docs/method.md, "Resolution"), so ``tau`` is
+    given relative to a reference separation of this field on this mesh: the **mean of the positive
     ``v+`` over interior nodes** (the typical value of a loaded node; boundary nodes are left out
-    because their unbalanced forces make them unrepresentative, and unloaded nodes because a
-    local field such as an impact would otherwise dilute the reference with zeros).
+    because their unbalanced forces make them unrepresentative, and unloaded nodes because a local
+    field such as an impact would otherwise dilute the reference with zeros).
 
     Parameters
     ----------
@@ -126,8 +126,9 @@ def _taper(
 
 
 def _separation(x: np.ndarray, faces: np.ndarray, stress: np.ndarray):
-    """Separation tensors (N, 3, 3) from the initial stress, once (method.md §A3-A5), and their
-    largest eigenvalue (N,), middle eigenvalue (N,) and largest eigenvector (N, 3)."""
+    """Separation tensors (N, 3, 3) from the initial stress, once (docs/method.md, "The
+    formulas"), and their largest eigenvalue (N,), middle eigenvalue (N,) and largest
+    eigenvector (N, 3)."""
     area, fnormal, grad = face_geometry(x, faces)
     frames = face_frames(fnormal, x, faces)
     plus, minus, _, _ = split_tension(stress, frames)
