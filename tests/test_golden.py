@@ -3,9 +3,12 @@
 A restructuring must not change behaviour; these runs are its proof.  Each case runs the
 ``crackbake`` command in-process (the most stable public surface) and compares:
 
-* the **crack network** (``cracks.json``: every point, face, time, width and depth, as
-  written) **exactly**: the solver runs on the CPU in 64-bit floats and is deterministic, so
-  any difference is a change of behaviour; a failure names the first crack that differs;
+* the **crack network** (``cracks.json``: every id, point count and face exactly; every point,
+  time, width and depth to ``NET_RTOL`` of the field's scale): the solver runs on the CPU in
+  64-bit floats and is deterministic on one machine, but another CPU or another numpy/scipy
+  release may round a sum in its last bits (plate_thesis moved by that between two machines of
+  this project with the same code), and such a change leaves every crack where it was; a
+  failure names the first crack that differs;
 * the **baked mask** (the decoded 8-bit ``_mask.png``) **with a tolerance**: it is drawn by
   the GPU, and another driver than the recording one (see ``recorded_with`` in
   ``golden.json``) may round a coverage or an edge texel differently.  On the recording
@@ -46,6 +49,10 @@ RECORD = os.environ.get("CRACKBAKE_RECORD_GOLDEN") == "1"
 MASK_LEVELS = 2  # 8-bit levels a texel may move without counting as different
 MASK_TEXELS = 0.005  # share of the texels that may differ by more than MASK_LEVELS
 MASK_MAX = 96  # largest difference of any texel, levels
+# Network tolerance: a share of each float field's largest magnitude (last-bit rounding of
+# sums between CPUs and library releases is ~1e-15 of it; a behaviour change moves points by
+# a sim edge, ~1e-3).
+NET_RTOL = 1e-7
 
 FIELDS = ("points", "faces", "time", "width", "depth")
 VERSIONS = ("numpy", "numba", "scipy", "moderngl", "triangle", "trimesh", "potpourri3d",
@@ -131,7 +138,8 @@ def _recorded_with(renderer: dict) -> dict:
 
 
 def first_network_difference(got: dict, want: dict) -> str | None:
-    """None when the two networks are equal bit for bit, else the first crack that differs.
+    """None when the two networks agree (ids, counts and faces exactly, floats to
+    ``NET_RTOL`` of each field's largest magnitude), else the first crack that differs.
 
     ``got`` and ``want`` are :func:`_arrays` dictionaries; the message names the crack (index
     and id), the first point and field that differ, and both values.
@@ -140,6 +148,8 @@ def first_network_difference(got: dict, want: dict) -> str | None:
         head = f"{len(got['ids'])} cracks, golden {len(want['ids'])}; "
     else:
         head = ""
+    tol = {f: NET_RTOL * max(float(np.abs(want[f]).max(initial=0.0)), 1e-300)
+           for f in FIELDS if f != "faces"}
     for k in range(min(len(got["ids"]), len(want["ids"]))):
         ga, gb = got["offsets"][k : k + 2]
         wa, wb = want["offsets"][k : k + 2]
@@ -150,8 +160,9 @@ def first_network_difference(got: dict, want: dict) -> str | None:
             return head + f"{where}: {gb - ga} points, golden {wb - wa}"
         for f in FIELDS:
             g, w = got[f][ga:gb], want[f][wa:wb]
-            if not np.array_equal(g, w):
-                i = int(np.flatnonzero((g != w).reshape(len(g), -1).any(axis=1))[0])
+            off = (g != w) if f == "faces" else (np.abs(g - w) > tol[f])
+            if off.any():
+                i = int(np.flatnonzero(off.reshape(len(g), -1).any(axis=1))[0])
                 return head + f"{where}: {f}[{i}] = {g[i].tolist()}, golden {w[i].tolist()}"
     if head:
         return head + "the first cracks are equal"
@@ -172,9 +183,11 @@ def test_first_network_difference_names_the_crack():
     mask = np.zeros((4, 4), np.uint8)
     want = _arrays(cracks, mask)
     assert first_network_difference(_arrays(cracks, mask), want) is None
-    cracks[1]["width"][1] = 1e-17
+    cracks[1]["width"][1] = 1e-17  # last-bit rounding: within the tolerance
+    assert first_network_difference(_arrays(cracks, mask), want) is None
+    cracks[1]["width"][1] = 1e-4
     msg = first_network_difference(_arrays(cracks, mask), want)
-    assert msg == "crack 1 (id 9, golden id 9): width[1] = 1e-17, golden 0.0"
+    assert msg == "crack 1 (id 9, golden id 9): width[1] = 0.0001, golden 0.0"
     assert "1 cracks, golden 2" in first_network_difference(_arrays(cracks[:1], mask), want)
 
 
@@ -205,7 +218,8 @@ def test_golden_run(case, tmp_path):
             stored = {k: z[k] for k in z.files}
         diff = first_network_difference(arrays, stored)
         assert diff is None, f"{case}: the crack network changed: {diff}"
-    summary = ("cracks", "points", "length", "sha256")
+    # With the arrays the counts suffice (the tolerance above); without them only the digest.
+    summary = ("cracks", "points") if stored is not None else ("cracks", "points", "sha256")
     assert {k: got[k] for k in summary} == {k: want[k] for k in summary}, (
         f"{case}: the crack network changed"
         + ("" if stored is not None else f" (no {npz.name} to name the first differing crack)"))
