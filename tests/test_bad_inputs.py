@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import shutil
+import struct
 import subprocess
 import sys
 import time
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -57,11 +60,61 @@ def _sidecar(plate: Path) -> dict:
     return to_dict(CrackNetwork(cracks=[crack], mesh=mesh_info(mesh)))
 
 
+def png_header_only(width: int, height: int) -> bytes:
+    """A PNG of a few dozen bytes whose header declares ``width`` x ``height`` RGB pixels (a
+    decompression bomb's shape: the pixel data is a 16-byte stream)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data)))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+            + chunk(b"IDAT", zlib.compress(b"\0" * 16)) + chunk(b"IEND", b""))
+
+
+def _nested(depth: int):
+    value: object = 1
+    for _ in range(depth):
+        value = [value]
+    return value
+
+
+def _sidecar_variants(folder: Path, side: dict) -> None:
+    """Sidecars that pass JSON decoding and then crashed (issue 19): one file per case."""
+    def variant(name: str, change) -> None:
+        bad = json.loads(json.dumps(side))
+        change(bad)
+        (folder / name).write_text(json.dumps(bad))
+
+    crack = lambda d: d["cracks"][0]  # noqa: E731
+    variant("id_huge.json", lambda d: crack(d).update(id=2**70))
+    variant("id_minus1.json", lambda d: crack(d).update(id=-1))
+    variant("id_2_24.json", lambda d: crack(d).update(id=2**24))
+    variant("points_1e300.json", lambda d: crack(d)["points"][0].__setitem__(0, 1e300))
+    variant("width_1e308.json", lambda d: crack(d)["width"].__setitem__(0, 1e308))
+    variant("params_deep.json", lambda d: d.setdefault("params", {}).update(x=_nested(900)))
+    variant("params_width.json", lambda d: d.setdefault("params", {}).update(crack_width=1e300))
+    variant("impact_strength.json", lambda d: d.update(
+        impacts=[{"point": [0.5, 0.5, 0.0], "radius": 0.1, "strength": 1e300}]))
+    # Nested 100000 deep: the JSON decoder itself recursed past Python's limit.
+    (folder / "deep.json").write_text(
+        '{"format": "crackbake-cracks", "version": 1, "cracks": ' + "[" * 100_000
+        + "]" * 100_000 + "}")
+
+
 def _inputs(folder: Path) -> None:
     """Every input file the cases name, written into ``folder``."""
     (folder / "plate.obj").write_text(PLATE)
     side = _sidecar(folder / "plate.obj")
     (folder / "side.json").write_text(json.dumps(side))
+    _sidecar_variants(folder, side)
+    (folder / "bomb.png").write_bytes(png_header_only(50_000, 50_000))
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    Image.fromarray(rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)).save(folder / "ok.png")
+    data = (folder / "ok.png").read_bytes()
+    (folder / "truncated.png").write_bytes(data[: len(data) // 2])
     bad = json.loads(json.dumps(side))
     bad["cracks"][0]["faces"][0] = True
     (folder / "bool_face.json").write_text(json.dumps(bad))
@@ -178,7 +231,54 @@ CASES: list[tuple[str, list[str], str]] = [
      "negative width (-5); width must be >= 0"),
     ("sidecar other mesh", ["plate.obj", "--cracks", "other_mesh.json"],
      "bake it on the mesh it was made for"),
+    # --- sidecars that passed validation and then crashed (issue 19) ---
+    ("sidecar nested 100000 deep", ["plate.obj", "--cracks", "deep.json"],
+     "nests lists or objects thousands deep"),
+    ("sidecar params nested 900 deep", ["plate.obj", "--cracks", "params_deep.json"],
+     "nests lists or objects more than 32 deep"),
+    ("sidecar id 2**70", ["plate.obj", "--cracks", "id_huge.json"],
+     "crack ids must lie in 0..16777215"),
+    ("sidecar id -1", ["plate.obj", "--cracks", "id_minus1.json"],
+     "has id -1; crack ids must lie in 0..16777215"),
+    ("sidecar id 2**24", ["plate.obj", "--cracks", "id_2_24.json"],
+     "has id 16777216; crack ids must lie in 0..16777215"),
+    ("sidecar points 1e300", ["plate.obj", "--cracks", "points_1e300.json"],
+     "has a point coordinate of 1e+300"),
+    ("sidecar width 1e308", ["plate.obj", "--cracks", "width_1e308.json"],
+     "has width 1e+308; width must be at most 1e+15 mesh units"),
+    ("sidecar params width 1e300", ["plate.obj", "--cracks", "params_width.json"],
+     '"params"."crack_width" is 1e+300; it must be a number above 0 up to 1e+15'),
+    ("sidecar impact strength 1e300", ["plate.obj", "--cracks", "impact_strength.json"],
+     '"impacts"[0]."strength" is 1e+300'),
+    # --- images ---
+    ("weight map truncated png", ["plate.obj", "--shrink", "1", "--weight-map", "truncated.png"],
+     "could not decode the weight map (IDAT: Read error"),
+    ("weight map 50000 squared header", ["plate.obj", "--shrink", "1", "--weight-map",
+                                          "bomb.png"], "could not read the weight map"),
+    # --- memory (issue 19): refused before the heavy stages, with the option to lower ---
+    ("res 16384 under 10 GiB", ["plate.obj", "--shrink", "1", "--res", "16384",
+                                "--max-memory", "10"],
+     "but --max-memory allows 10.0 GiB; lower --res"),
+    ("stress res 16384 under 16 GiB", ["plate.obj", "--shrink", "1", "--stress-res", "16384",
+                                       "--max-memory", "16"],
+     "but --max-memory allows 16.0 GiB; lower --stress-res"),
+    ("sim faces 20M under 8 GiB", ["plate.obj", "--shrink", "1", "--sim-faces", "20000000",
+                                   "--max-memory", "8"],
+     "but --max-memory allows 8.0 GiB; lower --sim-faces"),
+    ("max memory zero", ["plate.obj", "--shrink", "1", "--max-memory", "0"],
+     "--max-memory 0 is out of range"),
+    ("egl device abc", ["plate.obj", "--shrink", "1", "--sim-faces", "300"],
+     "CRACKBAKE_EGL_DEVICE='abc' is not an EGL device number"),
+    ("res 8192 under a 3 GB address-space cap", ["plate.obj", "--shrink", "1", "--res", "8192"],
+     "of address space"),
+    ("res 4096 unwrap under a 2.5 GB address-space cap",
+     ["plate.obj", "--shrink", "1", "--res", "4096", "--uv", "unwrap"],
+     "allows 2.3 GiB; lower --res"),
 ]
+# Cases that need more than arguments: an environment variable, a memory cap.
+ENVIRON = {"egl device abc": {"CRACKBAKE_EGL_DEVICE": "abc"}}
+RLIMIT_AS = {"res 8192 under a 3 GB address-space cap": 3 * 10**9,
+             "res 4096 unwrap under a 2.5 GB address-space cap": int(2.5 * 10**9)}
 
 
 def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
@@ -187,10 +287,17 @@ def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
     shutil.copytree(root / "_inputs", folder)
     before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
     t0 = time.perf_counter()
-    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache")}
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache"),
+           **ENVIRON.get(name, {})}
+    cap = RLIMIT_AS.get(name)
+
+    def limit() -> None:  # in the child, before exec: the cap covers the whole run
+        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+
     r = subprocess.run(
         [sys.executable, "-m", "crackbake", "--res", "64", "-o", "out", *args],
         cwd=folder, capture_output=True, text=True, env=env, timeout=300,
+        preexec_fn=limit if cap else None,
     )
     after = sorted(p.relative_to(folder) for p in folder.rglob("*"))
     return {"secs": time.perf_counter() - t0, "rc": r.returncode, "stderr": r.stderr,
