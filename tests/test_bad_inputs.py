@@ -115,6 +115,19 @@ def _inputs(folder: Path) -> None:
     Image.fromarray(rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)).save(folder / "ok.png")
     data = (folder / "ok.png").read_bytes()
     (folder / "truncated.png").write_bytes(data[: len(data) // 2])
+    (folder / "bomb20k.png").write_bytes(png_header_only(20_000, 20_000))
+    for stem, image in (("bomb", "bomb20k.png"), ("trunc", "truncated.png")):
+        (folder / f"{stem}.mtl").write_text(f"newmtl m\nmap_Kd {image}\n")
+        (folder / f"{stem}_tex.obj").write_text(f"mtllib {stem}.mtl\nusemtl m\n" + PLATE)
+    lines = PLATE.splitlines()
+    first_face = next(i for i, line in enumerate(lines) if line.startswith("f "))
+    corners = lines[first_face].split()
+    corners[1] = corners[1].split("/")[0] + "/99"  # 25 vt lines: 99 is out of range
+    (folder / "bad_vt.obj").write_text("\n".join(
+        lines[:first_face] + [" ".join(corners)] + lines[first_face + 1:]) + "\n")
+    first_vt = next(i for i, line in enumerate(lines) if line.startswith("vt "))
+    (folder / "inf_uv.obj").write_text("\n".join(
+        lines[:first_vt] + ["vt inf 0.5"] + lines[first_vt + 1:]) + "\n")
     bad = json.loads(json.dumps(side))
     bad["cracks"][0]["faces"][0] = True
     (folder / "bool_face.json").write_text(json.dumps(bad))
@@ -275,8 +288,24 @@ CASES: list[tuple[str, list[str], str]] = [
      ["plate.obj", "--shrink", "1", "--res", "4096", "--uv", "unwrap"],
      "allows 2.3 GiB; lower --res"),
 ]
+# Inputs that run (exit 0) with one warning line naming the problem (issue 19's "small ones"
+# and optional textures): (case id, arguments, words the warning line must hold).
+WARN_CASES: list[tuple[str, list[str], str]] = [
+    ("vt index out of range", ["bad_vt.obj", "--shrink", "1", "--sim-faces", "300"],
+     "(line 51: vt 99, but only 25 vt lines); ignoring every UV"),
+    ("inf uv", ["inf_uv.obj", "--shrink", "1", "--sim-faces", "300"],
+     "1 UVs hold infinite values; ignoring them all"),
+    ("texture header 20000 squared", ["bomb_tex.obj", "--shrink", "1", "--sim-faces", "300"],
+     "base-colour texture bomb20k.png is unreadable"),
+    ("texture truncated", ["trunc_tex.obj", "--shrink", "1", "--sim-faces", "300"],
+     "base-colour texture truncated.png is unreadable (image file is truncated); using grey"),
+    ("home missing", ["plate.obj", "--shrink", "1", "--sim-faces", "300", "--uv", "unwrap"],
+     "the home folder"),
+]
 # Cases that need more than arguments: an environment variable, a memory cap.
-ENVIRON = {"egl device abc": {"CRACKBAKE_EGL_DEVICE": "abc"}}
+ENVIRON = {"egl device abc": {"CRACKBAKE_EGL_DEVICE": "abc"},
+           "home missing": {"HOME": "{d}/nohome", "CRACKBAKE_CACHE_DIR": None,
+                            "XDG_CACHE_HOME": None}}
 RLIMIT_AS = {"res 8192 under a 3 GB address-space cap": 3 * 10**9,
              "res 4096 unwrap under a 2.5 GB address-space cap": int(2.5 * 10**9)}
 
@@ -287,8 +316,12 @@ def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
     shutil.copytree(root / "_inputs", folder)
     before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
     t0 = time.perf_counter()
-    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache"),
-           **ENVIRON.get(name, {})}
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache")}
+    for key, value in ENVIRON.get(name, {}).items():  # None removes the variable
+        if value is None:
+            env.pop(key, None)
+        else:
+            env[key] = value.format(d=folder)
     cap = RLIMIT_AS.get(name)
 
     def limit() -> None:  # in the child, before exec: the cap covers the whole run
@@ -309,13 +342,14 @@ def results(tmp_path_factory) -> dict:
     root = tmp_path_factory.mktemp("bad_inputs")
     (root / "_inputs").mkdir()
     _inputs(root / "_inputs")
+    cases = CASES + WARN_CASES
     with ThreadPoolExecutor(max_workers=4) as pool:
-        done = pool.map(lambda c: _run_case(root, c), CASES)
-        return {case[0]: res for case, res in zip(CASES, done, strict=True)}
+        done = pool.map(lambda c: _run_case(root, c), cases)
+        return {case[0]: res for case, res in zip(cases, done, strict=True)}
 
 
 def test_catalogue_is_large_and_unique():
-    names = [c[0] for c in CASES]
+    names = [c[0] for c in CASES + WARN_CASES]
     assert len(names) >= 40 and len(set(names)) == len(names)
 
 
@@ -330,6 +364,18 @@ def test_bad_input_is_one_clear_line(results, name, args, message):
     assert "Traceback" not in line and "np." not in line and "internal error" not in line
     assert r["stdout"] == ""
     assert r["new"] == [], f"left behind: {r['new']}"
+
+
+@pytest.mark.parametrize(("name", "args", "message"), WARN_CASES, ids=[c[0] for c in WARN_CASES])
+def test_recoverable_input_runs_with_one_warning(results, name, args, message):
+    """A broken optional part (UVs, texture, cache folder) costs a warning, never the run."""
+    r = results[name]
+    assert r["rc"] == 0, r["stderr"]
+    warned = [line for line in r["stderr"].splitlines() if line.startswith("warning: ")]
+    assert len(warned) == 1 and message in warned[0], r["stderr"]
+    assert "Traceback" not in r["stderr"] and "libpng" not in r["stderr"]
+    # Only the output folder (and the test's own cache folder) appear: no home folder made.
+    assert all(p.split("/")[0] in ("out", ".cache") for p in r["new"]), r["new"]
 
 
 
@@ -359,3 +405,22 @@ def test_library_params_give_the_same_plain_messages(fields, message):
     with pytest.raises(CrackbakeError, match=message) as info:
         RunParams(mesh=Path("plate.obj"), **fields).validate()
     assert "np." not in str(info.value)
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_json_to_a_full_stdout_is_one_line_after_the_commit(tmp_path):
+    """``--json > /dev/full``: the run is complete, the summary cannot be written; one error
+    line saying so (it was a traceback), exit 2, the output set in place."""
+    (tmp_path / "plate.obj").write_text(PLATE)
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(tmp_path / ".c")}
+    with open("/dev/full", "w") as full:
+        r = subprocess.run(
+            [sys.executable, "-m", "crackbake", "plate.obj", "--shrink", "1", "--res", "64",
+             "--sim-faces", "300", "-o", "out", "-q", "--json"],
+            cwd=tmp_path, stdout=full, stderr=subprocess.PIPE, text=True, env=env, timeout=300,
+        )
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: cannot write the --json summary"), lines
+    assert "the outputs are complete in out/" in lines[0]
+    assert (tmp_path / "out" / "manifest.json").is_file()

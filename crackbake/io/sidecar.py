@@ -251,4 +251,7 @@ def read_sidecar(path: str | Path, mesh: Mesh | None = None) -> CrackNetwork:
             f"is not valid JSON ({exc.msg} at line {exc.lineno} column "
             f"{exc.colno}); fix or re-make the file",
         ) from exc
+    except ValueError as exc:  # an integer of thousands of digits (Python's int_max_str_digits)
+        raise fail(source, f"holds a number JSON cannot hold here ({exc}); re-make the file") \
+            from exc
     return from_dict(data, source=source, mesh=mesh)
