@@ -6,8 +6,9 @@ reads ``VmHWM``, the peak resident set, and ``VmPeak``, the peak address space, 
 ``/proc/self/status`` as it exits).  The series vary one size at a time from a small baseline:
 
 * ``res``: spot (5,856 faces) at ``--res`` 1024..4096 without the stress maps;
-* ``tile``: spot at ``--res`` 2048, 4096 with ``--tile 1024`` (the GL share stops growing);
-* ``stress``: spot at ``--res 256`` with ``--stress-res`` 1024..4096 (and 4096 at ``--tile 1024``);
+* ``tile``: spot at ``--res`` 2048, 4096 and ``--stress-res 4096`` with a 1024 tile (the GL
+  share stops growing at the tile; ``RunParams.tile``, no command-line option);
+* ``stress``: spot at ``--res 256`` with ``--stress-res`` 1024..4096;
 * ``sim``: spot at ``--res 256`` with ``--sim-faces`` 100k..1M (no stress maps);
 * ``faces``: flat plates of 50k..800k faces (UVs kept) at ``--res 256``.
 
@@ -64,12 +65,12 @@ SERIES: dict[str, list[dict]] = {
              "args": [*SPOT_IMPACT, *NO_STRESS, "--res", str(r)]} for r in (1024, 2048, 4096)],
     "tile": [{"mesh": "spot", "faces": 5856, "res": r, "sim": 100_000, "stress": None,
               "tile": 1024, "args": [*SPOT_IMPACT, *NO_STRESS, "--res", str(r)]}
-             for r in (2048, 4096)],
-    "stress": [{"mesh": "spot", "faces": 5856, "res": 256, "sim": 100_000, "stress": s,
-                "args": [*SPOT_IMPACT, "--res", "256", "--stress-res", str(s)]}
-               for s in (1024, 2048, 4096)]
+             for r in (2048, 4096)]
     + [{"mesh": "spot", "faces": 5856, "res": 256, "sim": 100_000, "stress": 4096, "tile": 1024,
         "args": [*SPOT_IMPACT, "--res", "256", "--stress-res", "4096"]}],
+    "stress": [{"mesh": "spot", "faces": 5856, "res": 256, "sim": 100_000, "stress": s,
+                "args": [*SPOT_IMPACT, "--res", "256", "--stress-res", str(s)]}
+               for s in (1024, 2048, 4096)],
     "sim": [{"mesh": "spot", "faces": 5856, "res": 256, "sim": n, "stress": None,
              "args": [*SPOT_IMPACT, *NO_STRESS, "--res", "256", "--sim-faces", str(n)]}
             for n in (100_000, 300_000, 1_000_000)],
