@@ -106,16 +106,14 @@ def measure(row: dict, folder: Path) -> dict:
     return got
 
 
-NAMES = ["BASE", "PER_FACE", "PER_SIM_FACE", "PER_TEXEL", "PER_GL_TEXEL", "PER_STRESS_TEXEL",
-         "PER_GL_STRESS_TEXEL"]
+NAMES = ["BASE", "PER_FACE", "PER_SIM_FACE", "PER_TEXEL", "PER_GL_TEXEL", "PER_STRESS_TEXEL"]
 
 
 def fit(rows: list[dict]) -> np.ndarray:
     """Least-squares coefficients of :data:`NAMES` (bytes) over the measured rows."""
     def terms(r):
         t, s = r.get("tile", 4096), r["stress"] or 0
-        return [1.0, r["faces"], r["sim"], r["res"] ** 2, min(r["res"], t) ** 2, s * s,
-                min(s, t) ** 2]
+        return [1.0, r["faces"], r["sim"], r["res"] ** 2, min(r["res"], t) ** 2, s * s]
     a = np.array([terms(r) for r in rows])
     b = np.array([r["hwm"] * 2**30 for r in rows])
     coef, *_ = np.linalg.lstsq(a, b, rcond=None)

@@ -381,6 +381,10 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
     except KeyboardInterrupt:
         _err("interrupted; no outputs were written")
         sys.exit(130)
+    except MemoryError:  # past the estimate (--max-memory above the real limit, a busy machine)
+        _err("error: ran out of memory; no outputs were written. Lower --res, --stress-res or "
+             "--sim-faces, or free memory (crackbake.memory estimates a run's peak)")
+        sys.exit(2)
     except Exception as exc:  # a bug: say so, keep the traceback behind --verbose
         if verbose:
             raise
