@@ -140,6 +140,8 @@ def _inputs(folder: Path) -> None:
     (folder / "corrupt.json").write_text('{"format": "crackbake-cracks", ')
     (folder / "notes.txt").write_text("hello")
     (folder / "empty.obj").write_bytes(b"")
+    (folder / "empty.ply").write_bytes(b"")
+    (folder / "empty.glb").write_bytes(b"")
     (folder / "points.obj").write_text(TRI)
     (folder / "words.obj").write_text("hello world\nthis is not a mesh\n")
     (folder / "zero_index.obj").write_text(TRI + "f 0 1 2\n")
@@ -214,6 +216,8 @@ CASES: list[tuple[str, list[str], str]] = [
     ("wrong suffix", ["notes.txt", "--shrink", "1"], "unsupported format '.txt'"),
     ("no suffix", ["noext", "--shrink", "1"], "unsupported format '(none)'"),
     ("empty obj", ["empty.obj", "--shrink", "1"], "no triangles"),
+    ("empty ply", ["empty.ply", "--shrink", "1"], "the file is empty, so it holds no triangles"),
+    ("empty glb", ["empty.glb", "--shrink", "1"], "the file is empty, so it holds no triangles"),
     ("vertices only", ["points.obj", "--shrink", "1"], "crackbake needs a triangle mesh"),
     ("text not obj", ["words.obj", "--shrink", "1"], "crackbake needs a triangle mesh"),
     ("obj index 0", ["zero_index.obj", "--shrink", "1"], "OBJ indices start at 1"),

@@ -138,6 +138,9 @@ def _read_file(path: Path):
             f"{path}: unsupported format '{suffix or '(none)'}'; "
             f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
         )
+    if path.stat().st_size == 0:  # trimesh's readers fail on no bytes with AttributeErrors
+        raise CrackbakeError(f"{path}: the file is empty, so it holds no triangles; crackbake "
+                             "needs a triangle mesh (export it again)")
     data, short_faces = None, 0
     if suffix == ".obj":
         data = _read_bytes(path)
