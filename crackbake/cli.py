@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
 import sys
+import threading
 import time
 import warnings
 from collections.abc import Callable
@@ -352,6 +355,13 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     show_default=True,
     help="Seconds xatlas may run before giving up.",
 )
+@click.option(
+    "--max-memory",
+    type=float,
+    metavar="GIB",
+    help="Memory the run may use, GiB, in place of the detected limit (cgroup, ulimit -v or "
+    "physical memory) its estimated peak is checked against before the heavy stages.",
+)
 @click.option("--no-cache", is_flag=True, help="Do not read or write the unwrap cache.")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.option("-v", "--verbose", is_flag=True, help="Print stage timings and details.")
@@ -383,6 +393,10 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
     except KeyboardInterrupt:
         _err("interrupted; no outputs were written")
         sys.exit(130)
+    except MemoryError:  # past the estimate (--max-memory above the real limit, a busy machine)
+        _err("error: ran out of memory; no outputs were written. Lower --res, --stress-res or "
+             "--sim-faces, or free memory (crackbake.memory estimates a run's peak)")
+        sys.exit(2)
     except Exception as exc:  # a bug: say so, keep the traceback behind --verbose
         if verbose:
             raise
@@ -391,14 +405,40 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
         sys.exit(1)
 
     result.warnings = recorded
-    if as_json:
-        click.echo(json.dumps(result.summary(), indent=2))
-    if not quiet:
-        _report(result, verbose)
+    # The output set is committed: a Ctrl-C now could only cut the summary short, or land in
+    # the interpreter's shutdown as "Exception ignored ... KeyboardInterrupt".
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        if as_json:
+            click.echo(json.dumps(result.summary(), indent=2))
+            sys.stdout.flush()
+        if not quiet:
+            _report(result, verbose)
+    except OSError as exc:  # a full disk or closed pipe behind stdout/stderr
+        _silence(sys.stdout)
+        what = "--json summary to stdout" if as_json else "summary"
+        _err(f"error: cannot write the {what} ({exc.strerror or exc}); the outputs are "
+             f"complete in {result.out_dir}/")
+        sys.exit(2)
+
+
+def _silence(stream) -> None:
+    """Point ``stream``'s file descriptor at /dev/null, so the interpreter's final flush of
+    what could not be written raises nothing more (the Python docs' recipe for SIGPIPE)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, stream.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # not a real file (tests capture streams)
+        pass
 
 
 def _err(msg: str) -> None:
-    click.echo(msg, err=True)
+    try:
+        click.echo(msg, err=True)
+    except OSError:  # stderr itself is full or closed: the exit code still says it
+        _silence(sys.stderr)
 
 
 T = TypeVar("T")

@@ -59,6 +59,8 @@ STRESS_MAX = 1e6
 #: Largest simulation mesh (the same bound the sim mesh builder enforces).
 SIM_FACES_MAX = 20_000_000
 UNWRAP_TIMEOUT_RANGE = (1e-3, 1e6)
+#: Largest ``--max-memory``, GiB (a petabyte: any real machine).
+MAX_MEMORY_GIB = 1e6
 #: Range of every bounded option: name -> (low, high, unit shown in messages, low excluded).
 #: Ints include both ends.
 RANGES: dict[str, tuple[float, float, str, bool]] = {
@@ -347,6 +349,9 @@ class RunParams:
         folder (refused with a warning by default).
     unwrap_timeout : float
         Seconds xatlas may run.
+    max_memory : float or None
+        GiB the run may use, in place of the detected limit (cgroup, ``RLIMIT_AS`` or physical
+        memory) the estimated peak is checked against (:mod:`crackbake.memory`).
     cache : bool
         Use the unwrap cache.
     tile : int
@@ -398,6 +403,7 @@ class RunParams:
     object_name: str | None = None
     allow_outside_textures: bool = False
     unwrap_timeout: float = 300.0
+    max_memory: float | None = None
     cache: bool = True
     tile: int = TILE_DEFAULT
     # --- solver and stress (None: from the preset, else SOLVER_DEFAULTS) ---
@@ -480,6 +486,7 @@ class RunParams:
         if self.up is not None and self.up not in UP_AXES:
             raise CrackbakeError(f"--up '{self.up}' is unknown; use one of {', '.join(UP_AXES)}")
         _check_range("--unwrap-timeout", self.unwrap_timeout, *UNWRAP_TIMEOUT_RANGE, " s")
+        _check_range("--max-memory", self.max_memory, 0.0, MAX_MEMORY_GIB, " GiB", True)
         if not TILE_MIN <= self.tile <= TILE_MAX:
             raise CrackbakeError(
                 f"tile size {self.tile} is out of range; use {TILE_MIN}..{TILE_MAX}"

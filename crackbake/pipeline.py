@@ -27,6 +27,7 @@ from crackbake.exchange.manifest import build_manifest, effective_params, write_
 from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
+from crackbake.memory import check_memory, estimate_peak, run_sizes
 from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import DECAL_RES_DEFAULT, STRESS_RES_DEFAULT, RunParams
 from crackbake.simulate.setup import (
@@ -136,6 +137,8 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
     mesh = load_mesh(params.mesh, params.object_name, params.allow_outside_textures)
     timings["load"] = time.perf_counter() - t
     check_scale(mesh)  # before any work: the float32 bake cannot resolve extreme scales
+    # Before the heavy stages: a run that cannot fit is refused now, not killed at 20 GB.
+    check_memory(estimate_peak(**run_sizes(params.resolved()[0], mesh)), params.max_memory)
 
     solver_stats: dict = {}
     solved = None

@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import shutil
+import struct
 import subprocess
 import sys
 import time
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -57,11 +60,74 @@ def _sidecar(plate: Path) -> dict:
     return to_dict(CrackNetwork(cracks=[crack], mesh=mesh_info(mesh)))
 
 
+def png_header_only(width: int, height: int) -> bytes:
+    """A PNG of a few dozen bytes whose header declares ``width`` x ``height`` RGB pixels (a
+    decompression bomb's shape: the pixel data is a 16-byte stream)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data)))
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+            + chunk(b"IDAT", zlib.compress(b"\0" * 16)) + chunk(b"IEND", b""))
+
+
+def _nested(depth: int):
+    value: object = 1
+    for _ in range(depth):
+        value = [value]
+    return value
+
+
+def _sidecar_variants(folder: Path, side: dict) -> None:
+    """Sidecars that pass JSON decoding and then crashed (issue 19): one file per case."""
+    def variant(name: str, change) -> None:
+        bad = json.loads(json.dumps(side))
+        change(bad)
+        (folder / name).write_text(json.dumps(bad))
+
+    crack = lambda d: d["cracks"][0]  # noqa: E731
+    variant("id_huge.json", lambda d: crack(d).update(id=2**70))
+    variant("id_minus1.json", lambda d: crack(d).update(id=-1))
+    variant("id_2_24.json", lambda d: crack(d).update(id=2**24))
+    variant("points_1e300.json", lambda d: crack(d)["points"][0].__setitem__(0, 1e300))
+    variant("width_1e308.json", lambda d: crack(d)["width"].__setitem__(0, 1e308))
+    variant("params_deep.json", lambda d: d.setdefault("params", {}).update(x=_nested(900)))
+    variant("params_width.json", lambda d: d.setdefault("params", {}).update(crack_width=1e300))
+    variant("impact_strength.json", lambda d: d.update(
+        impacts=[{"point": [0.5, 0.5, 0.0], "radius": 0.1, "strength": 1e300}]))
+    # Nested 100000 deep: the JSON decoder itself recursed past Python's limit.
+    (folder / "deep.json").write_text(
+        '{"format": "crackbake-cracks", "version": 1, "cracks": ' + "[" * 100_000
+        + "]" * 100_000 + "}")
+
+
 def _inputs(folder: Path) -> None:
     """Every input file the cases name, written into ``folder``."""
     (folder / "plate.obj").write_text(PLATE)
     side = _sidecar(folder / "plate.obj")
     (folder / "side.json").write_text(json.dumps(side))
+    _sidecar_variants(folder, side)
+    (folder / "bomb.png").write_bytes(png_header_only(50_000, 50_000))
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    Image.fromarray(rng.integers(0, 256, (64, 64, 3), dtype=np.uint8)).save(folder / "ok.png")
+    data = (folder / "ok.png").read_bytes()
+    (folder / "truncated.png").write_bytes(data[: len(data) // 2])
+    (folder / "bomb20k.png").write_bytes(png_header_only(20_000, 20_000))
+    for stem, image in (("bomb", "bomb20k.png"), ("trunc", "truncated.png")):
+        (folder / f"{stem}.mtl").write_text(f"newmtl m\nmap_Kd {image}\n")
+        (folder / f"{stem}_tex.obj").write_text(f"mtllib {stem}.mtl\nusemtl m\n" + PLATE)
+    lines = PLATE.splitlines()
+    first_face = next(i for i, line in enumerate(lines) if line.startswith("f "))
+    corners = lines[first_face].split()
+    corners[1] = corners[1].split("/")[0] + "/99"  # 25 vt lines: 99 is out of range
+    (folder / "bad_vt.obj").write_text("\n".join(
+        lines[:first_face] + [" ".join(corners)] + lines[first_face + 1:]) + "\n")
+    first_vt = next(i for i, line in enumerate(lines) if line.startswith("vt "))
+    (folder / "inf_uv.obj").write_text("\n".join(
+        lines[:first_vt] + ["vt inf 0.5"] + lines[first_vt + 1:]) + "\n")
     bad = json.loads(json.dumps(side))
     bad["cracks"][0]["faces"][0] = True
     (folder / "bool_face.json").write_text(json.dumps(bad))
@@ -74,6 +140,8 @@ def _inputs(folder: Path) -> None:
     (folder / "corrupt.json").write_text('{"format": "crackbake-cracks", ')
     (folder / "notes.txt").write_text("hello")
     (folder / "empty.obj").write_bytes(b"")
+    (folder / "empty.ply").write_bytes(b"")
+    (folder / "empty.glb").write_bytes(b"")
     (folder / "points.obj").write_text(TRI)
     (folder / "words.obj").write_text("hello world\nthis is not a mesh\n")
     (folder / "zero_index.obj").write_text(TRI + "f 0 1 2\n")
@@ -194,6 +262,8 @@ CASES: list[tuple[str, list[str], str]] = [
     ("wrong suffix", ["notes.txt", "--shrink", "1"], "unsupported format '.txt'"),
     ("no suffix", ["noext", "--shrink", "1"], "unsupported format '(none)'"),
     ("empty obj", ["empty.obj", "--shrink", "1"], "no triangles"),
+    ("empty ply", ["empty.ply", "--shrink", "1"], "the file is empty, so it holds no triangles"),
+    ("empty glb", ["empty.glb", "--shrink", "1"], "the file is empty, so it holds no triangles"),
     ("vertices only", ["points.obj", "--shrink", "1"], "crackbake needs a triangle mesh"),
     ("text not obj", ["words.obj", "--shrink", "1"], "crackbake needs a triangle mesh"),
     ("obj index 0", ["zero_index.obj", "--shrink", "1"], "OBJ indices start at 1"),
@@ -250,7 +320,70 @@ CASES: list[tuple[str, list[str], str]] = [
      "output '/dev/null' exists and is not a folder; choose a folder with --png"),
     ("inspect png user folder", ["inspect", "good.exr", "--png", "album"],
      "output folder 'album' is not empty and has no crackbake manifest.json"),
+    # --- sidecars that passed validation and then crashed (issue 19) ---
+    ("sidecar nested 100000 deep", ["plate.obj", "--cracks", "deep.json"],
+     "nests lists or objects thousands deep"),
+    ("sidecar params nested 900 deep", ["plate.obj", "--cracks", "params_deep.json"],
+     "nests lists or objects more than 32 deep"),
+    ("sidecar id 2**70", ["plate.obj", "--cracks", "id_huge.json"],
+     "crack ids must lie in 0..16777215"),
+    ("sidecar id -1", ["plate.obj", "--cracks", "id_minus1.json"],
+     "has id -1; crack ids must lie in 0..16777215"),
+    ("sidecar id 2**24", ["plate.obj", "--cracks", "id_2_24.json"],
+     "has id 16777216; crack ids must lie in 0..16777215"),
+    ("sidecar points 1e300", ["plate.obj", "--cracks", "points_1e300.json"],
+     "has a point coordinate of 1e+300"),
+    ("sidecar width 1e308", ["plate.obj", "--cracks", "width_1e308.json"],
+     "has width 1e+308; width must be at most 1e+15 mesh units"),
+    ("sidecar params width 1e300", ["plate.obj", "--cracks", "params_width.json"],
+     '"params"."crack_width" is 1e+300; it must be a number above 0 up to 1e+15'),
+    ("sidecar impact strength 1e300", ["plate.obj", "--cracks", "impact_strength.json"],
+     '"impacts"[0]."strength" is 1e+300'),
+    # --- images ---
+    ("weight map truncated png", ["plate.obj", "--shrink", "1", "--weight-map", "truncated.png"],
+     "could not decode the weight map (IDAT: Read error"),
+    ("weight map 50000 squared header", ["plate.obj", "--shrink", "1", "--weight-map",
+                                          "bomb.png"], "could not read the weight map"),
+    # --- memory (issue 19): refused before the heavy stages, with the option to lower ---
+    ("res 16384 under 10 GiB", ["plate.obj", "--shrink", "1", "--res", "16384",
+                                "--max-memory", "10"],
+     "but --max-memory allows 10.0 GiB; lower --res"),
+    ("stress res 16384 under 16 GiB", ["plate.obj", "--shrink", "1", "--stress-res", "16384",
+                                       "--max-memory", "16"],
+     "but --max-memory allows 16.0 GiB; lower --stress-res"),
+    ("sim faces 20M under 8 GiB", ["plate.obj", "--shrink", "1", "--sim-faces", "20000000",
+                                   "--max-memory", "8"],
+     "but --max-memory allows 8.0 GiB; lower --sim-faces"),
+    ("max memory zero", ["plate.obj", "--shrink", "1", "--max-memory", "0"],
+     "--max-memory 0 is out of range"),
+    ("egl device abc", ["plate.obj", "--shrink", "1", "--sim-faces", "300"],
+     "CRACKBAKE_EGL_DEVICE='abc' is not an EGL device number"),
+    ("res 8192 under a 3 GB address-space cap", ["plate.obj", "--shrink", "1", "--res", "8192"],
+     "of address space"),
+    ("res 4096 unwrap under a 2 GB address-space cap",
+     ["plate.obj", "--shrink", "1", "--res", "4096", "--uv", "unwrap"],
+     "allows 1.9 GiB; lower --res"),
 ]
+# Inputs that run (exit 0) with one warning line naming the problem (issue 19's "small ones"
+# and optional textures): (case id, arguments, words the warning line must hold).
+WARN_CASES: list[tuple[str, list[str], str]] = [
+    ("vt index out of range", ["bad_vt.obj", "--shrink", "1", "--sim-faces", "300"],
+     "(line 51: vt 99, but only 25 vt lines); ignoring every UV"),
+    ("inf uv", ["inf_uv.obj", "--shrink", "1", "--sim-faces", "300"],
+     "1 UVs hold infinite values; ignoring them all"),
+    ("texture header 20000 squared", ["bomb_tex.obj", "--shrink", "1", "--sim-faces", "300"],
+     "base-colour texture bomb20k.png is unreadable"),
+    ("texture truncated", ["trunc_tex.obj", "--shrink", "1", "--sim-faces", "300"],
+     "base-colour texture truncated.png is unreadable (image file is truncated); using grey"),
+    ("home missing", ["plate.obj", "--shrink", "1", "--sim-faces", "300", "--uv", "unwrap"],
+     "the home folder"),
+]
+# Cases that need more than arguments: an environment variable, a memory cap.
+ENVIRON = {"egl device abc": {"CRACKBAKE_EGL_DEVICE": "abc"},
+           "home missing": {"HOME": "{d}/nohome", "CRACKBAKE_CACHE_DIR": None,
+                            "XDG_CACHE_HOME": None}}
+RLIMIT_AS = {"res 8192 under a 3 GB address-space cap": 3 * 10**9,
+             "res 4096 unwrap under a 2 GB address-space cap": 2 * 10**9}
 
 
 def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
@@ -261,13 +394,23 @@ def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
     before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
     t0 = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache")}
+    for key, value in ENVIRON.get(name, {}).items():  # None removes the variable
+        if value is None:
+            env.pop(key, None)
+        else:
+            env[key] = value.format(d=folder)
+    cap = RLIMIT_AS.get(name)
+
+    def limit() -> None:  # in the child, before exec: the cap covers the whole run
+        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+
     common = [] if args[:1] == ["inspect"] else ["--res", "64", "-o", "out"]
     try:
         # A read that blocks (a FIFO) must fail the case, not hang the catalogue.
         r = subprocess.run(
             [sys.executable, "-m", "crackbake", *common, *args],
             cwd=folder, capture_output=True, text=True, env=env,
-            timeout=60 if "fifo" in name else 300,
+            timeout=60 if "fifo" in name else 300, preexec_fn=limit if cap else None,
         )
         rc, stderr, stdout = r.returncode, r.stderr, r.stdout
     except subprocess.TimeoutExpired as exc:
@@ -282,13 +425,14 @@ def results(tmp_path_factory) -> dict:
     root = tmp_path_factory.mktemp("bad_inputs")
     (root / "_inputs").mkdir()
     _inputs(root / "_inputs")
+    cases = CASES + WARN_CASES
     with ThreadPoolExecutor(max_workers=4) as pool:
-        done = pool.map(lambda c: _run_case(root, c), CASES)
-        return {case[0]: res for case, res in zip(CASES, done, strict=True)}
+        done = pool.map(lambda c: _run_case(root, c), cases)
+        return {case[0]: res for case, res in zip(cases, done, strict=True)}
 
 
 def test_catalogue_is_large_and_unique():
-    names = [c[0] for c in CASES]
+    names = [c[0] for c in CASES + WARN_CASES]
     assert len(names) >= 40 and len(set(names)) == len(names)
 
 
@@ -303,6 +447,18 @@ def test_bad_input_is_one_clear_line(results, name, args, message):
     assert "Traceback" not in line and "np." not in line and "internal error" not in line
     assert r["stdout"] == ""
     assert r["new"] == [], f"left behind: {r['new']}"
+
+
+@pytest.mark.parametrize(("name", "args", "message"), WARN_CASES, ids=[c[0] for c in WARN_CASES])
+def test_recoverable_input_runs_with_one_warning(results, name, args, message):
+    """A broken optional part (UVs, texture, cache folder) costs a warning, never the run."""
+    r = results[name]
+    assert r["rc"] == 0, r["stderr"]
+    warned = [line for line in r["stderr"].splitlines() if line.startswith("warning: ")]
+    assert len(warned) == 1 and message in warned[0], r["stderr"]
+    assert "Traceback" not in r["stderr"] and "libpng" not in r["stderr"]
+    # Only the output folder (and the test's own cache folder) appear: no home folder made.
+    assert all(p.split("/")[0] in ("out", ".cache") for p in r["new"]), r["new"]
 
 
 
@@ -444,3 +600,22 @@ def test_textures_outside_the_mesh_folder_are_not_read(textured, stem, named, al
         assert f"'{path}'" in warned[0] and "lies outside the mesh's folder" in warned[0]
         assert "--allow-outside-textures" in warned[0]
     assert abs(red - blue) < 25 and abs(red - green) < 25, r["colour"]  # grey, not red
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_json_to_a_full_stdout_is_one_line_after_the_commit(tmp_path):
+    """``--json > /dev/full``: the run is complete, the summary cannot be written; one error
+    line saying so (it was a traceback), exit 2, the output set in place."""
+    (tmp_path / "plate.obj").write_text(PLATE)
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(tmp_path / ".c")}
+    with open("/dev/full", "w") as full:
+        r = subprocess.run(
+            [sys.executable, "-m", "crackbake", "plate.obj", "--shrink", "1", "--res", "64",
+             "--sim-faces", "300", "-o", "out", "-q", "--json"],
+            cwd=tmp_path, stdout=full, stderr=subprocess.PIPE, text=True, env=env, timeout=300,
+        )
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: cannot write the --json summary"), lines
+    assert "the outputs are complete in out/" in lines[0]
+    assert (tmp_path / "out" / "manifest.json").is_file()

@@ -142,3 +142,22 @@ def test_error_on_a_terminal_clears_the_live_line(plate, tmp_path):
     assert term.rsplit("\x1b[K", 1)[-1].strip().startswith(
         "error: impact point (1e+308, 1e+308, 1e+308) is 7.06e+307 mesh diagonals")
     assert not (tmp_path / "e").exists()
+
+
+def test_ctrl_c_after_the_commit_is_ignored(plate, tmp_path):
+    """Once the output set is committed, SIGINT is ignored: a Ctrl-C during the closing summary
+    or the interpreter's shutdown printed "Exception ignored ... KeyboardInterrupt"."""
+    import signal
+
+    from click.testing import CliRunner
+
+    from crackbake.cli import main
+
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        result = CliRunner().invoke(main, [str(plate), "--shrink", "1", *QUICK, "-o",
+                                           str(tmp_path / "out"), "-q"])
+        assert result.exit_code == 0, result.output
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)

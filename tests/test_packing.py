@@ -183,7 +183,7 @@ def test_filtered_data_rows_give_the_same_png():
     depth = (rng.random((RES, RES)) * 0.02).astype(np.float32)
     depth[3, :5] = [np.nan, -1.0, 0.0, 0.02, 1.0]  # NaN -> 0, clipped at both ends
     m = SimpleNamespace(
-        mask=_halves(rng), width=(rng.random((RES, RES)) * 0.01).astype(np.float16),
+        mask=_halves(rng), width=(rng.random((RES, RES)) * 0.01).astype(np.float32),
         time=_halves(rng), depth=depth, occlusion=None,
     )  # fmt: skip
     rows = targets.data16_filtered(m)
@@ -192,3 +192,22 @@ def test_filtered_data_rows_give_the_same_png():
     assert png_rows(rows, RES, 16, 4) == png_bytes(pixels)
     # the unfiltered first row is the big-endian pixels themselves
     assert rows[0, 1:].tobytes() == pixels[0].tobytes()
+
+
+def test_fused_data_texture_equals_numpy_quantise():
+    """The fused 16-bit data texture equals the per-plane numpy quantisation, with float32
+    widths past half's 65504 (crack.width is float32: mesh units are unbounded)."""
+    rng = np.random.default_rng(17)
+    width = (rng.random((RES, RES)) * 2e5).astype(np.float32)
+    width[2, :3] = [-1.0, 0.0, 3e5]  # widths are >= 0, but clipped anyway
+    depth = (rng.random((RES, RES)) * 0.02).astype(np.float32)
+    m = SimpleNamespace(mask=_halves(rng), width=width, time=_halves(rng), depth=depth,
+                        occlusion=None)
+    scales = targets.data_scales(m)
+    assert scales["width"] > 65504
+    got = targets.pack("data", m, 16)
+    want = np.stack([targets.quantise(m.mask, 16), targets.quantise(width, 16, scales["width"]),
+                     targets.quantise(depth, 16, scales["depth"]), targets.quantise(m.time, 16)],
+                    axis=-1)
+    np.testing.assert_array_equal(got, want)
+    assert int(got[..., 1].max()) == 65535  # the widest texel reaches full scale

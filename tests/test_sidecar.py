@@ -118,6 +118,48 @@ def test_numpy_params_are_written_as_plain_json(tmp_path):
     assert read_sidecar(tmp_path / "c.json").params == {"seed": 4, "size": [2.0, 3.0], "on": True}
 
 
+def test_write_refuses_params_nested_past_the_stack(tmp_path):
+    """Params nested 900 deep (a library user's, or a sidecar's read back) made the writer
+    recurse past Python's limit; now a one-line error and no file."""
+    net = tiny_network()
+    deep: object = 1
+    for _ in range(900):
+        deep = [deep]
+    net.params = {"x": deep}
+    with pytest.raises(CrackbakeError, match="nest"):
+        write_sidecar(net, tmp_path / "c.json")
+    assert not (tmp_path / "c.json").exists()
+
+
+def test_a_number_of_5000_digits_is_one_line(tmp_path):
+    path = tmp_path / "digits.json"
+    path.write_text(json.dumps(valid()).replace('"id": 7', '"id": ' + "9" * 5000))
+    with pytest.raises(CrackbakeError, match="holds a number JSON cannot hold here"):
+        read_sidecar(path)
+
+
+def test_decoding_a_deeply_nested_file_is_one_line(tmp_path):
+    path = tmp_path / "deep.json"
+    path.write_text('{"format": "crackbake-cracks", "version": 1, "cracks": '
+                    + "[" * 200_000 + "]" * 200_000 + "}")
+    with pytest.raises(CrackbakeError, match="nests lists or objects thousands deep"):
+        read_sidecar(path)
+
+
+def test_largest_allowed_id_and_width_reach_the_maps_exactly(tmp_path):
+    """The limits are what the EXR channels hold: id 2**24 - 1 in float32 crack.id, a width
+    past half's 65504 in float32 crack.width."""
+    from crackbake.exchange.layers import CRACK_LAYERS
+
+    assert not CRACK_LAYERS["id"].half and not CRACK_LAYERS["width"].half
+    assert float(np.float32(2**24 - 1)) == 2**24 - 1 and float(np.float32(2**24 + 1)) != 2**24 + 1
+    data = valid()
+    data["cracks"][0]["id"] = 2**24 - 1
+    data["cracks"][0]["width"] = [1e5, 1e5, 1e5]
+    net = from_dict(data)
+    assert net.cracks[0].id == 2**24 - 1 and float(np.float32(net.cracks[0].width[0])) == 1e5
+
+
 def test_write_refuses_unreadable_network(tmp_path):
     net = tiny_network()
     net.cracks[0].width[1] = np.nan
@@ -207,6 +249,29 @@ INVALID = [
     ("units", _set(["units"], "cm"), "\"units\" is 'cm'"),
     ("cracks type", _set(["cracks"], {"id": 0}), '"cracks" is not a list'),
     ("crack type", _set(["cracks", 0], [1, 2]), "cracks\\[0\\] is not an object"),
+    # Issue 19: values JSON holds but the bake cannot (the CLI's ranges, crack.id's float32).
+    ("id -1", _set(["cracks", 0, "id"], -1), r"has id -1; crack ids must lie in 0\.\.16777215"),
+    ("id 2**24", _set(["cracks", 0, "id"], 2**24), "has id 16777216; crack ids must lie in"),
+    ("id 2**70", _set(["cracks", 0, "id"], 2**70), "has id 1180591620717411303424; crack ids"),
+    ("id 10**400", _set(["cracks", 0, "id"], 10**400), r"has id 2\*\*1328 or more; crack ids"),
+    ("width 1e308", _set(["cracks", 0, "width", 0], 1e308), "width 1e\\+308; width must be at"),
+    ("depth 1e16", _set(["cracks", 1, "depth", 0], 1e16), "depth 1e\\+16; depth must be at"),
+    ("point 1e300", _set(["cracks", 0, "points", 0, 1], 1e300), "point coordinate of 1e\\+300"),
+    ("params width", _set(["params"], {"crack_width": 0}),
+     '"params"."crack_width" is 0; it must be a number above 0 up to 1e\\+15 mesh units'),
+    ("params steps huge", _set(["params"], {"max_steps": 10**400}),
+     r'"params"."max_steps" is 2\*\*1328 or more; it must be a number from 1'),
+    ("params noise text", _set(["params"], {"noise": "loud"}), '"params"."noise" is \'loud\''),
+    ("params seed", _set(["params"], {"seed": -3}),
+     '"params"."seed" is -3; it must be a non-negative'),
+    ("params impact", _set(["params"], {"impacts": [{"point": [0, 0, 1e300]}]}),
+     '"params"."impacts"\\[0\\]."point" is \\[0, 0, 1e\\+300\\]'),
+    ("impact radius", _set(["impacts"], [{"point": [0, 0, 0], "radius": -1, "strength": 1}]),
+     '"impacts"\\[0\\]."radius" is -1'),
+    ("impact point", _set(["impacts"], [{"point": [0, 0], "strength": 1}]),
+     '"impacts"\\[0\\]."point" is \\[0, 0\\]; it must be \\[x, y, z\\]'),
+    ("nested params", _set(["params"], {"x": json.loads("[" * 40 + "1" + "]" * 40)}),
+     "nests lists or objects more than 32 deep"),
 ]
 
 

@@ -38,12 +38,25 @@ def create_context():
     """
     import moderngl
 
+    for name in ("CRACKBAKE_EGL_DEVICE", "GLCONTEXT_DEVICE_INDEX"):
+        value = os.environ.get(name)
+        if value is not None and not value.strip().isdigit():
+            # glcontext would fail with int()'s message, and the install hint would mislead.
+            raise CrackbakeError(
+                f"{name}={value!r} is not an EGL device number; set it to 0, 1, ... or unset it"
+            )
     if "CRACKBAKE_EGL_DEVICE" in os.environ:
-        os.environ["GLCONTEXT_DEVICE_INDEX"] = os.environ["CRACKBAKE_EGL_DEVICE"]
+        os.environ["GLCONTEXT_DEVICE_INDEX"] = os.environ["CRACKBAKE_EGL_DEVICE"].strip()
     try:
         ctx = moderngl.create_standalone_context(backend="egl", require=430)
     except Exception as exc:
         msg = str(exc)
+        device = os.environ.get("GLCONTEXT_DEVICE_INDEX")
+        if device is not None and "device" in msg.lower() and "found 0 devices" not in msg:
+            raise CrackbakeError(
+                f"cannot open EGL device {device} ({msg}); pick another with "
+                "CRACKBAKE_EGL_DEVICE or unset it"
+            ) from exc
         for needle, hint in _HINTS:
             if needle in msg:
                 raise CrackbakeError(

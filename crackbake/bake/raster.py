@@ -42,7 +42,7 @@ class CrackMaps:
     ----------
     mask : float16, 0..1
         Anti-aliased crack coverage.
-    width : float16, mesh units
+    width : float32, mesh units
         Opening width of the nearest crack (0 where there is none within ``max_distance``).
     time : float16, 0..1
         Crack time of the nearest crack point.
@@ -151,7 +151,7 @@ def bake_cracks(
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
         Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
-        texels (67 bytes each on the GL side).
+        texels (69 bytes each on the GL side).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
     normals : (V, 3) float, optional
@@ -206,7 +206,9 @@ def bake_cracks(
 
 
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
-_DTYPES = ("f2", "f2", "f2", "f4", "f4", "f4", "f1")
+# width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
+# below 6e-5), while mask and time are 0..1.
+_DTYPES = ("f2", "f4", "f2", "f4", "f4", "f4", "f1")
 _NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 
@@ -307,7 +309,7 @@ def _render(
                                          max_distance, profile_shape, frames, projection, min_px)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (67 bytes a texel: 48 for the surface pass, 19 for the maps; 70 with the normal map,
+        # (69 bytes a texel: 48 for the surface pass, 21 for the maps; 72 with the normal map,
         # whose inside target holds the winning segment as R32F).
         band = max(1, min(res, (tile * tile) // res))
         # With the normal map the inside target also says which segment's depth wins (R32F).

@@ -77,14 +77,15 @@ def _value(role, layer, half, units, rng, text) -> Layer:
 
 
 #: The crack master ``<stem>_cracks.exr``, by role, in file-description order.  Pixel types are
-#: those the bake has always used: half where the range is bounded, float for depth/distance and
-#: for ids (half holds integers exactly only up to 2048).
+#: half where the range is bounded (0..1 or unit vectors), float for lengths in mesh units
+#: (width, depth, distance: half stops at 65504) and for ids (half holds integers exactly only
+#: up to 2048, float32 up to 2**24, the sidecar's id limit).
 CRACK_LAYERS: dict[str, Layer] = {
     layer.role: layer
     for layer in (
         _value("mask", "crack.mask", True, "fraction", "0..1", "anti-aliased crack coverage"),
         _value(
-            "width", "crack.width", True, "mesh units", ">= 0",
+            "width", "crack.width", False, "mesh units", ">= 0",
             "opening width of the nearest crack (0 where none within max distance)",
         ),
         _value(

@@ -13,24 +13,31 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _texel16(i, j, mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain):
-    """The data texture's four 16-bit samples at texel (i, j): mask, width, depth, time."""
-    d = depth[i, j] * depth_gain + np.float32(0.5)
-    # NaN compares false both ways and lands on 0, like the numpy path.
+def _scaled16(x, gain):
+    """``x * gain`` rounded to uint16, clipped; NaN compares false both ways and lands on 0,
+    like the numpy path."""
+    d = x * gain + np.float32(0.5)
     q = np.uint16(0)
     if d >= np.float32(65535.0):
         q = np.uint16(65535)
     elif d > np.float32(0.0):
         q = np.uint16(d)
-    return lut_mask[mask[i, j]], lut_width[width[i, j]], q, lut_time[time[i, j]]
+    return q
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _texel16(i, j, mask, width, time, depth, lut_mask, width_gain, lut_time, depth_gain):
+    """The data texture's four 16-bit samples at texel (i, j): mask, width, depth, time."""
+    return (lut_mask[mask[i, j]], _scaled16(width[i, j], width_gain),
+            _scaled16(depth[i, j], depth_gain), lut_time[time[i, j]])
 
 
 @njit(cache=True, nogil=True)
-def _data16(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain, out):
+def _data16(mask, width, time, depth, lut_mask, width_gain, lut_time, depth_gain, out):
     h, w = mask.shape
     for i in range(h):
         for j in range(w):
-            a, b, q, c = _texel16(i, j, mask, width, time, depth, lut_mask, lut_width,
+            a, b, q, c = _texel16(i, j, mask, width, time, depth, lut_mask, width_gain,
                                   lut_time, depth_gain)
             # Big-endian samples, the byte order PNG stores.
             out[i, j, 0] = (a >> 8) | (a << 8)
@@ -40,7 +47,7 @@ def _data16(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain,
 
 
 @njit(cache=True, nogil=True)
-def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_gain, rows):
+def _data16_rows(mask, width, time, depth, lut_mask, width_gain, lut_time, depth_gain, rows):
     # The data texture already PNG-filtered ("Up": each byte minus the byte above), written
     # straight into the scanline buffer: no (H, W, 4) pixel array, no second pass.
     h, w = mask.shape
@@ -48,7 +55,7 @@ def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_
     cur = np.empty(8 * w, np.uint8)
     for i in range(h):
         for j in range(w):
-            a, b, q, c = _texel16(i, j, mask, width, time, depth, lut_mask, lut_width,
+            a, b, q, c = _texel16(i, j, mask, width, time, depth, lut_mask, width_gain,
                                   lut_time, depth_gain)
             o = 8 * j  # big-endian samples: high byte first
             cur[o], cur[o + 1] = a >> 8, a & 0xFF
@@ -62,7 +69,8 @@ def _data16_rows(mask, width, time, depth, lut_mask, lut_width, lut_time, depth_
         prev, cur = cur, prev
 
 
-def data16_rows(mask, width, time, depth, luts, depth_scale: float) -> np.ndarray:
+def data16_rows(mask, width, time, depth, luts, width_scale: float,
+                depth_scale: float) -> np.ndarray:
     """:func:`data16`'s texture as PNG scanlines with the "Up" filter applied, in one pass.
 
     Returns
@@ -74,7 +82,7 @@ def data16_rows(mask, width, time, depth, luts, depth_scale: float) -> np.ndarra
     """
     h, w = mask.shape
     rows = np.empty((h, 1 + 8 * w), np.uint8)
-    _data16_rows(*_data16_inputs(mask, width, time, depth, luts, depth_scale), rows)
+    _data16_rows(*_data16_inputs(mask, width, time, depth, luts, width_scale, depth_scale), rows)
     return rows
 
 
@@ -83,39 +91,45 @@ def data16(
     width: np.ndarray,
     time: np.ndarray,
     depth: np.ndarray,
-    luts: tuple[np.ndarray, np.ndarray, np.ndarray],
+    luts: tuple[np.ndarray, np.ndarray],
+    width_scale: float,
     depth_scale: float,
 ) -> np.ndarray:
-    """The 16-bit RGBA data texture: R mask, G width, B depth / ``depth_scale``, A time.
+    """The 16-bit RGBA data texture: R mask, G width / ``width_scale``, B depth /
+    ``depth_scale``, A time.
 
     Parameters
     ----------
-    mask, width, time : (H, W) float16
-        Quantised through ``luts``: three (65536,) uint16 tables indexed by the float16 bit
+    mask, time : (H, W) float16
+        Quantised through ``luts``: two (65536,) uint16 tables indexed by the float16 bit
         pattern (native byte order), built by the caller with its rounding rule.
-    depth : (H, W) float32
-        Mesh units; rounded to ``depth / depth_scale * 65535`` (clipped, NaN -> 0).
-    depth_scale : float
-        Depth that maps to 65535, > 0.
+    width, depth : (H, W) float32
+        Mesh units; rounded to ``x / scale * 65535`` (clipped, NaN -> 0).
+    width_scale, depth_scale : float
+        Width and depth that map to 65535, > 0.
 
     Returns
     -------
     (H, W, 4) big-endian uint16 (``>u2``)
     """
     out = np.empty((*mask.shape, 4), np.uint16)
-    _data16(*_data16_inputs(mask, width, time, depth, luts, depth_scale), out)
+    _data16(*_data16_inputs(mask, width, time, depth, luts, width_scale, depth_scale), out)
     return out.view(">u2")
 
 
-def _data16_inputs(mask, width, time, depth, luts, depth_scale: float) -> tuple:
-    """The data-texture kernels' inputs: the float16 planes as their uint16 bit patterns, depth
-    as float32, the three tables, and the depth gain."""
+def _data16_inputs(mask, width, time, depth, luts, width_scale: float,
+                   depth_scale: float) -> tuple:
+    """The data-texture kernels' inputs: mask and time as their float16 bit patterns, width and
+    depth as float32, the two tables and the two gains (in the kernels' argument order)."""
+    lut_mask, lut_time = (np.ascontiguousarray(t, dtype=np.uint16) for t in luts)
     return (
         np.ascontiguousarray(mask).view(np.uint16),
-        np.ascontiguousarray(width).view(np.uint16),
+        np.ascontiguousarray(width, dtype=np.float32),
         np.ascontiguousarray(time).view(np.uint16),
         np.ascontiguousarray(depth, dtype=np.float32),
-        *(np.ascontiguousarray(t, dtype=np.uint16) for t in luts),
+        lut_mask,
+        np.float32(65535.0 / width_scale),
+        lut_time,
         np.float32(65535.0 / depth_scale),
     )
 

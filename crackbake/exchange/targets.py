@@ -255,31 +255,30 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
     return np.stack(planes, axis=-1)
 
 
-def _data16_luts(maps) -> tuple:
-    scales = data_scales(maps)
-    return tuple(
-        half_lut(lambda x, s=s: np.clip(x / s * 65535 + 0.5, 0, 65535)).astype(np.uint16)
-        for s in (1.0, scales["width"], 1.0)
-    )
+def _data16_luts() -> tuple:
+    # Mask and time (0..1 float16) through one table of every half bit pattern.
+    lut = half_lut(lambda x: np.clip(x * 65535 + 0.5, 0, 65535)).astype(np.uint16)
+    return lut, lut
 
 
 def data16_filtered(maps) -> np.ndarray | None:
     """The 16-bit data texture as PNG-filtered scanlines (:func:`packing.data16_rows`, for
-    :func:`~crackbake.exchange.pngenc.png_rows`); None unless mask, width, time are float16."""
-    if not all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.width, maps.time)):
+    :func:`~crackbake.exchange.pngenc.png_rows`); None unless mask and time are float16."""
+    if not all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.time)):
         return None
-    luts = _data16_luts(maps)
-    return data16_rows(maps.mask, maps.width, maps.time, maps.depth, luts,
-                       data_scales(maps)["depth"])  # fmt: skip
+    scales = data_scales(maps)
+    return data16_rows(maps.mask, maps.width, maps.time, maps.depth, _data16_luts(),
+                       scales["width"], scales["depth"])  # fmt: skip
 
 
 def _data_planes(maps, bits: int):
-    """R mask, G width, B depth, A time: one fused pass for the usual 16-bit float16 maps."""
+    """R mask, G width, B depth, A time: one fused pass for the usual 16-bit maps (mask and
+    time float16)."""
     scales = data_scales(maps)
-    halves = all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.width, maps.time))
+    halves = all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.time))
     if bits == 16 and halves:
-        return data16(maps.mask, maps.width, maps.time, maps.depth, _data16_luts(maps),
-                      scales["depth"])  # fmt: skip
+        return data16(maps.mask, maps.width, maps.time, maps.depth, _data16_luts(),
+                      scales["width"], scales["depth"])  # fmt: skip
     return (
         quantise(maps.mask, bits), quantise(maps.width, bits, scales["width"]),
         quantise(maps.depth, bits, scales["depth"]), quantise(maps.time, bits),

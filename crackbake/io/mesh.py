@@ -182,6 +182,9 @@ def _read_file(path: Path, allow_outside: bool = False):
             f"{path}: unsupported format '{suffix or '(none)'}'; "
             f"use one of {', '.join(s[1:].upper() for s in SUPPORTED_SUFFIXES)}"
         )
+    if path.stat().st_size == 0:  # trimesh's readers fail on no bytes with AttributeErrors
+        raise CrackbakeError(f"{path}: the file is empty, so it holds no triangles; crackbake "
+                             "needs a triangle mesh (export it again)")
     data, short_faces = None, 0
     if suffix == ".obj":
         data = _read_bytes(path)
@@ -329,12 +332,25 @@ def load_mesh(
 
     uv = np.concatenate(uv_parts) if keep_uv else None
     if uv is not None and not np.isfinite(uv).all():
+        bad = ~np.isfinite(uv)
+        what = " and ".join(w for w, hit in (("NaN", np.isnan(uv).any()),
+                                             ("infinite values", np.isinf(uv).any())) if hit)
         warnings.warn(
-            f"{path.name}: UVs contain NaN; ignoring them (the mesh will be unwrapped)",
+            f"{path.name}: {int(bad.any(axis=1).sum())} UVs hold {what}; ignoring them all "
+            "(the mesh will be unwrapped)",
             CrackbakeWarning,
             stacklevel=2,
         )
         uv = None
+    if uv is None and obj_text is not None and keep_uv is False:
+        bad_vt = obj_checks.explain_bad_uv_index(obj_text)
+        if bad_vt is not None:
+            warnings.warn(
+                f"{path.name}: {bad_vt}; ignoring every UV (the mesh will be unwrapped; fix "
+                "the file to keep its UVs)",
+                CrackbakeWarning,
+                stacklevel=2,
+            )
 
     if all(n is not None for n in normal_parts):
         normals = np.concatenate(normal_parts)

@@ -166,3 +166,31 @@ def explain_bad_index(data: bytes, path: Path) -> CrackbakeError | None:
         f"file does not have (line {first[0]}: vertex {first[1]}, but only {n_vertices} "
         "vertices); the file is truncated or corrupt, re-export it"
     )
+
+
+_VT_LINE = re.compile(rb"^vt[ \t]", re.M)
+
+
+def explain_bad_uv_index(data: bytes) -> str | None:
+    """Where face corners name texture coordinates (``f v/vt``) the file does not have, or None.
+
+    trimesh then drops every UV of the mesh without a word; called only when a file with
+    ``vt`` lines loaded without UVs, so the Python loop over face lines is not on the fast path.
+    """
+    n_vt = len(_VT_LINE.findall(data))
+    bad_lines, first = 0, None
+    for match in _FACE_LINE.finditer(data):
+        for corner in match.group(1).split():
+            parts = corner.split(b"/")
+            try:
+                index = int(parts[1]) if len(parts) > 1 and parts[1] else None
+            except ValueError:
+                continue
+            if index is not None and (index == 0 or index > n_vt or index < -n_vt):
+                bad_lines += 1
+                first = first or (_line_no(data, match.start()), index)
+                break
+    if first is None:
+        return None
+    return (f"{bad_lines} face line{'s use' if bad_lines != 1 else ' uses'} texture coordinates "
+            f"the file does not have (line {first[0]}: vt {first[1]}, but only {n_vt} vt lines)")

@@ -17,9 +17,11 @@ import numpy as np
 from crackbake.io.mesh import Mesh
 from crackbake.io.safe_open import read_bytes
 from crackbake.io.sidecar_checks import (
+    DEPTH_MAX,
     FORMAT,
     UNITS,
     VERSION,
+    check_depth,
     check_header,
     check_mesh,
     fail,
@@ -109,6 +111,7 @@ def from_dict(data: Any, source: str = "cracks.json", mesh: Mesh | None = None) 
     CrackbakeError
         Anything malformed; the message names the crack and the fix.
     """
+    check_depth(data, source)
     check_header(data, source)
     info = parse_mesh_block(data["mesh"], source)
     params, impacts, steps = parse_extras(data, source)
@@ -186,7 +189,13 @@ def write_sidecar(network: CrackNetwork, path: str | Path) -> None:
         written.
     """
     path = Path(path)
-    data = to_dict(network)
+    try:
+        data = to_dict(network)
+    except RecursionError as exc:  # params nested past the interpreter's stack
+        raise fail(
+            str(path),
+            f"params/impacts nest more than {DEPTH_MAX} deep; use flat values",
+        ) from exc
     from_dict(data, source=str(path))
     try:
         text = _dump(data, 0) + "\n"
@@ -233,10 +242,19 @@ def read_sidecar(path: str | Path, mesh: Mesh | None = None) -> CrackNetwork:
         raise fail(source, "is not UTF-8 text, so not JSON; pass a crackbake cracks.json") from exc
     try:
         data = json.loads(text)
+    except RecursionError as exc:  # the decoder recurses once per nesting level
+        raise fail(
+            source,
+            f"nests lists or objects thousands deep (a cracks.json nests 5 deep, at most "
+            f"{DEPTH_MAX}); this is not a crackbake cracks.json",
+        ) from exc
     except json.JSONDecodeError as exc:
         raise fail(
             source,
             f"is not valid JSON ({exc.msg} at line {exc.lineno} column "
             f"{exc.colno}); fix or re-make the file",
         ) from exc
+    except ValueError as exc:  # an integer of thousands of digits (Python's int_max_str_digits)
+        raise fail(source, f"holds a number JSON cannot hold here ({exc}); re-make the file") \
+            from exc
     return from_dict(data, source=source, mesh=mesh)

@@ -6,6 +6,7 @@ Used by :func:`crackbake.io.sidecar.from_dict`; every failure is a one-line
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any
 
@@ -14,6 +15,7 @@ import numpy as np
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh
 from crackbake.network import Crack
+from crackbake.params import LENGTH_MAX, RADIUS_REL_MAX, RANGES, STRESS_MAX
 
 FORMAT = "crackbake-cracks"
 VERSION = 1
@@ -27,10 +29,45 @@ _MESH_KEYS = ("vertices", "faces", "bbox_min", "bbox_max")
 # broken projection, but the bake still works, so that one only warns.
 BBOX_TOLERANCE = 1e-6
 PLANE_TOLERANCE = 1e-3
+#: Largest crack id: ``crack.id`` is a float32 channel, which holds integers exactly only up to
+#: 2**24; -1 there means "no crack", so ids start at 0.
+ID_MAX = 2**24 - 1
+#: Deepest nesting of lists and objects a sidecar may hold.  A crackbake sidecar nests 5 deep
+#: (cracks -> crack -> points -> point); params values a few more.  Deeper files are refused
+#: before any recursive code (the JSON writer, numpy) walks them.
+DEPTH_MAX = 32
 
 
 def fail(source: str, message: str) -> CrackbakeError:
     return CrackbakeError(f"{source}: {message}")
+
+
+def _short(value: Any) -> str:
+    """``repr`` of a JSON value cut to one readable line (a 10**6-digit id stays short)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= 10**30:
+        return f"{'-' if value < 0 else ''}2**{abs(value).bit_length() - 1} or more"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def check_depth(data: Any, source: str) -> None:
+    """Refuse lists and objects nested deeper than :data:`DEPTH_MAX` (walked without recursion)."""
+    stack = [(data, 1)]
+    while stack:
+        value, depth = stack.pop()
+        if isinstance(value, dict):
+            children = value.values()
+        elif isinstance(value, list):
+            children = value
+        else:
+            continue
+        if depth > DEPTH_MAX:
+            raise fail(
+                source,
+                f"nests lists or objects more than {DEPTH_MAX} deep; a cracks.json nests 5 "
+                "deep, so this is not one (re-make it with crackbake)",
+            )
+        stack.extend((v, depth + 1) for v in children if isinstance(v, dict | list))
 
 
 def _array(value: Any, source: str, where: str, key: str, integer: bool = False) -> np.ndarray:
@@ -80,7 +117,13 @@ def parse_crack(raw: Any, index: int, source: str) -> Crack:
         )
     cid = raw["id"]
     if not isinstance(cid, int) or isinstance(cid, bool):
-        raise fail(source, f"cracks[{index}] has id {cid!r}; crack ids must be integers")
+        raise fail(source, f"cracks[{index}] has id {_short(cid)}; crack ids must be integers")
+    if not 0 <= cid <= ID_MAX:
+        raise fail(
+            source,
+            f"cracks[{index}] has id {_short(cid)}; crack ids must lie in 0..{ID_MAX} "
+            "(crack.id stores them as float32; -1 there means no crack)",
+        )
     where = f"crack {cid}"
     points = _array(raw["points"], source, where, "points")
     if points.ndim != 2 or points.shape[1] != 3:
@@ -118,6 +161,19 @@ def parse_crack(raw: Any, index: int, source: str) -> Crack:
                 source,
                 f"{where} has negative {key} ({float(arrays[key].min()):g}); {key} must be >= 0",
             )
+        if (arrays[key] > LENGTH_MAX).any():
+            raise fail(
+                source,
+                f"{where} has {key} {float(arrays[key].max()):g}; {key} must be at most "
+                f"{LENGTH_MAX:g} mesh units (the --crack-width range)",
+            )
+    big = float(np.abs(points).max())
+    if big > LENGTH_MAX:
+        raise fail(
+            source,
+            f"{where} has a point coordinate of {big:g}; points must lie on the mesh, within "
+            f"{LENGTH_MAX:g} mesh units of the origin",
+        )
     t = arrays["time"]
     if ((t < 0) | (t > 1)).any():
         raise fail(
@@ -249,6 +305,7 @@ def parse_extras(data: dict, source: str) -> tuple[dict, list, int]:
     params = data.get("params", {})
     if not isinstance(params, dict):
         raise fail(source, '"params" is not an object; write it as {"name": value, ...}')
+    _check_params(params, source)
     impacts = data.get("impacts", [])
     if not isinstance(impacts, list) or not all(isinstance(i, dict) for i in impacts):
         raise fail(
@@ -256,8 +313,69 @@ def parse_extras(data: dict, source: str) -> tuple[dict, list, int]:
             '"impacts" is not a list of objects; write it as '
             '[{"point": [x, y, z], "radius": r, "strength": s}, ...]',
         )
+    for i, imp in enumerate(impacts):
+        _check_impact(imp, f'"impacts"[{i}]', source)
     stats = data.get("stats", {})
     steps = stats.get("solver_steps", 0) if isinstance(stats, dict) else 0
     if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
         raise fail(source, f'"stats"."solver_steps" is {steps!r}; it must be an integer >= 0')
     return params, impacts, steps
+
+
+def _check_value(value: Any, name: str, low: float, high: float, unit: str, low_open: bool,
+                 source: str) -> None:
+    """The CLI's range check (:data:`crackbake.params.RANGES`) for one sidecar value."""
+    if value is None:
+        return
+    ok = _is_number(value) and (low < value if low_open else low <= value) and value <= high
+    if not ok:
+        above = f"above {low:g}" if low_open else f"from {low:g}"
+        raise fail(
+            source,
+            f"{name} is {_short(value)}; it must be a number {above} up to {high:g}{unit} "
+            "(the command line's range)",
+        )
+
+
+def _is_number(value: Any) -> bool:
+    """A finite JSON number (not a bool; an integer too large for a float is not one)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
+def _check_params(params: dict, source: str) -> None:
+    """Every recorded parameter with a command-line range must lie in it."""
+    for key, bounds in RANGES.items():
+        _check_value(params.get(key), f'"params"."{key}"', *bounds, source)
+    seed = params.get("seed")
+    if seed is not None and (not isinstance(seed, int) or isinstance(seed, bool)
+                             or not 0 <= seed < 2**63):
+        raise fail(source, f'"params"."seed" is {_short(seed)}; it must be a non-negative '
+                           "64-bit integer (the --seed range)")
+    impacts = params.get("impacts")
+    if isinstance(impacts, list):
+        for i, imp in enumerate(impacts):
+            if isinstance(imp, dict):
+                _check_impact(imp, f'"params"."impacts"[{i}]', source)
+
+
+def _check_impact(imp: dict, where: str, source: str) -> None:
+    """An impact's point, radius and strength within the command line's bounds."""
+    point = imp.get("point")
+    ok = (isinstance(point, list) and len(point) == 3
+          and all(_is_number(c) and abs(c) <= LENGTH_MAX for c in point))
+    if not ok:
+        raise fail(
+            source,
+            f'{where}."point" is {_short(point)}; it must be [x, y, z], finite numbers within '
+            f"{LENGTH_MAX:g} mesh units",
+        )
+    _check_value(imp.get("radius"), f'{where}."radius"', 0.0, LENGTH_MAX, " mesh units", True,
+                 source)
+    _check_value(imp.get("radius_rel"), f'{where}."radius_rel"', 0.0, RADIUS_REL_MAX,
+                 " bounding-box diagonals", True, source)
+    _check_value(imp.get("strength"), f'{where}."strength"', 0.0, STRESS_MAX, "", True, source)

@@ -122,13 +122,29 @@ def _named(
     return target
 
 
+#: Largest base-colour texture read, pixels (11585² as 8-bit RGB is 400 MB).  The bake's page is at
+#: most 16384², but a texture that large is rare and a header can claim any size (a 74-byte PNG
+#: declared 20000²), so bigger ones give grey with a warning naming the size.
+TEXTURE_PIXELS_MAX = 2**27
+
+
 def _resampled(blob: bytes, res: int, mesh_path: Path, name: str) -> np.ndarray | None:
     from PIL import Image, UnidentifiedImageError
 
     try:
-        img = Image.open(io.BytesIO(blob))
+        with warnings.catch_warnings():  # the size check below replaces Pillow's bomb warning
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            img = Image.open(io.BytesIO(blob))
+        w, h = img.size
+        if w * h > TEXTURE_PIXELS_MAX:
+            _warn(f"{mesh_path.name}: base-colour texture {name} is {w}x{h}, over the "
+                  f"{TEXTURE_PIXELS_MAX:,} pixels crackbake reads; using grey (shrink the "
+                  "texture to the bake's --res)")
+            return None
+        img.draft("RGB", (res, res))  # JPEG decodes at 1/2..1/8 scale when that suffices
         img.load()
-    except (OSError, UnidentifiedImageError) as exc:
+    except (OSError, ValueError, SyntaxError, EOFError, MemoryError,
+            Image.DecompressionBombError, UnidentifiedImageError) as exc:
         _warn(f"{mesh_path.name}: base-colour texture {name} is unreadable ({exc}); using grey")
         return None
     if img.mode not in ("RGB", "RGBA", "L", "LA", "P"):

@@ -113,6 +113,7 @@ def sidecar_params(effective: dict) -> dict:
         "formats",
         "float32",
         "unwrap_timeout",
+        "max_memory",
         "cache",
         "tile",
         "res",

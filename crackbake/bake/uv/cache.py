@@ -35,8 +35,25 @@ def cache_dir() -> Path:
     """
     if os.environ.get("CRACKBAKE_CACHE_DIR"):
         return Path(os.environ["CRACKBAKE_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    try:
+        home = Path.home()
+    except RuntimeError:  # no $HOME and no passwd entry: _missing_home keeps the cache off
+        home = Path("~")
+    base = os.environ.get("XDG_CACHE_HOME") or str(home / ".cache")
     return Path(base) / "crackbake" / "unwrap"
+
+
+def _missing_home() -> Path | None:
+    """The user's home (or ``$XDG_CACHE_HOME``'s parent) when it does not exist: the cache then
+    stays off rather than create a home folder (``mkdir -p`` would make ``$HOME`` itself)."""
+    if os.environ.get("CRACKBAKE_CACHE_DIR"):
+        return None  # named explicitly: created as asked
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    try:
+        home = Path(xdg).parent if xdg else Path.home()
+    except RuntimeError:  # no $HOME and no passwd entry
+        return Path("~")
+    return None if home.is_dir() else home
 
 
 def cache_key(mesh: Mesh, res: int, padding: int) -> str:
@@ -87,6 +104,15 @@ def read_cache(path: Path, key: str, mesh: Mesh) -> UVMesh | None:
 def write_cache(path: Path, key: str, result: UVMesh) -> None:
     """Store an unwrap atomically; a failure only warns (the cache is an optimisation)."""
     tmp_name = None
+    home = _missing_home()
+    if home is not None:
+        warnings.warn(
+            f"no unwrap cache written: the home folder {home} does not exist (crackbake does not "
+            "create it); set CRACKBAKE_CACHE_DIR to a folder to cache unwraps",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+        return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".npz")

@@ -1,0 +1,228 @@
+"""Peak memory of a run, estimated before the heavy stages, and the memory the run may use.
+
+The estimate is a linear model of the sizes that drive memory, fitted to measured runs
+(``benchmarks/bench_memory.py``: peak RSS of fresh ``crackbake`` processes while one size at a
+time varies)::
+
+    peak = BASE + PER_FACE * faces + PER_SIM_FACE * sim_faces
+           + PER_TEXEL * res**2 + PER_GL_TEXEL * min(res, tile)**2
+           + PER_STRESS_TEXEL * stress_res**2
+
+The crack-map terms are split because the bake draws in bands of at most ``tile**2`` texels: the
+GL targets (about 70 bytes a texel) stop growing at the tile while the maps in numpy keep
+growing with ``res**2``.  The stress bake's bands are small whatever the tile (measured: the
+same peak at tile 1024 and 4096), so it has one term.  Over the 15 measured runs the model is
+within -10 %..+17 % of the peak RSS (docs/memory.md); adding the stages' shares errs on the
+safe side where they do not overlap (the solver's arrays are freed before the bake peaks).
+
+:func:`estimate_peak` is the model alone (the batch's Ray ``memory`` requests call it with the
+job's sizes); :func:`check_memory` compares it with :func:`available_memory` (the cgroup limit,
+``RLIMIT_AS`` or the physical memory) and refuses a run that cannot fit with one line naming the
+estimate, the limit and the option to lower.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from crackbake.errors import CrackbakeError
+from crackbake.params import STRESS_RES_DEFAULT, TILE_DEFAULT
+
+__all__ = ["MemoryEstimate", "available_memory", "check_memory", "estimate_peak", "run_sizes"]
+
+GIB = 2**30
+# Bytes, least-squares fit of benchmarks/bench_memory.py's 15 runs (docs/memory.md), rounded up.
+BASE = 0.35 * GIB
+PER_FACE = 670.0
+PER_SIM_FACE = 960.0
+PER_TEXEL = 59.0
+PER_GL_TEXEL = 71.0
+PER_STRESS_TEXEL = 85.0
+#: Address space beyond the resident set (shared libraries, LLVM, thread stacks, GL driver
+#: reservations): ``VmPeak - VmHWM`` was 1.07..1.33 GiB over the measured runs.  ``RLIMIT_AS``
+#: limits address space, so a cap is compared with ``rss + ADDRESS_OVERHEAD``.
+ADDRESS_OVERHEAD = 1.3 * GIB
+#: Share of a cgroup or physical limit a run may plan to use: the model's error, the page cache
+#: and other processes.  An address-space cap is the process's own, and the overhead above is
+#: already the largest measured, so the whole cap counts.
+HEADROOM = 0.9
+
+
+@dataclass(frozen=True)
+class MemoryEstimate:
+    """A run's estimated peak memory, bytes.
+
+    Attributes
+    ----------
+    rss : int
+        Peak resident memory (what a cgroup limit or the physical memory must hold).
+    parts : dict of str to int
+        The terms of the model: ``base``, ``mesh``, ``sim``, ``bake``, ``stress``.
+    """
+
+    rss: int
+    parts: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def address_space(self) -> int:
+        """Peak address space (what ``RLIMIT_AS`` must allow)."""
+        return int(self.rss + ADDRESS_OVERHEAD)
+
+    @property
+    def largest(self) -> str:
+        """The part that weighs most: which option to lower."""
+        return max((k for k in self.parts if k != "base"), key=self.parts.__getitem__)
+
+
+def estimate_peak(faces: int, sim_faces: int, res: int, stress_res: int | None = None,
+                  tile: int = TILE_DEFAULT) -> MemoryEstimate:
+    """Estimated peak memory of a run from its sizes.
+
+    Parameters
+    ----------
+    faces : int
+        Faces of the asset mesh.
+    sim_faces : int
+        Faces of the simulation mesh (the ``--sim-faces`` target, or the asset's own faces
+        where it is finer and no proxy stands in).
+    res : int
+        Texels per side of the crack maps (``--res``).
+    stress_res : int or None
+        Texels per side of the stress maps; None when they are not written.
+    tile : int
+        Largest framebuffer edge of a bake pass (``--tile``).
+
+    Returns
+    -------
+    MemoryEstimate
+    """
+    gl = min(res, tile) ** 2
+    parts = {
+        "base": BASE,
+        "mesh": PER_FACE * faces,
+        "sim": PER_SIM_FACE * sim_faces,
+        "bake": PER_TEXEL * res * res + PER_GL_TEXEL * gl,
+        "stress": PER_STRESS_TEXEL * stress_res**2 if stress_res else 0.0,
+    }
+    parts = {k: int(v) for k, v in parts.items()}
+    return MemoryEstimate(rss=sum(parts.values()), parts=parts)
+
+
+def run_sizes(params, mesh=None, faces: int | None = None) -> dict:
+    """The keyword arguments of :func:`estimate_peak` for a run.
+
+    Parameters
+    ----------
+    params : RunParams
+        Resolved (:meth:`RunParams.resolved`) or not: an unset ``sim_faces`` counts as the
+        default.
+    mesh : Mesh, optional
+        The loaded asset: its face count, and its area for ``--detail``.
+    faces : int, optional
+        The asset's face count when the mesh is not loaded (a batch planning its jobs).
+    """
+    from crackbake.params import SIM_FACES_DEFAULT
+    from crackbake.simulate.simmesh.proxy import proxy_limit
+
+    faces = len(mesh.faces) if mesh is not None else int(faces or 0)
+    if params.cracks is not None:
+        sim = 0  # a re-bake solves nothing
+    else:
+        wanted = params.sim_faces or SIM_FACES_DEFAULT
+        if params.detail is not None and mesh is not None:
+            from crackbake.geometry import face_cross
+
+            area = 0.5 * float(np.linalg.norm(face_cross(mesh.vertices, mesh.faces), axis=1).sum())
+            wanted = area / (0.25 * np.sqrt(3.0) * params.detail**2)  # equilateral triangles
+        limit = {"auto": proxy_limit(wanted), "always": 0}.get(params.sim_proxy, faces)
+        # Refinement never coarsens: an asset finer than wanted is its own sim mesh, unless a
+        # proxy of the wanted size stands in for it.
+        sim = int(wanted if faces > limit else max(wanted, faces))
+    stress = None
+    if "stress" in params.formats and params.cracks is None:
+        stress = params.stress_res or min(params.res, STRESS_RES_DEFAULT)
+    return {"faces": faces, "sim_faces": sim, "res": params.res, "stress_res": stress,
+            "tile": params.tile}
+
+
+def _read_int(path: str) -> int | None:
+    try:
+        text = Path(path).read_text().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def available_memory() -> tuple[int, str, bool]:
+    """The memory this process may use: bytes, where the figure comes from, and whether it
+    limits address space (``RLIMIT_AS``) rather than resident memory.
+
+    The smallest of the cgroup limit (v2 ``memory.max``, v1 ``memory.limit_in_bytes``),
+    ``RLIMIT_AS`` and the physical memory.
+    """
+    found: list[tuple[int, str, bool]] = []
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        value = _read_int(path)
+        if value is not None and value < 2**60:  # v1 writes "no limit" as a huge number
+            found.append((value, f"the cgroup limit ({path})", False))
+            break
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        found.append((soft, "the address-space limit (ulimit -v)", True))
+    try:
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        found.append((physical, "the physical memory", False))
+    except (ValueError, OSError):
+        pass
+    if not found:
+        return 2**62, "no known limit", False
+    return min(found, key=lambda f: f[0] - (ADDRESS_OVERHEAD if f[2] else 0))
+
+
+_LOWER = {
+    "bake": "--res",
+    "stress": "--stress-res (or drop stress from --formats)",
+    "sim": "--sim-faces (or a larger --detail)",
+    "mesh": "the mesh's face count (decimate it)",
+}
+
+
+def check_memory(estimate: MemoryEstimate, max_memory: float | None = None) -> None:
+    """Refuse a run whose estimated peak does not fit the memory it may use.
+
+    Parameters
+    ----------
+    estimate : MemoryEstimate
+    max_memory : float, optional
+        ``--max-memory``: GiB the run may use, in place of the detected limit (a larger value
+        lets a run the estimate refuses go ahead).
+
+    Raises
+    ------
+    CrackbakeError
+        One line: the estimate, the limit and where it comes from, the option to lower.
+    """
+    if max_memory is not None:
+        limit, source, address = int(max_memory * GIB), "--max-memory", False
+        need = estimate.rss
+        room = limit
+    else:
+        limit, source, address = available_memory()
+        need = estimate.address_space if address else estimate.rss
+        room = limit if address else HEADROOM * limit
+    if need <= room:
+        return
+    shares = {**estimate.parts, **({"libraries": ADDRESS_OVERHEAD} if need > estimate.rss else {})}
+    parts = ", ".join(f"{k} {v / GIB:.1f}" for k, v in shares.items() if v >= 0.05 * GIB)
+    space = " of address space" if address else ""
+    override = ("raise --max-memory" if max_memory is not None
+                else "pass --max-memory GIB to run anyway")
+    raise CrackbakeError(
+        f"this run needs about {need / GIB:.1f} GiB{space} ({parts}) but {source} allows "
+        f"{limit / GIB:.1f} GiB; lower {_LOWER[estimate.largest]}, or {override}"
+    )

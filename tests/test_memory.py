@@ -1,0 +1,89 @@
+"""The peak-memory estimate and the check that refuses runs before they can be killed."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from crackbake.errors import CrackbakeError
+from crackbake.memory import (
+    GIB,
+    MemoryEstimate,
+    available_memory,
+    check_memory,
+    estimate_peak,
+    run_sizes,
+)
+from crackbake.params import RunParams
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_estimate_grows_with_every_size():
+    base = estimate_peak(faces=10_000, sim_faces=100_000, res=1024, stress_res=1024)
+    for change in ({"faces": 1_000_000}, {"sim_faces": 1_000_000}, {"res": 4096},
+                   {"stress_res": 4096}):
+        bigger = estimate_peak(**{"faces": 10_000, "sim_faces": 100_000, "res": 1024,
+                                  "stress_res": 1024, **change})
+        assert bigger.rss > base.rss, change
+    assert base.rss == sum(base.parts.values())
+    assert estimate_peak(faces=0, sim_faces=0, res=64).parts["stress"] == 0
+
+
+def test_banded_bake_grows_slower_than_the_texels():
+    """Above the tile the GL targets stop growing: 4x the texels, less than 4x the bake."""
+    a = estimate_peak(faces=0, sim_faces=0, res=4096).parts["bake"]
+    b = estimate_peak(faces=0, sim_faces=0, res=8192).parts["bake"]
+    assert 2 * a < b < 4 * a
+
+
+def test_the_issue_runs_are_refused_where_they_died():
+    """Issue 19's runs: --stress-res 16384 was killed at 21.5 GB on a 24 GB machine; --res 8192
+    ended in MemoryError under a 2-3 GB cap, --res 16384 under 10 GB."""
+    stress = estimate_peak(faces=5856, sim_faces=100_000, res=2048, stress_res=16384)
+    assert stress.rss > 18 * GIB and stress.largest == "stress"
+    assert estimate_peak(faces=5856, sim_faces=100_000, res=8192).rss > 3 * GIB
+    assert estimate_peak(faces=5856, sim_faces=100_000, res=16384).rss > 10 * GIB
+    assert estimate_peak(faces=5856, sim_faces=20_000_000, res=2048).largest == "sim"
+
+
+def test_check_names_estimate_limit_and_option():
+    est = estimate_peak(faces=5856, sim_faces=100_000, res=16384)
+    with pytest.raises(CrackbakeError) as info:
+        check_memory(est, max_memory=10)
+    text = str(info.value)
+    assert f"needs about {est.rss / GIB:.1f} GiB" in text
+    assert "--max-memory allows 10.0 GiB; lower --res, or raise --max-memory" in text
+    check_memory(est, max_memory=est.rss / GIB + 0.1)  # the override lets it run
+    check_memory(MemoryEstimate(rss=GIB, parts={"base": GIB}))  # 1 GiB fits any test machine
+
+
+def test_run_sizes_follow_the_options(tmp_path):
+    p = RunParams(mesh=Path("m.obj"), res=4096, sim_faces=300_000)
+    sizes = run_sizes(p, faces=5000)
+    assert sizes == {"faces": 5000, "sim_faces": 300_000, "res": 4096, "stress_res": 1024,
+                     "tile": 4096}
+    # An asset finer than wanted is its own sim mesh; far finer gets a proxy of the wanted size.
+    assert run_sizes(p, faces=500_000)["sim_faces"] == 500_000
+    assert run_sizes(p, faces=5_000_000)["sim_faces"] == 300_000
+    # A re-bake solves nothing and writes no stress maps.
+    rebake = run_sizes(RunParams(mesh=Path("m.obj"), cracks=Path("c.json")), faces=5000)
+    assert rebake["sim_faces"] == 0 and rebake["stress_res"] is None
+    assert run_sizes(RunParams(mesh=Path("m"), formats=("exr",)), faces=1)["stress_res"] is None
+
+
+def test_available_memory_reads_the_address_space_cap():
+    """Under ``RLIMIT_AS`` (``ulimit -v``, ``prlimit --as``) the cap is the limit, compared with
+    the address space (the resident estimate plus the libraries' reservations)."""
+    code = ("import resource; resource.setrlimit(resource.RLIMIT_AS, (3 * 2**30, 3 * 2**30));"
+            "from crackbake.memory import available_memory; print(available_memory())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=120, check=True)
+    limit, source, address = eval(out.stdout)  # noqa: S307 - our own repr of a tuple
+    assert limit == 3 * 2**30 and "ulimit -v" in source and address is True
+    limit, _, _ = available_memory()
+    assert 0 < limit <= os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
