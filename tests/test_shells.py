@@ -92,6 +92,11 @@ def test_cracks_cross_onto_a_touching_plate(tmp_path):
     assert starts >= 8
     # The small plate's top face cracks too (the crossed cracks run round its rim).
     assert len(np.concatenate(small)[np.concatenate(small)[:, 2] > 3 * TOP - 0.001]) > 10
+    # Deterministic: the same run gives the same network.
+    again, _ = _solve(tmp_path / "plates.obj")
+    assert len(polylines(again)) == len(polylines(network))
+    for p, q in zip(polylines(again), polylines(network), strict=True):
+        np.testing.assert_array_equal(p, q)
 
 
 def test_a_plate_held_off_gets_no_cracks(tmp_path):

@@ -80,6 +80,7 @@ def solve_iben(sim, field, params: SolverParams) -> SolverResult:
         or the boundary), ``nucleations_vetoed`` (refused by the footprint test),
         ``nucleations_near`` (refused beside an existing crack), ``tips_ended_near`` (by the
         near-crack rule), ``ligaments_broken`` (steps a tip took through a ligament),
+        ``shell_crossings`` (cracks carried onto a touching shell, ``loop.cross_shells``),
         ``tips_arrested`` (free tips left below the toughness), ``shadow_radius``,
         ``impact_steps`` (with several impacts, the step each one landed at, in order),
         ``stopped`` (why the run ended: ``max steps``, ``max cracks``, ``saturated`` or
