@@ -81,3 +81,6 @@ LIGAMENT_CONE_DEG = 45.0
 """Half-angle of the cone ahead of an arrested tip in which :func:`.rules.bridge` looks."""
 UPDATE_CHUNK = 4096
 """Faces or nodes per parallel work item of :func:`.update.update_all` (one set of scratch each)."""
+CROSS_CLEAR = 3.0
+"""A crack tip crosses to a touching shell (:func:`.loop.cross_shells`) only where no crack of
+that shell runs within this many of the mate's edge lengths: there it cracked already."""

@@ -4,14 +4,14 @@
 fails: the material dries a step further) or a crack event at the most critical node:
 :func:`pick` it, cut it (:mod:`crackbake.simulate.solver.iben.cut`), :func:`record` the
 segments and cast their shadow, :func:`update_ring`, :func:`end_near_tips`,
-:func:`push_residual`, relax the region and :func:`update_region`.
+:func:`push_residual`, relax the region, :func:`update_region` and :func:`cross_shells`.
 """
 
 from __future__ import annotations
 
 from numba import njit
 
-from crackbake.simulate.solver.iben.constants import GROWTH_REF_STEPS
+from crackbake.simulate.solver.iben.constants import CROSS_CLEAR, GROWTH_REF_STEPS
 from crackbake.simulate.solver.iben.cut import (
     choose_tips,
     crack_plane,
@@ -32,6 +32,7 @@ from crackbake.simulate.solver.iben.state import (
     ABORTED,
     BRIDGED,
     CRACKS,
+    CROSSED,
     DEPOSITS,
     DONE,
     DRIED,
@@ -57,7 +58,7 @@ from crackbake.simulate.solver.iben.state import (
 )
 from crackbake.simulate.solver.iben.structs import state_ref, work_ref
 from crackbake.simulate.solver.iben.update import key, push
-from crackbake.simulate.solver.iben.vec import norm3, wrap
+from crackbake.simulate.solver.iben.vec import dot3, norm3, wrap
 from crackbake.simulate.solver.topology import on_boundary
 
 _WIDEN = 2  # crack_event: the table needs widening
@@ -269,6 +270,7 @@ def crack_event(s, p, w, c):
         # The new shadow reaches the whole region: refresh its faces.
         _update_faces(s, w, w.regf, nrf)
     update_region(s, p, w, nrn)
+    cross_shells(s, p, w, c, cid, excess)
     cnt[STEP] += 1
     cnt[EVENTS] += 1
     if cnt[FIRST_CRACK] < 0:
@@ -435,3 +437,69 @@ def update_region(s, p, w, nrn):
                         seed, sc, acc, ev, G, gp, tipn)
             cnt[TIPS_NEAR] += 1
         push(s, n, p.tip_first)
+
+
+@njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
+def cross_shells(s, p, w, c, cid, excess):
+    """Touching shells crack as one surface: a tip of this event at a node whose point has a
+    mate on another shell (``State.mate``, within a sim edge) starts the crack there too.
+
+    The mate becomes a tip of the same crack, with the crack's heading and normal projected
+    into its shell's tangent plane (``pdir``, ``tipn``) and the residual a tip would get, so
+    it cuts as the tip would have; not where a crack already runs near the mate (that shell
+    cracked there already: its own tip carries on; a crack never bounces back).  Tips that met
+    a crack or were ended by the near-crack rule do not cross; tips that met the boundary do.
+    """
+    X, pid, mate, nrm, area, NF, NFc = s.X, s.pid, s.mate, s.nrm, s.area, s.NF, s.NFc
+    nc = w.geo[1]
+    for side in range(2):
+        t = w.tip[side]
+        if t < 0:
+            continue
+        if not ((w.free_tip[side] and s.crack_of[t] == cid) or (not w.free_tip[side]
+                                                                 and s.onb[t])):
+            continue
+        m = mate[pid[t]]
+        if m < 0 or s.dead[m] or s.crack_of[m] >= 0 or s.pcid[pid[m]] >= 0:
+            continue
+        # The mate's shell normal: its faces' area-weighted normals.
+        u0 = u1 = u2 = 0.0
+        for j in range(NFc[m]):
+            f = NF[m, j]
+            u0 += area[f] * nrm[f, 0]
+            u1 += area[f] * nrm[f, 1]
+            u2 += area[f] * nrm[f, 2]
+        lu = norm3(u0, u1, u2)
+        if lu == 0.0:
+            continue
+        u0, u1, u2 = u0 / lu, u1 / lu, u2 / lu
+        d0, d1, d2 = X[t, 0] - X[c, 0], X[t, 1] - X[c, 1], X[t, 2] - X[c, 2]
+        k = dot3(d0, d1, d2, u0, u1, u2)
+        d0, d1, d2 = d0 - k * u0, d1 - k * u1, d2 - k * u2
+        k = dot3(nc[0], nc[1], nc[2], u0, u1, u2)
+        n0, n1, n2 = nc[0] - k * u0, nc[1] - k * u1, nc[2] - k * u2
+        ld, ln = norm3(d0, d1, d2), norm3(n0, n1, n2)
+        if ld == 0.0 or ln < 1e-6:
+            continue
+        d0, d1, d2, n0, n1, n2 = d0 / ld, d1 / ld, d2 / ld, n0 / ln, n1 / ln, n2 / ln
+        near_rad = p.near_rad * _scale(s, m)
+        if near_other(s, w, m, -1, d0, d1, d2, near_rad, p.near_cos,
+                      max(p.nuc_any, CROSS_CLEAR * s.hn[m])) > 0:
+            continue
+        s.crack_of[m] = cid
+        q = pid[m]
+        s.pdir[q, 0], s.pdir[q, 1], s.pdir[q, 2] = d0, d1, d2
+        s.tipn[m, 0], s.tipn[m, 1], s.tipn[m, 2] = n0, n1, n2
+        if s.clen[cid] < p.max_len and excess > 0.0:
+            a_eff = (p.alpha ** min(w.segl[side] / p.tip_len, 1.0) if p.tip_len > 0.0
+                     else p.alpha)
+            nn = (n0, n1, n2)
+            for i in range(3):
+                for j in range(3):
+                    s.rho[m, i, j] += a_eff * excess * nn[i] * nn[j]
+        if s.G.shape[0] >= 2:
+            _update_faces(s, w, NF[m], NFc[m])
+        _node_update(s, w, p, m, True)
+        s.nevl[m] = s.cnt[DEPOSITS]
+        s.cnt[CROSSED] += 1
+        push(s, m, p.tip_first)

@@ -25,6 +25,7 @@ from crackbake.simulate.solver.iben.state import (
     ABORTED,
     BRIDGED,
     CRACKS,
+    CROSSED,
     DONE,
     DRIED,
     EVENTS,
@@ -79,6 +80,7 @@ def solve_iben(sim, field, params: SolverParams) -> SolverResult:
         or the boundary), ``nucleations_vetoed`` (refused by the footprint test),
         ``nucleations_near`` (refused beside an existing crack), ``tips_ended_near`` (by the
         near-crack rule), ``ligaments_broken`` (steps a tip took through a ligament),
+        ``shell_crossings`` (cracks carried onto a touching shell, ``loop.cross_shells``),
         ``tips_arrested`` (free tips left below the toughness), ``shadow_radius``,
         ``impact_steps`` (with several impacts, the step each one landed at, in order),
         ``stopped`` (why the run ended: ``max steps``, ``max cracks``, ``saturated`` or
@@ -144,6 +146,9 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
         dead=np.zeros(ncap, bool), nonuc=np.zeros(ncap, bool), nst=zi(ncap), nevl=zi(ncap),
         lchk=zi(ncap), tipn=np.zeros((ncap, 3)), segof=np.full(ncap, -1, np.int64),
         pcid=np.full(ncap, -1, np.int64), pdir=np.zeros((ncap, 3)),
+        mate=np.concatenate([_mates(X0, F0, float(getattr(sim, "edge_length", 0.0)
+                                                  or elen.mean()), period),
+                             np.full(ncap - n0, -1, np.int64)]),
         hk=np.zeros(ncap + 65536), hnode=zi(ncap + 65536), hv=zi(ncap + 65536),
         segp=np.zeros((scap, 2), np.int64), seg_alive=np.zeros(scap, bool),
         seg_info=np.zeros((scap, 3)), clen=clen, corig=np.zeros((len(clen), 5)), G=G, gp=gp,
@@ -157,6 +162,55 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     if np.any(s.area[:m0] <= 0):
         raise CrackbakeError("the simulation mesh has zero-area faces; clean the mesh first")
     return s, mesh
+
+
+def _mates(X0: np.ndarray, F0: np.ndarray, link: float, period: float = 0.0) -> np.ndarray:
+    """Per node, the nearest node of another shell within ``link`` (a sim edge), else -1.
+
+    Separate shells that touch or interpenetrate (a nail on a finger, a plate lying on another)
+    crack as one surface: a crack tip at a node with a mate continues on the mate's shell
+    (``loop.py::cross_shells``).  One KD-tree pair query over the mesh, at set-up only; a mesh
+    of one shell (or a periodic plate) gets no mates.
+
+    Parameters
+    ----------
+    X0 : (N, 3) float
+        Node positions.
+    F0 : (M, 3) int
+        Faces.
+    link : float
+        Largest gap bridged, world units.
+
+    Returns
+    -------
+    (N,) int64
+        The mate of each node, -1 where none.
+    """
+    from scipy.spatial import cKDTree
+
+    from crackbake.simulate.stress.geodesic import _shells
+
+    n = len(X0)
+    mate = np.full(n, -1, np.int64)
+    if period or link <= 0.0 or n == 0:
+        return mate
+    shell = _shells(F0, n)
+    if shell.max() == 0:
+        return mate
+    pairs = cKDTree(X0).query_pairs(link, output_type="ndarray")
+    pairs = pairs[shell[pairs[:, 0]] != shell[pairs[:, 1]]]
+    if len(pairs) == 0:
+        return mate
+    a = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    b = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    dist = np.linalg.norm(X0[a] - X0[b], axis=1)
+    # Nearest first, ties by index: the same mate whatever order the tree returns pairs in.
+    order = np.lexsort((b, dist, a))
+    a, b = a[order], b[order]
+    first = np.ones(len(a), bool)
+    first[1:] = a[1:] != a[:-1]
+    mate[a[first]] = b[first]
+    return mate
 
 
 def _wrapped(d: np.ndarray, period: float) -> np.ndarray:
@@ -410,6 +464,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
             "nucleations_near": int(cnt[NUC_NEAR]),
             "tips_ended_near": int(cnt[TIPS_NEAR]),
             "ligaments_broken": int(cnt[BRIDGED]),
+            "shell_crossings": int(cnt[CROSSED]),
             "tips_arrested": int(np.count_nonzero(s.crack_of[:nn] >= 0)),
             "shadow_radius": float(s.gp[4]),
             "impact_steps": list(getattr(mesh, "landed", [])),

@@ -17,8 +17,8 @@ import numpy as np
 # faces, segments), so their order is fixed.
 (HEAP, NODES, FACES, SEGS, STEP, EVENTS, STAMP, CRACKS, ABORTED, GROWTH_STEPS, DEPOSITS,
  REFRESHED, NUC_EDGE, NUC_VETOED, NUC_NEAR, TIPS_NEAR, IDLE, FIRST_CRACK, SATURATED,
- BRIDGED) = range(20)
-N_COUNTERS = 20
+ BRIDGED, CROSSED) = range(21)
+N_COUNTERS = 21
 
 # Return codes of the loop: chunk done, finished, state full (grow and call again), node ->
 # face table too narrow for the next event (widen it and call again), a drying step grew the
@@ -63,6 +63,7 @@ class State(NamedTuple):
     segof: np.ndarray  #: (Ncap,) per point: last live segment at it
     pcid: np.ndarray  #: (Ncap,) per point: crack it belongs to, else -1
     pdir: np.ndarray  #: (Ncap, 3) per point: smoothed crack direction
+    mate: np.ndarray  #: (Ncap,) per point: nearest node of a touching shell, else -1
     hk: np.ndarray  #: (Hcap,) heap keys
     hnode: np.ndarray  #: (Hcap,) heap nodes
     hv: np.ndarray  #: (Hcap,) heap versions
@@ -144,7 +145,8 @@ def grown(a: np.ndarray, size: int) -> np.ndarray:
 
 
 _NODE_FIELDS = ("X", "NF", "NFc", "rho", "val", "vec", "taun", "hn", "pid", "onb", "crack_of",
-                "nver", "dead", "nonuc", "nst", "nevl", "segof", "pcid", "pdir", "tipn", "lchk")
+                "nver", "dead", "nonuc", "nst", "nevl", "segof", "pcid", "pdir", "tipn", "lchk",
+                "mate")
 _FACE_FIELDS = ("F", "S", "AF", "area", "nrm", "grad", "pr", "fst")
 _SEG_FIELDS = ("segp", "seg_alive", "seg_info")
 
@@ -160,6 +162,7 @@ def grow(s: State, has_growth: bool) -> State:
         new["crack_of"][ncap:] = -1
         new["segof"][ncap:] = -1
         new["pcid"][ncap:] = -1
+        new["mate"][ncap:] = -1
         hcap = 2 * ncap + 65536
         new.update({k: grown(getattr(s, k), hcap) for k in ("hk", "hnode", "hv")})
     if cnt[FACES] + 16 > mcap:

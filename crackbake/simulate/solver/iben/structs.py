@@ -42,7 +42,8 @@ STATE_FIELDS = (("X", _F82), ("F", _I82), ("S", _F83), ("AF", _I81), ("GR", _F83
     ("rho", _F83), ("val", _F81), ("vec", _F82), ("taun", _F81), ("hn", _F81), ("pid", _I81),
     ("onb", _B11), ("crack_of", _I81), ("nver", _I81), ("dead", _B11), ("nonuc", _B11),
     ("nst", _I81), ("nevl", _I81), ("lchk", _I81), ("tipn", _F82), ("segof", _I81),
-    ("pcid", _I81), ("pdir", _F82), ("hk", _F81), ("hnode", _I81), ("hv", _I81), ("segp", _I82),
+    ("pcid", _I81), ("pdir", _F82), ("mate", _I81), ("hk", _F81), ("hnode", _I81), ("hv", _I81),
+    ("segp", _I82),
     ("seg_alive", _B11), ("seg_info", _F82), ("clen", _F81), ("corig", _F82), ("G", _F84),
     ("gp", _F81), ("cnt", _I81))
 WORK_FIELDS = (("regf", _I81), ("regn", _I81), ("disp", _F82), ("buf", _I81), ("par", _I81),
@@ -88,6 +89,7 @@ def state_ref(s):
     r.segof = s.segof
     r.pcid = s.pcid
     r.pdir = s.pdir
+    r.mate = s.mate
     r.hk = s.hk
     r.hnode = s.hnode
     r.hv = s.hv
