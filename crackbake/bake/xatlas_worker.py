@@ -75,9 +75,11 @@ PATCHES_PER_BATCH = 4
 # xatlas fits about 0.5-0.7 of the page with charts of real meshes; tries shrink the scale by SHRINK
 # until everything fits one page, then bisect between the last miss and the fit.
 TARGET_FILL = 0.7
+TARGET_FILL_MANY = 0.55
 MAX_ATTEMPTS = 14
 SHRINK = 0.93
 REFINE_STEPS = 4
+REFINE_STEPS_MANY = 2
 PROBES = 4
 PROBE_STEP = 0.015
 
@@ -226,7 +228,9 @@ def fit_one_page(
 
     tried: list[tuple[int, int, int]] = []
     best, miss = None, None
-    scale = res * np.sqrt(TARGET_FILL / chart_area)
+    # Many charts (a capped mesh) fill less of the page: start lower, refine less (each try
+    # packs hundreds of charts).
+    scale = res * np.sqrt((TARGET_FILL_MANY if limited else TARGET_FILL) / chart_area)
 
     def attempt(scale):
         packed = _pack(uv_units, ix, res, padding, scale)
@@ -264,7 +268,7 @@ def fit_one_page(
         )
     if miss is not None:
         lo, hi = best[0], miss
-        for _ in range(REFINE_STEPS):
+        for _ in range(REFINE_STEPS_MANY if limited else REFINE_STEPS):
             mid = np.sqrt(lo * hi)
             fit = attempt(mid)
             if fit is None:
