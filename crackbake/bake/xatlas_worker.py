@@ -79,6 +79,7 @@ TARGET_FILL_MANY = 0.55
 MAX_ATTEMPTS = 14
 SHRINK = 0.93
 REFINE_STEPS = 4
+SEARCH_RES = 1024
 REFINE_STEPS_MANY = 2
 PROBES = 4
 PROBE_STEP = 0.015
@@ -232,16 +233,25 @@ def fit_one_page(
     # packs hundreds of charts).
     scale = res * np.sqrt((TARGET_FILL_MANY if limited else TARGET_FILL) / chart_area)
 
+    # Packing costs xatlas time in proportion to the page's texels, so the search packs at
+    # most SEARCH_RES texels wide, with the gutter rounded up, and the layout found is scaled
+    # up: xatlas rasterises charts conservatively, so at the full size every chart stays inside
+    # its footprint and the gutters are at least `padding` wide.
+    search = min(res, SEARCH_RES)
+    up = res / search
+    pad_search = int(np.ceil(padding / up))
+
     def attempt(scale):
-        packed = _pack(uv_units, ix, res, padding, scale)
+        packed = _pack(uv_units, ix, search, pad_search, scale / up)
         w, h, pages = int(packed.width), int(packed.height), int(packed.atlas_count)
         tried.append((w, h, pages))
         _progress(f"packing {res}px, try {len(tried)}")
-        if pages == 1 and max(w, h) <= res:
+        if pages == 1 and max(w, h) <= search:
             vm2, ix2, uv2 = packed[0]
             fit = (vmap[vm2.astype(np.int64)], ix2.astype(np.int64),
-                   uv2.astype(np.float64) * np.array([w, h]), w, h, int(packed.chart_count))
-            return fit  # fmt: skip
+                   uv2.astype(np.float64) * np.array([w, h]) * up,
+                   round(w * up), round(h * up), int(packed.chart_count))  # fmt: skip
+            return fit
         return None
 
     # Shrink until everything fits one page; when the first try fits, grow until it does not.
