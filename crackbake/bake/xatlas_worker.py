@@ -17,8 +17,12 @@ Output arrays (``out.npz``): ``vmapping`` (V',) int64 into the input vertices, `
 (F, 3) int64 (same face order and corner order as the input), ``uv`` (V', 2) float64 texel
 position / ``res`` on both axes (one square page, square texels), ``width`` and ``height`` (the
 page xatlas packed into, texels), ``atlas_count``, ``chart_count``, ``utilization``,
-``texels_per_unit``, ``attempts`` (xatlas runs needed to fit one page) and ``tried`` (the
-(width, height, atlas_count) of every run, (attempts, 3) int64).
+``texels_per_unit`` (in the normalised frame, see :func:`normalised`), ``attempts`` (packing
+runs) and ``tried`` (the (width, height, atlas_count) of every packing run at the search
+resolution, (attempts, 3) int64).
+
+Progress goes to stderr as ``progress: <text>`` lines (chart batches, packing tries), which
+:func:`crackbake.bake.uv.unwrap.run_worker` relays to the UV stage's display as they come.
 """
 
 from __future__ import annotations

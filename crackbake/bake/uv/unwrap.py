@@ -1,8 +1,9 @@
 """xatlas unwraps, run in a child process (:mod:`crackbake.bake.xatlas_worker`) with a time limit.
 
-xatlas is slow (about 45 s for 100k faces) and can crash, so it never runs in this process; an
-unwrap packs every chart into ONE square page with square texels and a gutter, and is cached by
-mesh content (:mod:`crackbake.bake.uv.cache`).
+xatlas is slow (10-25 s of CPU for 100k faces) and can crash, so it never runs in this
+process; an unwrap packs every chart into ONE square page with square texels and a gutter, and
+is cached by mesh content (:mod:`crackbake.bake.uv.cache`).  Its progress lines are logged
+(logger ``crackbake.bake.uv.unwrap``) and show as the UV stage's detail on the live display.
 """
 
 from __future__ import annotations
