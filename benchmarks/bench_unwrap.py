@@ -15,7 +15,7 @@ Two tables:
 Usage::
 
     python benchmarks/bench_unwrap.py [--faces 100000 270000] [--res 2048] [--skip-coverage]
-    python benchmarks/bench_unwrap.py --faces --res 1024   # the coverage table only
+    python benchmarks/bench_unwrap.py --faces [--meshes DIR]   # the coverage table only
 """
 
 from __future__ import annotations
@@ -33,7 +33,10 @@ from crackbake.bake.uv.uvmesh import uv_area_coverage
 from crackbake.io.mesh import Mesh, load_mesh
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "meshes"
+# ../shared/meshes beside the checkout, or two levels up from a worktree.
+SHARED = next((p for p in (ROOT.parent / "shared" / "meshes",
+                           ROOT.parent.parent / "shared" / "meshes") if p.is_dir()),
+              ROOT.parent / "shared" / "meshes")  # fmt: skip
 
 
 class _Phases(logging.Handler):
@@ -89,6 +92,7 @@ def main() -> None:
     ap.add_argument("--faces", type=int, nargs="*", default=[100_000, 270_000])
     ap.add_argument("--res", type=int, default=2048)
     ap.add_argument("--skip-coverage", action="store_true", help="only the speed table")
+    ap.add_argument("--meshes", type=Path, default=SHARED, help="folder of extra .obj meshes")
     args = ap.parse_args()
 
     head = ("| mesh | faces | charts s | pack s | wall s | worker CPU s | coverage |\n"
@@ -106,8 +110,8 @@ def main() -> None:
         ("scan_blob 5k", lambda: scan_blob(5000, 0.15)),
         ("spot --uv unwrap", lambda: load_mesh(ROOT / "examples" / "spot.obj")),
     ]
-    if SHARED.is_dir():
-        cases += [(p.name, lambda p=p: load_mesh(p)) for p in sorted(SHARED.glob("*.obj"))]
+    if args.meshes.is_dir():
+        cases += [(p.name, lambda p=p: load_mesh(p)) for p in sorted(args.meshes.glob("*.obj"))]
     print(f"\ncoverage, {args.res}px:\n{head}", flush=True)
     for name, make in cases:
         with warnings.catch_warnings():

@@ -84,7 +84,6 @@ MAX_ATTEMPTS = 14
 SHRINK = 0.93
 REFINE_STEPS = 4
 SEARCH_RES = 1024
-REFINE_STEPS_MANY = 2
 PROBES = 4
 PROBE_STEP = 0.015
 
@@ -233,8 +232,7 @@ def fit_one_page(
 
     tried: list[tuple[int, int, int]] = []
     best, miss = None, None
-    # Many charts (a capped mesh) fill less of the page: start lower, refine less (each try
-    # packs hundreds of charts).
+    # Many charts (a capped mesh) fill less of the page: start lower.
     scale = res * np.sqrt((TARGET_FILL_MANY if limited else TARGET_FILL) / chart_area)
 
     # Packing costs xatlas time in proportion to the page's texels, so the search packs at
@@ -282,7 +280,7 @@ def fit_one_page(
         )
     if miss is not None:
         lo, hi = best[0], miss
-        for _ in range(REFINE_STEPS_MANY if limited else REFINE_STEPS):
+        for _ in range(REFINE_STEPS):
             mid = np.sqrt(lo * hi)
             fit = attempt(mid)
             if fit is None:
@@ -290,13 +288,12 @@ def fit_one_page(
             else:
                 lo, best = mid, (mid, fit)
     # Whether charts fit is not monotonic in the scale (xatlas places them greedily), so a few
-    # scales just above the bracket often fit too; cheap where charts are few.
-    if not limited:
-        top = best[0]
-        for k in range(1, PROBES + 1):
-            fit = attempt(top * (1.0 + PROBE_STEP * k))
-            if fit is not None:
-                best = (top * (1.0 + PROBE_STEP * k), fit)
+    # scales just above the bracket often fit too.
+    top = best[0]
+    for k in range(1, PROBES + 1):
+        fit = attempt(top * (1.0 + PROBE_STEP * k))
+        if fit is not None:
+            best = (top * (1.0 + PROBE_STEP * k), fit)
     scale, (vmapping, indices, texels, width, height, n_charts) = best
     # Texel positions / res on both axes keep texels square.  The y axis is kept as is (no
     # flip): xatlas's texel y counts rows from 0 like GL's framebuffer rows (row 0 = v 0,
