@@ -486,7 +486,8 @@ def _report(result, verbose: bool) -> None:
     uv_found = "found" if m["mesh"]["has_uv"] else "none in the file"
     _err(
         f"mesh: {m['mesh']['vertices']} vertices, {m['mesh']['faces']} faces, "
-        f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}; "
+        f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}, "
+        f"{m['uv']['coverage']:.0%} of the texture used; "
         f"cracks: {m['cracks']['cracks']} ({m['cracks']['points']} points)"
     )
     if verbose:

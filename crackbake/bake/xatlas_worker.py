@@ -17,8 +17,12 @@ Output arrays (``out.npz``): ``vmapping`` (V',) int64 into the input vertices, `
 (F, 3) int64 (same face order and corner order as the input), ``uv`` (V', 2) float64 texel
 position / ``res`` on both axes (one square page, square texels), ``width`` and ``height`` (the
 page xatlas packed into, texels), ``atlas_count``, ``chart_count``, ``utilization``,
-``texels_per_unit``, ``attempts`` (xatlas runs needed to fit one page) and ``tried`` (the
-(width, height, atlas_count) of every run, (attempts, 3) int64).
+``texels_per_unit`` (in the normalised frame, see :func:`normalised`), ``attempts`` (packing
+runs) and ``tried`` (the (width, height, atlas_count) of every packing run at the search
+resolution, (attempts, 3) int64).
+
+Progress goes to stderr as ``progress: <text>`` lines (chart batches, packing tries), which
+:func:`crackbake.bake.uv.unwrap.run_worker` relays to the UV stage's display as they come.
 """
 
 from __future__ import annotations
@@ -59,9 +63,59 @@ import io  # noqa: E402  (after die_with_parent: the slow imports below run alre
 import numpy as np  # noqa: E402
 import xatlas  # noqa: E402
 
-# Repacks tried (each shrinks the scale by SHRINK) before giving up on one page.
-MAX_ATTEMPTS = 12
+# Chart growing costs xatlas far more than linear time in a chart's size (a 20k-face blob: 19 s
+# as 51 charts, 3 s when no chart may exceed 1/20 of the area), so a chart may cover at most the
+# area of this many average faces (fewer, larger charts pack no better).
+CHART_FACES = 2000
+# Meshes up to this many faces unwrap in seconds unlimited, and a flat one packs far better as
+# one chart (0.68 of the page) than cut into a few (0.38).
+LIMIT_ABOVE = 20000
+# Faces per patch: the mesh is cut into patches of at most this many faces (each a separate
+# xatlas mesh, so xatlas grows their charts on all cores); a batch of PATCHES_PER_BATCH patches
+# is one xatlas call, and the progress line counts them.
+PATCH_FACES = 16384
+PATCHES_PER_BATCH = 4
+# Share of the page the first packing try aims to fill (the chart area over the page area).
+# xatlas fits about 0.5-0.7 of the page with charts of real meshes; tries shrink the scale by SHRINK
+# until everything fits one page, then bisect between the last miss and the fit.
+TARGET_FILL = 0.7
+TARGET_FILL_MANY = 0.55
+MAX_ATTEMPTS = 14
 SHRINK = 0.93
+REFINE_STEPS = 4
+SEARCH_RES = 1024
+PROBES = 4
+PROBE_STEP = 0.015
+
+
+# The frame xatlas works in: the mesh centred, its bounding-box diagonal 1 and its median face at
+# least this area.  xatlas takes float32 positions and counts a face whose area is below
+# FLT_EPSILON (1.2e-7) as degenerate (zero UV area): a 15 cm scan of 270k faces in metres has 96 %
+# of its faces there.  In this frame a face is that small only on a mesh of millions of faces,
+# and the floor scales those up further (float32 keeps 7 digits, plenty at any size here).
+MEDIAN_AREA_MIN = 1e-5
+
+
+def normalised(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``vertices`` (V, 3) moved into the frame xatlas unwraps in (see :data:`MEDIAN_AREA_MIN`).
+
+    A uniform scale and a translation: charts, and so UVs, are the same for a mesh at any size
+    and place.  Returned as float64; an empty or single-point mesh is only centred.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    if len(v) == 0:
+        return v
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    v = v - 0.5 * (lo + hi)
+    diagonal = float(np.linalg.norm(hi - lo))
+    if not np.isfinite(diagonal) or diagonal <= 0.0:
+        return v
+    v = v / diagonal
+    if len(faces):
+        median = float(np.median(face_areas(v, faces)))
+        if 0.0 < median < MEDIAN_AREA_MIN:
+            v = v * np.sqrt(MEDIAN_AREA_MIN / median)
+    return v
 
 
 def _pack_options(res: int, padding: int, texels_per_unit: float):
@@ -71,15 +125,87 @@ def _pack_options(res: int, padding: int, texels_per_unit: float):
     pack.bilinear = True
     # bruteForce ran for minutes on 20k faces at 4096 (measured); never use it.
     pack.bruteForce = False
+    pack.blockAlign = False  # aligning charts to 4x4 blocks wastes page for no bake benefit
+    pack.rotate_charts = True
     pack.texels_per_unit = float(texels_per_unit)
     return pack
 
 
-def _repack(texels: np.ndarray, indices: np.ndarray, res: int, padding: int, scale: float):
-    """Pack existing charts again at ``scale`` x their size: no chart computation (~20x faster)."""
+def _chart_options(max_chart_area: float):
+    charts = xatlas.ChartOptions()
+    charts.max_chart_area = float(max_chart_area)
+    return charts
+
+
+def _progress(message: str) -> None:
+    """One progress line on stderr; the parent shows it as the UV stage's detail."""
+    print(f"progress: {message}", file=sys.stderr, flush=True)
+
+
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area per face, (F,)."""
+    c = vertices[faces]
+    return 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+
+
+def patches(vertices: np.ndarray, faces: np.ndarray, limit: int = PATCH_FACES) -> list[np.ndarray]:
+    """Face indices of spatial patches of at most ``limit`` faces, cut along the longest axis.
+
+    Recursive halving of the face centroids at their median: patches are compact blobs, so
+    their borders (which become chart borders) are short.  Deterministic.
+    """
+    centroids = vertices[faces].mean(axis=1)
+    out, todo = [], [np.arange(len(faces))]
+    while todo:
+        idx = todo.pop()
+        if len(idx) <= limit:
+            out.append(idx)
+            continue
+        c = centroids[idx]
+        axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+        order = idx[np.argsort(c[:, axis], kind="stable")]
+        half = len(order) // 2
+        todo += [order[half:], order[:half]]
+    return out
+
+
+def _chart_patches(vertices, faces, max_chart_area):
+    """Charts of every patch: (vertex index (C,), faces (F, 3) into it, uv (C, 2)) in the
+    normalised frame's units, face order as ``faces``; xatlas's own packing is thrown away."""
+    parts = patches(vertices, faces)
+    batches = [parts[i : i + PATCHES_PER_BATCH] for i in range(0, len(parts), PATCHES_PER_BATCH)]
+    # xatlas packs each batch too; packing it coarsely costs next to nothing.
+    tpu = 256.0 / np.sqrt(max(face_areas(vertices, faces).sum() / len(batches), 1e-30))
+    vmap, uv, out_faces = [], [], np.empty_like(faces)
+    n_uv, done, shift = 0, 0, 0.0
+    for b, batch in enumerate(batches):
+        atlas = xatlas.Atlas()
+        locals_ = []
+        for face_idx in batch:
+            used, local = np.unique(faces[face_idx], return_inverse=True)
+            locals_.append((face_idx, used))
+            atlas.add_mesh(vertices[used].astype(np.float32),
+                           local.reshape(-1, 3).astype(np.uint32))  # fmt: skip
+        atlas.generate(_chart_options(max_chart_area), _pack_options(0, 0, tpu))
+        for m, (face_idx, used) in enumerate(locals_):
+            vm, ix, uvm = atlas[m]
+            vmap.append(used[vm.astype(np.int64)])
+            # Batches are packed on their own pages: moved apart so no two charts share UVs.
+            uv.append(uvm.astype(np.float64) * np.array([atlas.width, atlas.height]) / tpu
+                      + np.array([shift, 0.0]))  # fmt: skip
+            out_faces[face_idx] = ix.astype(np.int64) + n_uv
+            n_uv += len(vm)
+        shift += (atlas.width + 16) / tpu
+        done += sum(len(f) for f in batch)
+        _progress(f"charts {done * 100 // len(faces)}% ({b + 1}/{len(batches)} batches)")
+    return np.concatenate(vmap), out_faces, np.concatenate(uv)
+
+
+def _pack(uv_units, indices, res, padding, scale):
+    """Pack the charts (UV islands of ``uv_units``) at ``scale`` texels per unit."""
     atlas = xatlas.Atlas()
-    atlas.add_uv_mesh(texels.astype(np.float32), indices.astype(np.uint32))
-    atlas.generate(xatlas.ChartOptions(), _pack_options(res, padding, scale))
+    atlas.add_uv_mesh((uv_units * scale).astype(np.float32), indices.astype(np.uint32))
+    atlas.generate(xatlas.ChartOptions(), _pack_options(res, padding, 1.0))
     return atlas
 
 
@@ -88,46 +214,87 @@ def fit_one_page(
 ) -> dict[str, np.ndarray]:
     """Unwrap and pack into one ``res`` x ``res`` page with square texels, as large as fits.
 
-    ``resolution=res`` alone lets xatlas choose its own scale, which gives a page of w x h texels
-    that is often not square, can exceed ``res``, or leaves much of it empty.  So the charts are
-    computed once (the slow part: about 45 s for 100k faces) and then only *repacked* at the
-    scale that fills the page, shrinking by 7 % per try until everything fits one page.
+    The mesh is unwrapped in a normalised frame (:func:`normalised`), cut into patches whose
+    charts xatlas computes (the slow part) once; the charts are then *repacked* only (UV
+    islands, no chart computation), first at the scale where their area fills
+    :data:`TARGET_FILL` of the page, shrinking by :data:`SHRINK` until everything fits one
+    page, then bisecting towards the largest scale that fits.
     """
-    atlas = xatlas.Atlas()
-    atlas.add_mesh(vertices, faces)
-    atlas.generate(xatlas.ChartOptions(), _pack_options(res, padding, 0.0))
-    vm1, ix1, uv1 = atlas[0]
-    w1, h1 = int(atlas.width), int(atlas.height)
-    tried = [(w1, h1, int(atlas.atlas_count))]
-    texels = uv1.astype(np.float64) * np.array([w1, h1])
-    chart_count = int(atlas.chart_count)
-    tpu1 = float(atlas.texels_per_unit)
-    fits = max(w1, h1) <= res and atlas.atlas_count == 1
+    faces = np.asarray(faces, dtype=np.int64)
+    v = normalised(vertices, faces)
+    area = face_areas(v, faces).sum()
+    limited = len(faces) > LIMIT_ABOVE
+    max_chart_area = area * CHART_FACES / len(faces) if limited else 0.0
+    _progress(f"charts of {len(faces)} faces")
+    vmap, ix, uv_units = _chart_patches(v, faces, max_chart_area)
+    n_charts = 0
+    chart_area = max(float(face_areas(np.pad(uv_units, ((0, 0), (0, 1))), ix).sum()), 1e-30)
 
-    best = (vm1.astype(np.int64), ix1.astype(np.int64), texels, w1, h1) if fits else None
-    scale = 0.99 * res / max(w1, h1)
-    if not fits or scale > 1.05:  # does not fit, or wastes more than ~10 % of the page
-        for _ in range(MAX_ATTEMPTS):
-            packed = _repack(texels, ix1, res, padding, scale)
-            w, h, pages = int(packed.width), int(packed.height), int(packed.atlas_count)
-            tried.append((w, h, pages))
-            if pages == 1 and max(w, h) <= res:
-                vm2, ix2, uv2 = packed[0]
-                best = (
-                    vm1.astype(np.int64)[vm2.astype(np.int64)],
-                    ix2.astype(np.int64),
-                    uv2.astype(np.float64) * np.array([w, h]),
-                    w,
-                    h,
-                )
-                break
+    tried: list[tuple[int, int, int]] = []
+    best, miss = None, None
+    # Many charts (a capped mesh) fill less of the page: start lower.
+    scale = res * np.sqrt((TARGET_FILL_MANY if limited else TARGET_FILL) / chart_area)
+
+    # Packing costs xatlas time in proportion to the page's texels, so the search packs at
+    # most SEARCH_RES texels wide, with the gutter rounded up, and the layout found is scaled
+    # up: xatlas rasterises charts conservatively, so at the full size every chart stays inside
+    # its footprint and the gutters are at least `padding` wide.
+    search = min(res, SEARCH_RES)
+    up = res / search
+    pad_search = int(np.ceil(padding / up))
+
+    def attempt(scale):
+        packed = _pack(uv_units, ix, search, pad_search, scale / up)
+        w, h, pages = int(packed.width), int(packed.height), int(packed.atlas_count)
+        tried.append((w, h, pages))
+        _progress(f"packing {res}px, try {len(tried)}")
+        if pages == 1 and max(w, h) <= search:
+            vm2, ix2, uv2 = packed[0]
+            fit = (vmap[vm2.astype(np.int64)], ix2.astype(np.int64),
+                   uv2.astype(np.float64) * np.array([w, h]) * up,
+                   round(w * up), round(h * up), int(packed.chart_count))  # fmt: skip
+            return fit
+        return None
+
+    # Shrink until everything fits one page; when the first try fits, grow until it does not.
+    first = attempt(scale)
+    if first is None:
+        miss = scale
+        while len(tried) < MAX_ATTEMPTS and best is None:
             scale *= SHRINK
+            fit = attempt(scale)
+            best = None if fit is None else (scale, fit)
+    else:
+        best = (scale, first)
+        while len(tried) < MAX_ATTEMPTS and miss is None:
+            scale /= SHRINK
+            fit = attempt(scale)
+            if fit is None:
+                miss = scale
+            else:
+                best = (scale, fit)
     if best is None:
         raise RuntimeError(
             f"could not fit the charts into one {res}x{res} page after {len(tried)} tries "
             f"(last: {tried[-1][0]}x{tried[-1][1]}, {tried[-1][2]} pages)"
         )
-    vmapping, indices, texels, width, height = best
+    if miss is not None:
+        lo, hi = best[0], miss
+        for _ in range(REFINE_STEPS):
+            mid = np.sqrt(lo * hi)
+            fit = attempt(mid)
+            if fit is None:
+                hi = mid
+            else:
+                lo, best = mid, (mid, fit)
+    # Whether charts fit is not monotonic in the scale (xatlas places them greedily), so a few
+    # scales just above the bracket often fit too.
+    top = best[0]
+    for k in range(1, PROBES + 1):
+        fit = attempt(top * (1.0 + PROBE_STEP * k))
+        if fit is not None:
+            best = (top * (1.0 + PROBE_STEP * k), fit)
+    scale, (vmapping, indices, texels, width, height, n_charts) = best
     # Texel positions / res on both axes keep texels square.  The y axis is kept as is (no
     # flip): xatlas's texel y counts rows from 0 like GL's framebuffer rows (row 0 = v 0,
     # bottom) and its charts come in both orientations anyway, so reading y as v-up (OBJ) is as
@@ -140,9 +307,9 @@ def fit_one_page(
         "width": np.int64(width),
         "height": np.int64(height),
         "atlas_count": np.int64(1),
-        "chart_count": np.int64(chart_count),
+        "chart_count": np.int64(n_charts),
         "utilization": np.float64(_utilization(uv, indices)),
-        "texels_per_unit": np.float64(tpu1 * (width / w1 if w1 else 1.0)),
+        "texels_per_unit": np.float64(scale),
         "attempts": np.int64(len(tried)),
         "tried": np.asarray(tried, dtype=np.int64),
     }

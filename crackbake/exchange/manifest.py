@@ -86,6 +86,9 @@ def build_manifest(
         "mesh": mesh.describe(),
         "uv": {
             "method": uvmesh.method,
+            # Share of the texture inside islands: the bake's footprint (texel centres on a
+            # face), so overlapping kept islands count once.
+            "coverage": round(float(maps.inside.mean()), 4),
             "vertices": int(len(uvmesh.vertices)),
             "overlap_fraction": float(uvmesh.overlap_fraction),
             "padding_px": int(uvmesh.padding_px),

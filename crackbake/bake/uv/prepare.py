@@ -1,7 +1,8 @@
 """The UVs the textures are baked for: the asset's own when usable, else an xatlas unwrap.
 
-Most game assets come with good UVs, and xatlas is slow (about 45 s for 100k faces) and can
-crash, so :func:`prepare_uvs` keeps the asset's UVs whenever :func:`check_uvs` finds them usable.
+Most game assets come with good UVs, and xatlas is slow (10-25 s of CPU for 100k faces) and
+can crash, so :func:`prepare_uvs` keeps the asset's UVs whenever :func:`check_uvs` finds them
+usable.
 """
 
 from __future__ import annotations

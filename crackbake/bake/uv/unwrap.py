@@ -1,17 +1,21 @@
 """xatlas unwraps, run in a child process (:mod:`crackbake.bake.xatlas_worker`) with a time limit.
 
-xatlas is slow (about 45 s for 100k faces) and can crash, so it never runs in this process; an
-unwrap packs every chart into ONE square page with square texels and a gutter, and is cached by
-mesh content (:mod:`crackbake.bake.uv.cache`).
+xatlas is slow (10-25 s of CPU for 100k faces) and can crash, so it never runs in this
+process; an unwrap packs every chart into ONE square page with square texels and a gutter, and
+is cached by mesh content (:mod:`crackbake.bake.uv.cache`).  Its progress lines are logged
+(logger ``crackbake.bake.uv.unwrap``) and show as the UV stage's detail on the live display.
 """
 
 from __future__ import annotations
 
 import io
+import logging
 import os
 import signal
 import subprocess
 import sys
+import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -19,13 +23,24 @@ import numpy as np
 from crackbake.bake.uv.cache import cache_dir, cache_key, read_cache, write_cache
 from crackbake.bake.uv.check import OVERLAP_RES
 from crackbake.bake.uv.overlap import uv_overlap_fraction
-from crackbake.bake.uv.uvmesh import UVMesh, default_padding, mesh_label, unwrapped_uvmesh
-from crackbake.errors import CrackbakeError
+from crackbake.bake.uv.uvmesh import (
+    UVMesh,
+    default_padding,
+    mesh_label,
+    unwrapped_uvmesh,
+    uv_area_coverage,
+)
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh
 
 # Tells the worker our pid (crackbake.bake.xatlas_worker.PARENT_ENV; not imported from there so
 # this process never loads xatlas).
 PARENT_ENV = "CRACKBAKE_XATLAS_PARENT"
+logger = logging.getLogger(__name__)
+# The worker's stderr lines starting so are progress (shown as the UV stage's detail).
+PROGRESS_PREFIX = "progress: "
+# An unwrap using less of the texture than this gets a warning: its cracks get few texels.
+COVERAGE_WARN = 0.30
 
 
 def weld_for_unwrap(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -99,8 +114,19 @@ def run_worker(
         env=env,
         start_new_session=True,  # own process group: Ctrl-C reaches us, we stop the child
     )
+    # Three pipes at once: feeding stdin while draining stdout and stderr (progress lines shown
+    # as they come) so neither side blocks on a full pipe.
+    out_chunks: list[bytes] = []
+    err_lines: list[str] = []
+    pumps = [
+        threading.Thread(target=_feed, args=(proc.stdin, buf.getvalue()), daemon=True),
+        threading.Thread(target=_drain, args=(proc.stdout, out_chunks), daemon=True),
+        threading.Thread(target=_relay, args=(proc.stderr, err_lines), daemon=True),
+    ]
+    for pump in pumps:
+        pump.start()
     try:
-        stdout, stderr = proc.communicate(buf.getbuffer(), timeout=timeout)
+        proc.wait(timeout=timeout)
     except subprocess.TimeoutExpired:
         raise CrackbakeError(
             f"xatlas did not finish within {timeout:g} s unwrapping {label} "
@@ -108,9 +134,10 @@ def run_worker(
             "or decimate the mesh"
         ) from None
     finally:
-        stop_worker(proc)
+        stop_worker(proc, pumps)
+    stdout, stderr = b"".join(out_chunks), "\n".join(err_lines)
     if proc.returncode != 0:
-        raise worker_error(proc.returncode, stderr.decode("utf-8", "replace"), label, n_faces)
+        raise worker_error(proc.returncode, stderr, label, n_faces)
     try:
         with np.load(io.BytesIO(stdout), allow_pickle=False) as data:
             return {k: np.asarray(data[k]) for k in data.files}
@@ -121,13 +148,43 @@ def run_worker(
         ) from exc
 
 
-def stop_worker(proc: subprocess.Popen) -> None:
-    """Kill ``proc``'s process group if it is still running, and reap it."""
+def _feed(pipe, data: bytes) -> None:
+    try:
+        with pipe:
+            pipe.write(data)
+    except (BrokenPipeError, OSError, ValueError):  # the child died or was stopped
+        pass
+
+
+def _drain(pipe, chunks: list[bytes]) -> None:
+    try:
+        chunks.append(pipe.read())
+    except (OSError, ValueError):
+        pass
+
+
+def _relay(pipe, lines: list[str]) -> None:
+    """Log the worker's progress lines as they come; keep the others for an error message."""
+    try:
+        for raw in pipe:
+            line = raw.decode("utf-8", "replace").rstrip()
+            if line.startswith(PROGRESS_PREFIX):
+                logger.info("%s", line[len(PROGRESS_PREFIX):])
+            elif line:
+                lines.append(line)
+    except (OSError, ValueError):
+        pass
+
+
+def stop_worker(proc: subprocess.Popen, pumps: list[threading.Thread] = ()) -> None:
+    """Kill ``proc``'s process group if it is still running, end the pipe threads, reap it."""
     if proc.poll() is None:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
+    for pump in pumps:  # the pipes reach EOF once the group is gone
+        pump.join(timeout=5.0)
     for pipe in (proc.stdin, proc.stdout, proc.stderr):
         if pipe is not None:
             pipe.close()
@@ -183,6 +240,7 @@ def unwrap(
     if cache:
         hit = read_cache(path, key, mesh)
         if hit is not None:
+            _warn_coverage(hit, label, res)
             return hit
 
     vertex_map, indices, uv = _xatlas(mesh, label, res, padding, timeout)
@@ -195,7 +253,20 @@ def unwrap(
     result = unwrapped_uvmesh(mesh, vertex_map, indices, uv, overlap, padding)
     if cache:
         write_cache(path, key, result)
+    _warn_coverage(result, label, res)
     return result
+
+
+def _warn_coverage(result: UVMesh, label: str, res: int) -> None:
+    """One line when the unwrap leaves most of the texture empty (cracks get few texels)."""
+    coverage = uv_area_coverage(result.uv, result.faces)
+    if coverage < COVERAGE_WARN:
+        warnings.warn(
+            f"{label}: the unwrap uses only {coverage:.0%} of the {res}px texture, so cracks get "
+            "few texels; raise --res, lower --padding, or bring UVs of your own (--uv keep)",
+            CrackbakeWarning,
+            stacklevel=4,
+        )
 
 
 def _checked_padding(mesh: Mesh, label: str, res: int, padding: int | None) -> int:

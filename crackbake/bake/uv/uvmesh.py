@@ -112,6 +112,18 @@ def default_padding(res: int) -> int:
     return max(2, int(round(res / 256)))
 
 
+def uv_area_coverage(uv: np.ndarray, faces: np.ndarray) -> float:
+    """Share of the [0, 1] page inside UV triangles, from their areas: (F, 3) faces into (V, 2).
+
+    Exact for an unwrap (xatlas charts never overlap and lie in the page); for kept UVs it
+    counts overlapping area twice, so reports use the bake's footprint
+    (:attr:`crackbake.bake.raster.CrackMaps.inside`) instead.
+    """
+    c = np.asarray(uv, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    return float(min(1.0, 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()))
+
+
 def mesh_label(mesh: Mesh) -> str:
     """The mesh's file name (or object name) for messages."""
     return Path(mesh.source).name if mesh.source else mesh.name
