@@ -68,6 +68,7 @@ class _Smaller:
     mask: np.ndarray
     normal: np.ndarray | None
     occlusion: np.ndarray | None
+    look: object = None
 
 
 def _smaller(maps: CrackMaps, size: int) -> CrackMaps | _Smaller:
@@ -78,7 +79,7 @@ def _smaller(maps: CrackMaps, size: int) -> CrackMaps | _Smaller:
         normal = downsample(maps.normal, size)
         normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
     occ = None if maps.occlusion is None else downsample(maps.occlusion, size)
-    return _Smaller(downsample(maps.mask, size), normal, occ)
+    return _Smaller(downsample(maps.mask, size), normal, occ, maps.look)
 
 
 class _Encoder:
@@ -123,7 +124,7 @@ class _Encoder:
         tex = self.texture
         if tex is not None and tex.shape[0] > size:
             tex = downsample(tex, size)
-        return base_color(maps.mask, occlusion=maps.occlusion, texture=tex)
+        return base_color(maps.mask, occlusion=maps.occlusion, texture=tex, look=maps.look)
 
 
 def write_outputs(
@@ -249,7 +250,16 @@ def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict)
         name=stem,
         extra_textures=extra,
         tangents=tangents,
+        material_extras=_look_extras(maps),
     )
+
+
+def _look_extras(maps: CrackMaps) -> dict | None:
+    """The material's ``extras``: the crack look the textures were composited with."""
+    from crackbake.looks import Look
+
+    look = maps.look if maps.look is not None else Look()
+    return {"crackbake_look": look.to_dict()}
 
 
 def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREVIEW_TEXTURE_MAX):
@@ -268,7 +278,7 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
         tex = texture
         if tex is not None and tex.shape[0] > size:
             tex = downsample(tex, size)
-        colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
+        colour = base_color(small.mask, occlusion=small.occlusion, texture=tex, look=maps.look)
         normal = None
         if with_normal and small.normal is not None:
             normal = pack("normal", small, 8, "gl")
@@ -277,7 +287,7 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
     mask, occ = downsample(maps.mask, half), maps.occlusion
     occ = None if occ is None else downsample(occ, half)
     tex = None if texture is None else downsample(texture, half)
-    colour = base_color_half(mask, occ, base_color_table(tex is not None), tex)
+    colour = base_color_half(mask, occ, base_color_table(tex is not None, maps.look), tex)
     normal = None
     if with_normal and maps.normal is not None:
         normal = normal_half(downsample(maps.normal, half))

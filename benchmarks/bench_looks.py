@@ -1,0 +1,121 @@
+"""How each preset's cracks look, measured: issue 18 §5's figures.
+
+Run: ``python benchmarks/bench_looks.py [--res 1024] [--presets mud concrete ...] [--keep DIR]
+[--blender /path/to/bpy/python]``.  Each preset runs the ``crackbake`` command (default seed,
+``--formats exr,png,glb``) on ``examples/spot.obj`` and on a flat 1 x 1 plate (2 x 12^2
+triangles, UVs = xy); glass gets an impact (spot's flank, the plate's centre) and concrete runs
+twice, without and with that impact.  Per run it prints, from ``cracks.json``
+(:mod:`crackbake.metrics.looks`): the mean width over the cell size (``sqrt`` of the mean cell
+area), the crack area share (length x width over the surface area), the median coefficient of
+variation of the width along a crack; on the plate also the mask's mean (the drawn share: the
+plate's texels all have the same area).  With a Blender Python (``--blender`` or
+``CRACKBAKE_BLENDER_PYTHON``) it renders a grazing-light close-up of each spot GLB in Cycles
+(``tests/blender/groove_contrast.py``) and prints the groove contrast: the mean display
+brightness of the groove walls facing the light minus that of the walls facing away.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from crackbake.io.mesh import load_mesh
+from crackbake.metrics.cells import network_stats
+from crackbake.metrics.looks import crack_area_share, width_cell_ratio, width_cv
+from crackbake.precompile import plate_obj
+
+ROOT = Path(__file__).resolve().parents[1]
+SPOT = ROOT / "examples" / "spot.obj"
+PRESETS = ("glass", "crackle", "glaze", "mud", "concrete", "ice")
+IMPACT = {"spot": "0.334,0.044,0.287", "plate": "0.5,0.5,0"}
+#: Close-up of the groove contrast render: a point on spot (glTF, Y-up) and the view size.
+CLOSE_UP = {"spot": ("0.334", "0.287", "-0.044", "0.35")}
+
+
+def run(mesh: Path, preset: str, res: int, out: Path, seed: int, extra: list[str]) -> float:
+    cmd = [sys.executable, "-m", "crackbake", str(mesh), "--preset", preset, "--res", str(res),
+           "--formats", "exr,png,glb", "--seed", str(seed), "-o", str(out), "-q", *extra]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{preset} on {mesh.name} failed: {proc.stderr.strip()[-400:]}")
+    return time.perf_counter() - t0
+
+
+def groove_contrast(python: str, glb: Path, where: tuple[str, ...], out: Path) -> dict:
+    script = ROOT / "tests" / "blender" / "groove_contrast.py"
+    proc = subprocess.run([python, str(script), str(glb), str(out), *where],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"groove_contrast.py failed: {proc.stderr[-600:]}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def measure(mesh: Path, kind: str, preset: str, impact: bool, args, folder: Path) -> dict:
+    name = f"{kind}_{preset}" + ("_impact" if impact and preset != "glass" else "")
+    out = folder / name
+    extra = ["--impact", IMPACT[kind]] if impact else []
+    secs = run(mesh, preset, args.res, out, args.seed, extra)
+    cracks = json.loads((out / "cracks.json").read_text())["cracks"]
+    pts = [np.asarray(c["points"]) for c in cracks]
+    wid = [np.asarray(c["width"]) for c in cracks]
+    surf = load_mesh(mesh)
+    st = network_stats(pts, wid, surf.vertices, surf.faces)
+    row = {"run": name, "seconds": secs, "out": str(out),
+           "width_cell": width_cell_ratio(st.mean_width, st.mean_cell_area),
+           "area_share": crack_area_share(pts, wid, surf.vertices, surf.faces),
+           "width_cv": width_cv(pts, wid), "cells": st.cells}
+    if kind == "plate":
+        mask = np.asarray(Image.open(out / f"{mesh.stem}_mask.png"), np.float64)
+        row["mask_mean"] = float(mask.mean() / 255.0)
+    if args.blender and kind in CLOSE_UP:
+        row.update(groove_contrast(args.blender, out / f"{mesh.stem}.glb", CLOSE_UP[kind],
+                                   folder / f"{name}_grazing.png"))
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--res", type=int, default=1024)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--presets", nargs="+", default=list(PRESETS))
+    ap.add_argument("--meshes", nargs="+", default=["spot", "plate"])
+    ap.add_argument("--blender", default=os.environ.get("CRACKBAKE_BLENDER_PYTHON"))
+    ap.add_argument("--keep", type=Path, help="keep the run folders here")
+    ap.add_argument("--json", type=Path, help="write the rows here")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = args.keep or Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        meshes = {"spot": SPOT, "plate": plate_obj(folder / "plate.obj", 12, uv_margin=0.0)}
+        rows = []
+        for kind in args.meshes:
+            for preset in args.presets:
+                runs = [True] if preset == "glass" else [False]
+                runs += [True] if preset == "concrete" else []
+                for impact in runs:
+                    rows.append(measure(meshes[kind], kind, preset, impact, args, folder))
+                    print(json.dumps(rows[-1]), file=sys.stderr)
+        print("| run | width / cell | crack area | width CV | mask mean | groove contrast |")
+        print("|---|---|---|---|---|---|")
+        for r in rows:
+            mm = f"{r['mask_mean']:.3f}" if "mask_mean" in r else "–"
+            gc = f"{r['contrast']:+.3f}" if "contrast" in r else "–"
+            print(f"| {r['run']} | {r['width_cell']:.4f} | {r['area_share']:.4f} | "
+                  f"{r['width_cv']:.3f} | {mm} | {gc} |")
+        if args.json:
+            args.json.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
