@@ -7,11 +7,14 @@ triangles, UVs = xy); glass gets an impact (spot's flank, the plate's centre) an
 twice, without and with that impact.  Per run it prints, from ``cracks.json``
 (:mod:`crackbake.metrics.looks`): the mean width over the cell size (``sqrt`` of the mean cell
 area), the crack area share (length x width over the surface area), the median coefficient of
-variation of the width along a crack; on the plate also the mask's mean (the drawn share: the
-plate's texels all have the same area).  With a Blender Python (``--blender`` or
-``CRACKBAKE_BLENDER_PYTHON``) it renders a grazing-light close-up of each spot GLB in Cycles
-(``tests/blender/groove_contrast.py``) and prints the groove contrast: the mean display
-brightness of the groove walls facing the light minus that of the walls facing away.
+variation of the width along a crack (and of the solver's widths, the look's width noise
+divided out: what runs had before the looks); on the plate also the mask's mean (the drawn
+share: the plate's texels all have the same area).  ``--picture`` renders the spot GLBs in
+Blender into one labelled sheet (``docs/presets_blender.png``).  With a Blender Python
+(``--blender`` or ``CRACKBAKE_BLENDER_PYTHON``) it renders a grazing-light close-up of each
+spot GLB in Cycles (``tests/blender/groove_contrast.py``) and prints the groove contrast: the
+mean display brightness of the groove walls facing the light minus that of the walls facing
+away.
 """
 
 from __future__ import annotations
@@ -26,9 +29,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
+from PIL import Image, ImageDraw, ImageFont
 
 from crackbake.io.mesh import load_mesh
+from crackbake.looks import WIDTH_NOISE_SCALE, width_factors
 from crackbake.metrics.cells import network_stats
 from crackbake.metrics.looks import crack_area_share, width_cell_ratio, width_cv
 from crackbake.precompile import plate_obj
@@ -38,7 +42,21 @@ SPOT = ROOT / "examples" / "spot.obj"
 PRESETS = ("glass", "crackle", "glaze", "mud", "concrete", "ice")
 IMPACT = {"spot": "0.334,0.044,0.287", "plate": "0.5,0.5,0"}
 #: Close-up of the groove contrast render: a point on spot (glTF, Y-up) and the view size.
-CLOSE_UP = {"spot": ("0.334", "0.287", "-0.044", "0.35")}
+CLOSE_UP = {"spot": ("0.334", "0.044", "0.287", "0.35")}
+
+
+def solver_widths(cracks: list[dict], look: dict, seed: int, diagonal: float) -> list:
+    """The widths the solver gave, before the look's width noise (the noise is seeded per
+    crack, so it is recomputed and divided out exactly): what runs before the looks had."""
+    v = look.get("width_variation", 0.0)
+    out = []
+    for c in cracks:
+        w = np.asarray(c["width"])
+        if v > 0:
+            rng = np.random.default_rng([seed, 0x100C5, int(c["id"])])
+            w = w / width_factors(np.asarray(c["points"]), v, WIDTH_NOISE_SCALE * diagonal, rng)
+        out.append(w)
+    return out
 
 
 def run(mesh: Path, preset: str, res: int, out: Path, seed: int, extra: list[str]) -> float:
@@ -71,7 +89,9 @@ def measure(mesh: Path, kind: str, preset: str, impact: bool, args, folder: Path
     wid = [np.asarray(c["width"]) for c in cracks]
     surf = load_mesh(mesh)
     st = network_stats(pts, wid, surf.vertices, surf.faces)
-    row = {"run": name, "seconds": secs, "out": str(out),
+    look = json.loads((out / "manifest.json").read_text())["params"]["look"]
+    raw = solver_widths(cracks, look, args.seed, surf.diagonal)
+    row = {"run": name, "seconds": secs, "out": str(out), "width_cv_solver": width_cv(pts, raw),
            "width_cell": width_cell_ratio(st.mean_width, st.mean_cell_area),
            "area_share": crack_area_share(pts, wid, surf.vertices, surf.faces),
            "width_cv": width_cv(pts, wid), "cells": st.cells}
@@ -84,6 +104,37 @@ def measure(mesh: Path, kind: str, preset: str, impact: bool, args, folder: Path
     return row
 
 
+def picture(rows: list[dict], python: str, path: Path, folder: Path, size: int = 440) -> None:
+    """The spot GLB of each preset (glass with its impact, concrete without) rendered in Blender
+    (``tests/blender/render_presets.py``: Cycles, one grazing sun), one labelled panel each."""
+    import shutil
+
+    spot = [r for r in rows if r["run"].startswith("spot_") and not r["run"].endswith("_impact")]
+    glbs = []
+    for r in spot:
+        glb = folder / f"{r['run'][5:]}.glb"
+        shutil.copy(Path(r["out"]) / "spot.glb", glb)
+        glbs.append(str(glb))
+    script = ROOT / "tests" / "blender" / "render_presets.py"
+    # Spot's flank, where the glass impact is, seen a little from the front and above.
+    view = ["-0.45", "-0.25", "-1.0"]
+    proc = subprocess.run([python, str(script), str(folder), str(size), *view, *glbs],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"render_presets.py failed: {proc.stderr[-600:]}")
+    cols = 3
+    n_rows = (len(glbs) + cols - 1) // cols
+    sheet = Image.new("RGB", (cols * size, n_rows * size))
+    font = ImageFont.load_default(size=24)
+    for k, glb in enumerate(glbs):
+        img = Image.open(Path(glb).with_suffix(".png")).convert("RGB")
+        x0, y0 = (k % cols) * size, (k // cols) * size
+        sheet.paste(img, (x0, y0))
+        ImageDraw.Draw(sheet).text((x0 + 12, y0 + 8), Path(glb).stem, fill=(235, 235, 235),
+                                   font=font)
+    sheet.save(path, optimize=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--res", type=int, default=1024)
@@ -93,7 +144,12 @@ def main() -> None:
     ap.add_argument("--blender", default=os.environ.get("CRACKBAKE_BLENDER_PYTHON"))
     ap.add_argument("--keep", type=Path, help="keep the run folders here")
     ap.add_argument("--json", type=Path, help="write the rows here")
+    ap.add_argument("--picture", type=Path, help="render the spot GLBs in Blender into this PNG")
+    ap.add_argument("--no-contrast", action="store_true", help="skip the groove renders")
     args = ap.parse_args()
+    python = args.blender
+    if args.no_contrast:
+        args.blender = None
     with tempfile.TemporaryDirectory() as tmp:
         folder = args.keep or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
@@ -106,15 +162,18 @@ def main() -> None:
                 for impact in runs:
                     rows.append(measure(meshes[kind], kind, preset, impact, args, folder))
                     print(json.dumps(rows[-1]), file=sys.stderr)
-        print("| run | width / cell | crack area | width CV | mask mean | groove contrast |")
-        print("|---|---|---|---|---|---|")
+        print("| run | width / cell | crack area | width CV (solver) | width CV | mask mean | "
+              "groove contrast |")
+        print("|---|---|---|---|---|---|---|")
         for r in rows:
             mm = f"{r['mask_mean']:.3f}" if "mask_mean" in r else "–"
             gc = f"{r['contrast']:+.3f}" if "contrast" in r else "–"
             print(f"| {r['run']} | {r['width_cell']:.4f} | {r['area_share']:.4f} | "
-                  f"{r['width_cv']:.3f} | {mm} | {gc} |")
+                  f"{r['width_cv_solver']:.3f} | {r['width_cv']:.3f} | {mm} | {gc} |")
         if args.json:
             args.json.write_text(json.dumps(rows, indent=1))
+        if args.picture and python:
+            picture(rows, python, args.picture, folder)
 
 
 if __name__ == "__main__":

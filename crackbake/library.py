@@ -206,6 +206,7 @@ def bake_variant(ctx, mesh, uvmesh, params: LibraryParams, variant: Variant) -> 
     maps = bake_cracks(
         uvmesh.vertices, uvmesh.faces, uvmesh.uv, segments(network), params.res,
         profile_shape=run.profile, ctx=ctx, normals=uvmesh.normals, tangents=uvmesh.tangents,
+        look=run.crack_look(), seed=variant.seed,
     )  # fmt: skip
     timings["bake"] = time.perf_counter() - t
     return Baked(variant, maps, len(network.cracks), timings)
