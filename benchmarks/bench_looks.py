@@ -79,6 +79,32 @@ def groove_contrast(python: str, glb: Path, where: tuple[str, ...], out: Path) -
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+#: Widths before the looks, relative to now (mud's crack_width_rel was 0.003, now 0.015).
+WIDTH_BEFORE = {"mud": 0.2}
+
+
+def before(out: Path, mesh: Path, preset: str, raw: list, args, folder: Path) -> Path:
+    """The run as crackbake drew it before the looks: its network with the solver's widths (at
+    the preset's old width) re-baked with ``--cracks`` and no preset, i.e. the default look
+    (which bakes bit for bit as before: tests/test_looks.py)."""
+    side = json.loads((out / "cracks.json").read_text())
+    k = WIDTH_BEFORE.get(preset, 1.0)
+    for c, w in zip(side["cracks"], raw, strict=True):
+        ratio = np.asarray(c["depth"]) / np.maximum(np.asarray(c["width"]), 1e-300)
+        c["width"] = (w * k).tolist()
+        c["depth"] = (w * k * ratio).tolist()
+    path = folder / f"{out.name}_before.json"
+    path.write_text(json.dumps(side))
+    old = folder / f"{out.name}_before"
+    cmd = [sys.executable, "-m", "crackbake", str(mesh), "--cracks", str(path), "--res",
+           str(args.res), "--formats", "glb", "-o", str(old), "-q"]
+    proc = subprocess.run(cmd, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    if proc.returncode != 0:
+        raise RuntimeError(f"re-bake of {out.name} failed: {proc.stderr.strip()[-400:]}")
+    return old
+
+
 def measure(mesh: Path, kind: str, preset: str, impact: bool, args, folder: Path) -> dict:
     name = f"{kind}_{preset}" + ("_impact" if impact and preset != "glass" else "")
     out = folder / name
@@ -101,6 +127,10 @@ def measure(mesh: Path, kind: str, preset: str, impact: bool, args, folder: Path
     if args.blender and kind in CLOSE_UP:
         row.update(groove_contrast(args.blender, out / f"{mesh.stem}.glb", CLOSE_UP[kind],
                                    folder / f"{name}_grazing.png"))
+        old = before(out, mesh, preset, raw, args, folder)
+        row["contrast_before"] = groove_contrast(
+            args.blender, old / f"{mesh.stem}.glb", CLOSE_UP[kind],
+            folder / f"{name}_grazing_before.png")["contrast"]
     return row
 
 
@@ -163,13 +193,14 @@ def main() -> None:
                     rows.append(measure(meshes[kind], kind, preset, impact, args, folder))
                     print(json.dumps(rows[-1]), file=sys.stderr)
         print("| run | width / cell | crack area | width CV (solver) | width CV | mask mean | "
-              "groove contrast |")
-        print("|---|---|---|---|---|---|---|")
+              "groove contrast before | after |")
+        print("|---|---|---|---|---|---|---|---|")
         for r in rows:
             mm = f"{r['mask_mean']:.3f}" if "mask_mean" in r else "–"
             gc = f"{r['contrast']:+.3f}" if "contrast" in r else "–"
+            gb = f"{r['contrast_before']:+.3f}" if "contrast_before" in r else "–"
             print(f"| {r['run']} | {r['width_cell']:.4f} | {r['area_share']:.4f} | "
-                  f"{r['width_cv_solver']:.3f} | {r['width_cv']:.3f} | {mm} | {gc} |")
+                  f"{r['width_cv_solver']:.3f} | {r['width_cv']:.3f} | {mm} | {gb} | {gc} |")
         if args.json:
             args.json.write_text(json.dumps(rows, indent=1))
         if args.picture and python:
