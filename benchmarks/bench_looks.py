@@ -76,7 +76,9 @@ def groove_contrast(python: str, glb: Path, where: tuple[str, ...], out: Path) -
                           capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"groove_contrast.py failed: {proc.stderr[-600:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    result["grazing_png"] = result.pop("out")
+    return result
 
 
 #: Widths before the looks, relative to now (mud's crack_width_rel was 0.003, now 0.015).
@@ -176,10 +178,16 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="write the rows here")
     ap.add_argument("--picture", type=Path, help="render the spot GLBs in Blender into this PNG")
     ap.add_argument("--no-contrast", action="store_true", help="skip the groove renders")
+    ap.add_argument("--picture-only", type=Path, metavar="ROWS_JSON",
+                    help="only render --picture from the rows (--json) of an earlier --keep run")
     args = ap.parse_args()
     python = args.blender
     if args.no_contrast:
         args.blender = None
+    if args.picture_only:
+        rows = json.loads(args.picture_only.read_text())
+        picture(rows, python, args.picture, args.keep or args.picture_only.parent)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         folder = args.keep or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)

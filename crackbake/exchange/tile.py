@@ -105,7 +105,7 @@ def write_tile(stage, params, maps, pieces: list, stats: dict, timings: dict, t0
     """Write the PNG set, ``tile_cracks.exr``, ``tile_3x3.png``, ``cracks.json`` and
     ``manifest.json`` into the open :class:`~crackbake.exchange.output.OutputStage`."""
     t = time.perf_counter()
-    base = base_color(maps.mask, occlusion=maps.occlusion, look=maps.look)
+    base = base_color(maps.mask, occlusion=maps.occlusion, look=getattr(maps, "look", None))
     depth_scale = max(float(np.max(maps.depth)), 1e-12)
     jobs = []
     for f in TARGETS["gltf"].files:
