@@ -297,7 +297,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     metavar="KEY=VALUE",
     help="Override one key of the preset's look (repeatable): color=R,G,B (sRGB 0..255), "
     "mode=darken|lighten|multiply, roughness, normal_strength, width_variation, chipping, curl "
-    "(README: Crack looks).",
+    "(docs/maps.md, Crack looks).",
 )
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option(
