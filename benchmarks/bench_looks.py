@@ -148,9 +148,10 @@ def picture(rows: list[dict], python: str, path: Path, folder: Path, size: int =
         shutil.copy(Path(r["out"]) / "spot.glb", glb)
         glbs.append(str(glb))
     script = ROOT / "tests" / "blender" / "render_presets.py"
-    # Spot's flank, where the glass impact is, seen a little from the front and above.
-    view = ["-0.45", "-0.25", "-1.0"]
-    proc = subprocess.run([python, str(script), str(folder), str(size), *view, *glbs],
+    # Spot's flank around the glass impact, seen a little from the front and above.
+    view = ["-0.35", "-0.35", "-1.0"]
+    target = ["0.25", "0.1", "0.3", "1.0"]
+    proc = subprocess.run([python, str(script), str(folder), str(size), *view, *target, *glbs],
                           capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"render_presets.py failed: {proc.stderr[-600:]}")

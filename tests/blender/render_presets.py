@@ -1,11 +1,12 @@
 """Render crackbake GLBs of one mesh in Blender (Cycles, CPU), each alone, same camera and light.
 
-Usage: ``python render_presets.py OUT_DIR SIZE VX VY VZ GLB...`` under a Python with ``bpy``.
-Writes ``OUT_DIR/<glb stem>.png`` (SIZE pixels square) per GLB.  VX, VY, VZ is the view
-direction in the GLB's own (glTF, Y-up) frame, from the camera towards the mesh.  The camera
-frames the mesh's bounding sphere; one sun lights it from 20 degrees above the surfaces the
-camera faces, from the side (a grazing light: grooves show their lit and shadowed walls), with
-a dim world for the shadows.  Prints a JSON line with the files written.
+Usage: ``python render_presets.py OUT_DIR SIZE VX VY VZ TX TY TZ WIDTH GLB...`` under a Python
+with ``bpy``.  Writes ``OUT_DIR/<glb stem>.png`` (SIZE pixels square) per GLB.  VX, VY, VZ is
+the view direction in the GLB's own (glTF, Y-up) frame, from the camera towards the mesh; the
+orthographic camera looks at TX, TY, TZ (glTF frame) and shows WIDTH mesh units across.  One
+sun lights it from about 20 degrees above the surfaces the camera faces, from the side (a
+grazing light: grooves show their lit and shadowed walls), with a dim world for the shadows.
+Prints a JSON line with the files written.
 """
 
 import json
@@ -18,7 +19,10 @@ from mathutils import Vector
 out_dir = Path(sys.argv[1])
 size = int(sys.argv[2])
 gx, gy, gz = map(float, sys.argv[3:6])
-glbs = sys.argv[6:]
+tx, ty, tz = map(float, sys.argv[6:9])
+width = float(sys.argv[9])
+glbs = sys.argv[10:]
+target = Vector((tx, -tz, ty))
 view = Vector((gx, -gz, gy)).normalized()  # glTF Y-up -> Blender Z-up
 written = []
 for glb in glbs:
@@ -26,15 +30,14 @@ for glb in glbs:
     bpy.ops.import_scene.gltf(filepath=glb)
     obj = next(o for o in bpy.context.scene.objects if o.type == "MESH")
     corners = [obj.matrix_world @ Vector(c) for c in obj.bound_box]
-    centre = sum(corners, Vector()) / 8
-    radius = max((c - centre).length for c in corners)
+    radius = max((c - target).length for c in corners)
     scene = bpy.context.scene
     cam_data = bpy.data.cameras.new("cam")
     cam_data.type = "ORTHO"
-    cam_data.ortho_scale = 1.55 * radius
+    cam_data.ortho_scale = width
     cam = bpy.data.objects.new("cam", cam_data)
     scene.collection.objects.link(cam)
-    cam.location = centre - view * 4 * radius
+    cam.location = target - view * 4 * radius
     cam.rotation_euler = view.to_track_quat("-Z", "Z").to_euler()
     scene.camera = cam
     # The sun: mostly across the view (from the camera's right, a little above), 20 degrees
@@ -43,7 +46,7 @@ for glb in glbs:
     to_light = (right * 0.8 + Vector((0, 0, 0.6))).normalized()
     to_light = (to_light * 0.94 - view * 0.34).normalized()
     sun_data = bpy.data.lights.new("sun", "SUN")
-    sun_data.energy = 4.5
+    sun_data.energy = 3.0
     sun_data.angle = 0.02
     sun = bpy.data.objects.new("sun", sun_data)
     scene.collection.objects.link(sun)
