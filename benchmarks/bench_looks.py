@@ -165,7 +165,9 @@ def picture(rows: list[dict], python: str, path: Path, folder: Path, size: int =
         sheet.paste(img, (x0, y0))
         ImageDraw.Draw(sheet).text((x0 + 12, y0 + 8), Path(glb).stem, fill=(235, 235, 235),
                                    font=font)
-    sheet.save(path, optimize=True)
+    # A palette keeps the sheet near 400 KB without visible banding.
+    sheet.quantize(colors=160, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
+        path, optimize=True)
 
 
 def main() -> None:
