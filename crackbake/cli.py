@@ -18,6 +18,7 @@ import click
 from crackbake import __version__
 from crackbake.display import Display, display_mode
 from crackbake.errors import CrackbakeError, CrackbakeWarning
+from crackbake.looks import parse_look
 from crackbake.params import (
     DECAL_RES_DEFAULT,
     FORMATS,
@@ -293,6 +294,15 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     help="Least drawn crack width in texels (mask, depth, normal); crack.width keeps the "
     "physical width. 0 = physical only.",
 )
+@click.option(
+    "--look",
+    "look",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Override one key of the preset's look (repeatable): color=R,G,B (sRGB 0..255), "
+    "mode=darken|lighten|multiply, roughness, normal_strength, width_variation, chipping, curl "
+    "(docs/maps.md, Crack looks).",
+)
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
 @click.option(
     "--formats",
@@ -466,7 +476,9 @@ def _run_params(mesh: Path, o: dict) -> RunParams:
     bias, density = _parse_curvature(o.pop("curvature"))
     impacts = tuple(parse_impact(t) for t in o.pop("impacts"))
     directions = tuple(parse_direction(d) for d in o.pop("directions"))
+    look = parse_look(o.pop("look"))
     return RunParams(
+        look=look,
         mesh=mesh,
         impacts=impacts,
         directions=directions,

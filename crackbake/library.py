@@ -207,7 +207,8 @@ def bake_variant(ctx, mesh, uvmesh, params: LibraryParams, variant: Variant) -> 
     arrays = bake_arrays(uvmesh)  # with the copies of faces straying past the page
     maps = bake_cracks(
         arrays.pop("vertices"), arrays.pop("faces"), arrays.pop("uv"), segments(network),
-        params.res, profile_shape=run.profile, ctx=ctx, **arrays,
+        params.res, profile_shape=run.profile, ctx=ctx, look=run.crack_look(), seed=variant.seed,
+        **arrays,
     )  # fmt: skip
     timings["bake"] = time.perf_counter() - t
     return Baked(variant, maps, len(network.cracks), timings)

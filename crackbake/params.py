@@ -377,6 +377,10 @@ class RunParams:
         Radius of each crack's stress shadow, a fraction of the bounding-box diagonal (the
         solver's own 0.1 when unset): how close parallel cracks may run, so smaller gives
         smaller cells.  Impacts narrow it further near their star.
+    look : dict
+        Overrides of the preset's ``[look]`` table (``--look KEY=VALUE``): crack colour and
+        composite mode, roughness, normal strength, width variation, chipping, curl
+        (:mod:`crackbake.looks`); :meth:`crack_look` gives the result.
     """
 
     mesh: Path
@@ -433,6 +437,7 @@ class RunParams:
     noise: float | None = None
     hoop: float | None = None
     spacing: float | None = None
+    look: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
 
     @property
@@ -502,6 +507,7 @@ class RunParams:
             _check_range("--" + name.replace("_", "-"), getattr(self, name), *bounds)
         for imp in self.impacts:
             _check_impact(imp)
+        self.crack_look()
         for d in self.directions:
             _check_range("--direction strength", d[3], -STRESS_MAX, STRESS_MAX)
         if self.weight_map is not None:
@@ -533,13 +539,20 @@ class RunParams:
             if getattr(self, key) is None:
                 changes[key] = preset.get(key, default)
         unknown = set(preset) - names - {"description", "needs_impact", "crack_width_rel",
-                                          "impact_radius_rel"}
+                                          "impact_radius_rel"} - {"look"}
         if unknown:
             raise CrackbakeError(f"preset '{self.preset}' has unknown keys {sorted(unknown)}")
         relative = {k: preset[k] for k in ("crack_width_rel", "impact_radius_rel") if k in preset}
         relative["needs_impact"] = bool(preset.get("needs_impact", False))
         relative["sim_size_set"] = self.detail is not None or self.sim_faces is not None
         return replace(self, **changes), relative
+
+    def crack_look(self):
+        """The :class:`crackbake.looks.Look` of this run: the preset's ``[look]`` table, then
+        ``look``'s overrides, over the defaults (each checked: a one-line error otherwise)."""
+        from crackbake.looks import resolve_look
+
+        return resolve_look(load_preset(self.preset) if self.preset else {}, self.look)
 
     def to_dict(self) -> dict:
         """JSON-ready dict of every effective parameter (paths as strings)."""
@@ -551,6 +564,7 @@ class RunParams:
         d["formats"] = list(self.formats)
         d["weight_map"] = str(self.weight_map) if self.weight_map is not None else None
         d["directions"] = [list(x) for x in self.directions]
+        d["look"] = self.crack_look().to_dict()
         extra = d.pop("extra")
         d.update(extra)
         return d

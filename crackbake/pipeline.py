@@ -27,6 +27,7 @@ from crackbake.exchange.manifest import build_manifest, effective_params, write_
 from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
+from crackbake.looks import WIDTH_NOISE_SCALE, vary_widths
 from crackbake.memory import check_memory, estimate_peak, run_sizes
 from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import DECAL_RES_DEFAULT, STRESS_RES_DEFAULT, RunParams
@@ -237,6 +238,8 @@ def _bake(
         ctx=ctx,
         normals=arrays["normals"],
         tangents=arrays["tangents"],
+        look=params.crack_look(),
+        seed=params.seed,
     )
     timings["bake"] = time.perf_counter() - t
     return maps
@@ -364,6 +367,11 @@ def solve(
         solver_steps=result.steps,
     )
     network = grow_from_impacts(network)  # crack.time grows out of the impact (timing.py)
+    look = params.crack_look()
+    # Widths that swell and narrow along each crack (the look's width_variation), in the
+    # network itself so cracks.json, crack.width and the drawn maps agree.
+    network = vary_widths(network, look.width_variation, params.seed,
+                          WIDTH_NOISE_SCALE * mesh.diagonal)
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
     return network, jsonable(stats), Solved(sim=sim, field=field, result=result)

@@ -365,7 +365,7 @@ def _build(params: TileParams, stage) -> dict:
         t = time.perf_counter()
         uvmesh = with_tangents(prepare_uvs(mesh, "keep", params.res, cache=False, ctx=ctx))
         maps = bake_tile(solved.pieces, uvmesh, params.size, params.res, solved.run.profile,
-                         ctx)
+                         ctx, look=solved.run.crack_look())
         timings["bake"] = time.perf_counter() - t
     finally:
         ctx.release()

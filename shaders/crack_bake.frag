@@ -25,6 +25,8 @@ uniform float u_half_width;     // half the widest crack's width, mesh units
 uniform float u_shape;          // depth profile exponent: 1 = V, < 1 fuller (U-like), > 1 sharper
 uniform float u_min_px;         // least drawn width, texels (0 = the physical width only)
 
+// @crack_look.glsl (inserted here by crackbake/bake/normal_map.py)
+
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
 layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y
@@ -66,10 +68,18 @@ void main() {
     // plus one footprint, and the footprint along any direction is at most |(|dpx|, |dpy|)|.
     // A crack drawn wider than it is (u_min_px) reaches min_px / 2 footprints.
     float foot = length(vec2(length(dpx), length(dpy)));
+    // u_half_width already holds the widest chipped half width (and the curl's rim).
     float cover_reach = max(u_half_width, 0.5 * u_min_px * foot) + foot;
     int best_seg = -1;
+#ifdef CRACK_CHIP
+    float chip = chip_factor(p);
+#endif
 #ifdef CRACK_NORMALS
     int deepest_seg = -1;  // the segment whose depth term wins (the normal's profile)
+#ifdef CRACK_CURL
+    int rim_seg = -1;      // with no depth here: the segment whose curled rim the texel is on
+    float rim_u = CURL_REACH + 1.0;
+#endif
 #endif
     for (uint k = bin_start[bin]; k < bin_start[bin + 1u]; ++k) {
         // Segments come nearest-bound first: the rest cannot be nearer or add coverage.
@@ -82,6 +92,11 @@ void main() {
         vec3 g = p - (s.a.xyz + t * ab);
         float d = length(g);
         float w_phys = mix(s.a.w, s.b.w, t);
+#ifdef CRACK_CHIP
+        float w_draw = w_phys * chip;  // chipped edges: the drawn width only
+#else
+        float w_draw = w_phys;
+#endif
 
         // Texel size measured along the direction in which the distance grows, so the
         // anti-aliasing ramp is one texel wide whatever the UV stretch.
@@ -93,7 +108,7 @@ void main() {
         fw = max(fw, 1e-30);
         // The drawn maps show at least u_min_px texels across (so a hairline still reads at
         // this resolution); the width channel keeps the physical width.
-        float w = max(w_phys, u_min_px * fw);
+        float w = max(w_draw, u_min_px * fw);
         float hw = 0.5 * w;
 
         float c;
@@ -102,7 +117,7 @@ void main() {
         // A crack drawn exactly one footprint wide by the floor keeps the filtered (thin)
         // form: same mask as a one-texel V, but a two-texel tent of depth whose normal does not
         // alias; wider floors draw the V.  With u_min_px = 0 this is the physical test w >= fw.
-        if (w_phys >= fw || w > fw) {
+        if (w_draw >= fw || w > fw) {
             c = clamp((hw - d) / fw + 0.5, 0.0, 1.0);
             float u = d / max(hw, 1e-30);
             dd = u < 1.0 ? depth_here * pow(1.0 - u, u_shape) : 0.0;
@@ -117,6 +132,10 @@ void main() {
         coverage = max(coverage, c);
 #ifdef CRACK_NORMALS
         if (dd > depth) deepest_seg = int(si);
+#ifdef CRACK_CURL
+        float ur = (d - hw) / max(hw, 1e-30);
+        if (ur >= 0.0 && ur < rim_u) { rim_u = ur; rim_seg = int(si); }
+#endif
 #endif
         depth = max(depth, dd);
         // Ties go to the lowest index, so the result does not depend on the list order.
@@ -136,6 +155,9 @@ void main() {
     o_id = best_id;
 #ifdef CRACK_NORMALS
     // 1 on a face with no crack depth, 2 + the segment whose depth term wins (exact < 2^24).
+#ifdef CRACK_CURL
+    if (deepest_seg < 0 && rim_seg >= 0) deepest_seg = rim_seg;  // on a curled rim
+#endif
     o_inside = float(deepest_seg + 2);
 #else
     o_inside = 1.0;

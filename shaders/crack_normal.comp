@@ -27,11 +27,13 @@ layout(std430, binding = 8) writeonly buffer Result { vec4 result[]; };  // norm
 uniform float u_shape;   // depth profile exponent: 1 = V
 uniform float u_min_px;  // least drawn width, texels (as crack_bake.frag)
 uniform uint u_count;    // texels listed
+uniform float u_normal_strength;  // slope scale of the normal (1 = the groove's true slope)
 
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
 layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y, w = face
 
+// @crack_look.glsl (inserted here by crackbake/bake/normal_map.py)
 // @crack_normal.glsl (inserted here by crackbake/bake/normal_map.py)
 
 void main() {

@@ -71,8 +71,9 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
     vec3 grad_t = (t_raw > 0.0 && t_raw < 1.0) ? ab / len2 : vec3(0.0);
     vec3 g = p - (s.a.xyz + t * ab);
     float d = length(g);
-    float w_phys = mix(s.a.w, s.b.w, t);
-    float dw = s.b.w - s.a.w;         // d(width)/dt
+    float chip = chip_factor(p);      // chipped edges (1 without): the drawn width only
+    float w_phys = chip * mix(s.a.w, s.b.w, t);
+    float dw = chip * (s.b.w - s.a.w);  // d(width)/dt
     float depth = mix(s.dt.x, s.dt.y, t);
     float ddepth = s.dt.y - s.dt.x;   // d(depth)/dt
     // On the axis itself the two walls meet: no across slope (their average).
@@ -91,6 +92,13 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
     occ = 1.0;
     if (w_phys >= fw || w > fw) {  // the branch crack_bake.frag takes
         float u = d / max(hw, 1e-30);
+#ifdef CRACK_CURL
+        // The curled rim beside the crack: height u_curl D (1 - x)^2, x = (d - hw) / (R hw).
+        if (u >= 1.0 && u < 1.0 + CURL_REACH) {
+            float x = (u - 1.0) / CURL_REACH;
+            return (2.0 * u_curl * depth * (1.0 - x) / (CURL_REACH * max(hw, 1e-30))) * gn;
+        }
+#endif
         if (u >= 1.0) return vec3(0.0);
         float q = max(1.0 - u, 1e-6);  // U profiles (shape < 1) have vertical walls at the rim
         float qs = pow(q, u_shape);
@@ -115,7 +123,7 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
 // by solving [T B N] (x, y, z) = n' and normalising.
 vec4 crack_normal(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, uint face) {
     float occ;
-    vec3 grad = depth_gradient(s, p, dpx, dpy, texel_iso, occ);
+    vec3 grad = u_normal_strength * depth_gradient(s, p, dpx, dpy, texel_iso, occ);
     // Barycentrics of p in its face (world positions are affine in UV inside a face, so these
     // are the rasteriser's), then N and T interpolated as the engine's rasteriser does.
     Frame f0 = frame[face_vertex[3u * face]];

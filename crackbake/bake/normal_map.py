@@ -45,24 +45,30 @@ from crackbake.geometry import welded_vertex_normals
 #: GLSL symbol that switches the normal/occlusion outputs on in the bake shaders.
 DEFINE = "CRACK_NORMALS"
 _INCLUDE = "// @crack_normal.glsl"
+_LOOK_INCLUDE = "// @crack_look.glsl"
 
 
-def shader_variant(name: str, normals: bool) -> str:
+def shader_variant(name: str, normals: bool, defines: tuple[str, ...] = ()) -> str:
     """Source of ``shaders/<name>``, with the normal-map code compiled in when ``normals``.
 
-    Without normals the text is the plain file (its ``#ifdef`` blocks drop out), so the other
-    channels run exactly the code they always ran.
+    ``defines``: more symbols to define (the look's ``CRACK_CHIP``, ``CRACK_CURL``:
+    ``shaders/crack_look.glsl``, inserted where a shader says ``// @crack_look.glsl``).
+    Without normals or defines the text is the plain file (its ``#ifdef`` blocks drop out), so
+    the other channels run exactly the code they always ran.
     """
     src = shader_source(name)
     lines = src.split("\n")
     out = []
+    symbols = ((DEFINE,) if normals else ()) + tuple(defines)
     for line in lines:
         if line.startswith(_INCLUDE):
             out.append(shader_source("crack_normal.glsl") if normals else "")
+        elif line.startswith(_LOOK_INCLUDE):
+            out.append(shader_source("crack_look.glsl"))
         else:
             out.append(line)
-        if normals and line.startswith("#version"):
-            out.append(f"#define {DEFINE} 1")
+        if line.startswith("#version"):
+            out.extend(f"#define {d} 1" for d in symbols)
     return "\n".join(out)
 
 
@@ -132,13 +138,23 @@ class NormalPass:
         Depth profile exponent.
     min_px : float
         Least drawn crack width, texels (as the crack pass draws it).
+    look_terms : dict, optional
+        The look's shader terms (:func:`crackbake.bake.raster.look_terms`): ``defines``,
+        ``uniforms`` and ``normal_strength`` (the normal's slope scale, default 1).
     """
 
-    def __init__(self, gl, profile_shape: float, min_px: float = 0.0) -> None:
+    def __init__(self, gl, profile_shape: float, min_px: float = 0.0,
+                 look_terms: dict | None = None) -> None:
         self.gl = gl
-        self.prog = gl.keep(gl.ctx.compute_shader(shader_variant("crack_normal.comp", True)))
+        terms = look_terms or {}
+        self.prog = gl.keep(gl.ctx.compute_shader(
+            shader_variant("crack_normal.comp", True, tuple(terms.get("defines", ())))))
         self.prog["u_shape"].value = float(profile_shape)
         self.prog["u_min_px"].value = float(min_px)
+        self.prog["u_normal_strength"].value = float(terms.get("normal_strength", 1.0))
+        for name, value in terms.get("uniforms", {}).items():
+            if self.prog.get(name, None) is not None:
+                self.prog[name].value = value
 
     def run(self, code: np.ndarray, planes: list[np.ndarray], y0: int) -> None:
         """Compute the crack texels of one band into ``planes`` (normal x, y, z, occlusion).

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -64,6 +64,9 @@ class CrackMaps:
     min_px : float
         Least drawn crack width in texels the mask, depth, normal and occlusion were drawn with
         (``width`` holds the physical width).
+    look : crackbake.looks.Look or None
+        The look the maps were baked with and the written material composites with (None:
+        the default look).
     """
 
     res: int
@@ -80,6 +83,7 @@ class CrackMaps:
     occlusion: np.ndarray | None = None
     min_px: float = 0.0
     timings: dict[str, float] = field(default_factory=dict)
+    look: object = None
 
     def channels(self) -> dict[str, np.ndarray]:
         """Role -> image for the maps that were baked (``normal``/``occlusion`` only with
@@ -111,6 +115,33 @@ def _segment_buffer(segments: Segments) -> np.ndarray:
     return buf
 
 
+#: Reach of a crack's curled rim beyond its half width, in half widths (shaders/crack_look.glsl).
+CURL_REACH = 1.5
+
+
+def look_terms(look, segments: Segments, seed: int = 0) -> dict:
+    """The shader terms of a :class:`crackbake.looks.Look`: ``defines`` (``CRACK_CHIP``,
+    ``CRACK_CURL``), ``uniforms``, ``normal_strength`` and ``reach`` (how far beyond its half
+    width a crack draws anything, as a factor: the candidate search widens by it)."""
+    terms: dict = {"defines": [], "uniforms": {}, "normal_strength": 1.0, "reach": 1.0}
+    if look is None:
+        return terms
+    terms["normal_strength"] = float(look.normal_strength)
+    if look.chipping > 0 and len(segments.a):
+        w = segments.width[segments.width > 0]
+        # Chips about as long as the crack is wide: ragged at the scale of the opening.
+        scale = 1.5 * float(np.median(w)) if len(w) else 1.0
+        terms["defines"].append("CRACK_CHIP")
+        terms["uniforms"].update(u_chip=float(look.chipping), u_chip_scale=scale,
+                                 u_chip_seed=int(seed) & 0xFFFFFFFF)
+        terms["reach"] *= 1.0 + float(look.chipping)
+    if look.curl > 0:
+        terms["defines"].append("CRACK_CURL")
+        terms["uniforms"]["u_curl"] = float(look.curl)
+        terms["reach"] *= 1.0 + CURL_REACH
+    return terms
+
+
 def bake_cracks(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -126,6 +157,8 @@ def bake_cracks(
     tangents: np.ndarray | None = None,
     projection: np.ndarray | None = None,
     min_px: float = MIN_PX_DEFAULT,
+    look=None,
+    seed: int = 0,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
 
@@ -172,6 +205,12 @@ def bake_cracks(
         thinner than a texel still reads at this resolution; the ``width`` channel keeps the
         physical width.  0 draws the physical width only (sub-texel cracks fade to their
         area-averaged coverage).
+    look : crackbake.looks.Look, optional
+        The run's crack look: its ``chipping`` (ragged drawn edges), ``curl`` (raised rims in
+        the normal map) and ``normal_strength`` (the normal's slope scale) change the bake;
+        None bakes the default look.  Kept on the maps for the written material.
+    seed : int
+        Seed of the chipping noise.
 
     Returns
     -------
@@ -192,16 +231,22 @@ def bake_cracks(
     max_distance = _max_distance(vertices, segments, max_distance)
     frames = None if tangents is None else frame_attributes(vertices, faces, normals, tangents)
 
-    bins = face_bins(vertices, faces, uv, segments, res, max_distance, float(min_px))
+    terms = look_terms(look, segments, seed)
+    reached = segments
+    if terms["reach"] != 1.0:  # chipped or curled cracks draw beyond their half width
+        reached = replace(segments, width=segments.width * terms["reach"])
+    bins = face_bins(vertices, faces, uv, reached, res, max_distance, float(min_px))
     timings["candidates"] = time.perf_counter() - t0
 
     images = _render(
         ctx, vertices, faces, uv, segments, res, tile, bins,
         float(max_distance), float(profile_shape), timings, frames, projection, float(min_px),
+        terms,
     )  # fmt: skip
 
     maps = _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
     maps.min_px = float(min_px)
+    maps.look = look
     return maps
 
 
@@ -214,7 +259,8 @@ _NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
               max_distance: float, profile_shape: float, frames: np.ndarray | None,
-              projection: np.ndarray | None = None, min_px: float = 0.0):
+              projection: np.ndarray | None = None, min_px: float = 0.0,
+              terms: dict | None = None):
     """The surface pass (faces at their placement -> world position, footprint, bin per texel;
     with ``frames``, the face too) and the crack pass (one full-screen triangle measuring the
     cracks per texel; with ``frames``, reading the faces' vertex frames), with their buffers.
@@ -223,6 +269,8 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     ``decal_project.vert`` through the ``projection`` camera; the passes after it are shared."""
     ctx = gl.ctx
     with_normals = frames is not None
+    terms = terms or look_terms(None, segments)
+    defines = tuple(terms["defines"])
     vertex = np.empty((len(vertices), 5), np.float32)
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
@@ -236,7 +284,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     prog = gl.keep(
         ctx.program(
             vertex_shader=shader_variant("crack_screen.vert", with_normals),
-            fragment_shader=shader_variant("crack_bake.frag", with_normals),
+            fragment_shader=shader_variant("crack_bake.frag", with_normals, defines),
         )
     )
     vbo = gl.keep(ctx.buffer(vertex))
@@ -259,7 +307,11 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
         gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
     surface["u_res"].value = float(res)
     prog["u_max_distance"].value = max_distance
-    prog["u_half_width"].value = 0.5 * float(segments.width.max()) if len(segments.a) else 0.0
+    half = 0.5 * float(segments.width.max()) * terms["reach"] if len(segments.a) else 0.0
+    prog["u_half_width"].value = half
+    for name, value in terms["uniforms"].items():
+        if prog.get(name, None) is not None:  # the crack pass uses the chipping terms only
+            prog[name].value = value
     prog["u_shape"].value = profile_shape
     prog["u_min_px"].value = min_px
     return surface, vao, screen
@@ -298,6 +350,7 @@ def _render(
     frames: np.ndarray | None = None,
     projection: np.ndarray | None = None,
     min_px: float = 0.0,
+    terms: dict | None = None,
 ) -> dict[str, np.ndarray]:
     """Draw the faces at their placement band by band; the planar channel images (row 0 = top)."""
     import moderngl
@@ -306,7 +359,8 @@ def _render(
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
         surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
-                                         max_distance, profile_shape, frames, projection, min_px)
+                                         max_distance, profile_shape, frames, projection, min_px,
+                                         terms)
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
         # (69 bytes a texel: 48 for the surface pass, 21 for the maps; 72 with the normal map,
@@ -316,7 +370,7 @@ def _render(
         dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
         images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
         if with_normals:
-            normal_pass = NormalPass(gl, profile_shape, min_px)
+            normal_pass = NormalPass(gl, profile_shape, min_px, terms)
             # Flat and open wherever no crack's depth reaches.  Planar storage: each component
             # dilates as its own image and EXR writers take the planes without a copy.
             images["normal"] = np.zeros((3, res, res), np.float32)

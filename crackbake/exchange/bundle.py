@@ -68,6 +68,7 @@ class _Smaller:
     mask: np.ndarray
     normal: np.ndarray | None
     occlusion: np.ndarray | None
+    look: object = None
 
 
 def _smaller(maps: CrackMaps, size: int) -> CrackMaps | _Smaller:
@@ -78,7 +79,7 @@ def _smaller(maps: CrackMaps, size: int) -> CrackMaps | _Smaller:
         normal = downsample(maps.normal, size)
         normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
     occ = None if maps.occlusion is None else downsample(maps.occlusion, size)
-    return _Smaller(downsample(maps.mask, size), normal, occ)
+    return _Smaller(downsample(maps.mask, size), normal, occ, getattr(maps, "look", None))
 
 
 class _Encoder:
@@ -123,7 +124,8 @@ class _Encoder:
         tex = self.texture
         if tex is not None and tex.shape[0] > size:
             tex = downsample(tex, size)
-        return base_color(maps.mask, occlusion=maps.occlusion, texture=tex)
+        look = getattr(maps, "look", None)
+        return base_color(maps.mask, occlusion=maps.occlusion, texture=tex, look=look)
 
 
 def write_outputs(
@@ -249,7 +251,16 @@ def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict)
         name=stem,
         extra_textures=extra,
         tangents=tangents,
+        material_extras=_look_extras(maps),
     )
+
+
+def _look_extras(maps: CrackMaps) -> dict | None:
+    """The material's ``extras``: the crack look the textures were composited with."""
+    from crackbake.looks import Look
+
+    look = getattr(maps, "look", None)
+    return {"crackbake_look": (look if look is not None else Look()).to_dict()}
 
 
 def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREVIEW_TEXTURE_MAX):
@@ -260,6 +271,7 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
     (:func:`_smaller`, :func:`base_color`, :func:`pack`) gives, bit for bit.
     """
     n = maps.mask.shape[0]
+    look = getattr(maps, "look", None)
     fused = size < n <= 4 * size and n % 4 == 0  # one numpy halving at most, then the kernels
     if fused and texture is not None and texture.shape[:2] != maps.mask.shape:
         fused = False
@@ -268,7 +280,7 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
         tex = texture
         if tex is not None and tex.shape[0] > size:
             tex = downsample(tex, size)
-        colour = base_color(small.mask, occlusion=small.occlusion, texture=tex)
+        colour = base_color(small.mask, occlusion=small.occlusion, texture=tex, look=look)
         normal = None
         if with_normal and small.normal is not None:
             normal = pack("normal", small, 8, "gl")
@@ -277,7 +289,7 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
     mask, occ = downsample(maps.mask, half), maps.occlusion
     occ = None if occ is None else downsample(occ, half)
     tex = None if texture is None else downsample(texture, half)
-    colour = base_color_half(mask, occ, base_color_table(tex is not None), tex)
+    colour = base_color_half(mask, occ, base_color_table(tex is not None, look), tex)
     normal = None
     if with_normal and maps.normal is not None:
         normal = normal_half(downsample(maps.normal, half))

@@ -107,6 +107,7 @@ def write_glb(
     name: str = "crackbake",
     extra_textures: dict[str, np.ndarray] | None = None,
     tangents: np.ndarray | None = None,
+    material_extras: dict | None = None,
 ) -> None:
     """Write the output mesh and its maps as one binary glTF 2.0 file.
 
@@ -134,6 +135,10 @@ def write_glb(
         embeds it once and binds it to both.
     tangents : (V, 4) float, optional
         MikkTSpace tangents, xyz unit and w = +-1 the bitangent sign; written as TANGENT.
+    material_extras : dict, optional
+        JSON-ready application data stored as the material's ``extras`` (crackbake writes
+        ``{"crackbake_look": {...}}``: how the cracks were composited, so a tool can tell bright
+        glass lines from dark grooves without decoding the textures).
 
     Notes
     -----
@@ -163,6 +168,8 @@ def write_glb(
     images: list[dict] = []
     textures: list[dict] = []
     material = _material(b, images, textures, name, base_color, extra)
+    if material_extras:
+        material["extras"] = dict(material_extras)
     binary = b.binary()
     gltf = _gltf_document(name, attributes, indices, material, images, textures, b, len(binary))
     _write_chunks(path, gltf, binary)

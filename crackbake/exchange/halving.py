@@ -64,7 +64,7 @@ def _base_color_half(mask, lut_m, occ, lut_o, has_occ, table, tex, has_tex, out)
                     t = t + np.float32(tex[2 * i, 2 * j + 1, k])
                     t = t + np.float32(tex[2 * i + 1, 2 * j + 1, k])
                     t = t * np.float32(0.25) + np.float32(0.5)
-                    out[i, j, k] = (np.int64(t) * np.int64(table[idx, k]) + 128) >> 8
+                    out[i, j, k] = min((np.int64(t) * np.int64(table[idx, k]) + 128) >> 8, 255)
                 else:
                     out[i, j, k] = table[idx, k]
 

@@ -250,7 +250,7 @@ def _base_color_tex(mask, occ, lut_m, lut_o, table, tex, out):
         for j in range(w):
             idx = (np.int64(lut_m[mask[i, j]]) << 8) | lut_o[occ[i, j]]
             for k in range(3):
-                out[i, j, k] = (np.uint32(tex[i, j, k]) * table[idx, k] + 128) >> 8
+                out[i, j, k] = min((np.uint32(tex[i, j, k]) * table[idx, k] + 128) >> 8, 255)
 
 
 def base_color8(
@@ -270,7 +270,7 @@ def base_color8(
         Float16 bit pattern -> 8-bit level.
     table : (65536, 3)
         Indexed by ``mask level << 8 | occlusion level``: uint8 colours without ``texture``,
-        else uint16 factors (256 = 1) that scale the texture, rounded.
+        else uint16 factors (256 = 1) that scale the texture, rounded and clipped to 255.
     texture : (H, W, 3) uint8 or uint16, optional
 
     Returns

@@ -157,18 +157,19 @@ def _const(shape, value: float, bits: int) -> np.ndarray:
     return np.full(shape, int(round(value * _full(bits))), _dtype(bits))
 
 
-def _rough_lut(bits: int, smooth: bool = False) -> np.ndarray:
-    """(65536,) table: roughness (or smoothness) of every float16 mask value, quantised."""
+def _rough_lut(bits: int, smooth: bool = False, look=None) -> np.ndarray:
+    """(65536,) table: roughness (or smoothness) of every float16 mask value, quantised
+    (the crack's roughness from ``look``, :data:`ROUGHNESS_CRACK` without one)."""
     top = _full(bits)
-    a, b = ROUGHNESS_SURFACE, ROUGHNESS_CRACK
+    a, b = ROUGHNESS_SURFACE, ROUGHNESS_CRACK if look is None else float(look.roughness)
     if smooth:
         a, b = 1 - a, 1 - b
     lut = half_lut(lambda x: np.clip((a + (b - a) * np.clip(x, 0, 1)) * top + 0.5, 0, top))
     return lut.astype(_dtype(bits))
 
 
-def _roughness(mask: np.ndarray, bits: int, smooth: bool = False) -> np.ndarray:
-    return np.take(_rough_lut(bits, smooth), np.asarray(mask, np.float16).view(np.uint16))
+def _roughness(mask: np.ndarray, bits: int, smooth: bool = False, look=None) -> np.ndarray:
+    return np.take(_rough_lut(bits, smooth, look), np.asarray(mask, np.float16).view(np.uint16))
 
 
 def _packed(content: str, maps, bits: int) -> np.ndarray | None:
@@ -179,7 +180,9 @@ def _packed(content: str, maps, bits: int) -> np.ndarray | None:
         return None
     const = {v: (SRC_CONST, _const((), v, bits)) for v in (0.0, 1.0)}
     o = const[1.0] if occ is None else (SRC_B, _quant_lut(bits))
-    rough, smooth = (SRC_A, _rough_lut(bits)), (SRC_A, _rough_lut(bits, smooth=True))
+    look = getattr(maps, "look", None)
+    rough = (SRC_A, _rough_lut(bits, look=look))
+    smooth = (SRC_A, _rough_lut(bits, smooth=True, look=look))
     channels = {
         "orm": [o, rough, const[0.0]],
         "mask_map": [const[0.0], o, const[1.0], smooth],
@@ -218,6 +221,7 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
     """
     shape = maps.mask.shape
     occ = maps.occlusion
+    look = getattr(maps, "look", None)
 
     def occlusion():
         return _const(shape, 1.0, bits) if occ is None else quantise(occ, bits)
@@ -233,20 +237,22 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
     if content == "occlusion":
         return occlusion()
     if content == "roughness":
-        return _roughness(maps.mask, bits)
+        return _roughness(maps.mask, bits, look=look)
     if content != "data":
         fused = _packed(content, maps, bits)
         if fused is not None:
             return fused
     planes = {
-        "orm": lambda: (occlusion(), _roughness(maps.mask, bits), _const(shape, 0.0, bits)),
+        "orm": lambda: (
+            occlusion(), _roughness(maps.mask, bits, look=look), _const(shape, 0.0, bits)
+        ),
         "mask_map": lambda: (
             _const(shape, 0.0, bits), occlusion(), _const(shape, 1.0, bits),
-            _roughness(maps.mask, bits, smooth=True),
+            _roughness(maps.mask, bits, smooth=True, look=look),
         ),
         "metallic_smoothness": lambda: (
             _const(shape, 0.0, bits), _const(shape, 0.0, bits), _const(shape, 0.0, bits),
-            _roughness(maps.mask, bits, smooth=True),
+            _roughness(maps.mask, bits, smooth=True, look=look),
         ),
         "data": lambda: _data_planes(maps, bits),
     }[content]()  # fmt: skip

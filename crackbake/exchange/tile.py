@@ -64,8 +64,13 @@ def tile_segments(pieces: list, period: float, reach: float) -> Segments:
     )
 
 
-def bake_tile(pieces: list, uvmesh, period: float, res: int, profile: float, ctx):
-    """The tile's :class:`~crackbake.bake.raster.CrackMaps` (periodic)."""
+def bake_tile(pieces: list, uvmesh, period: float, res: int, profile: float, ctx, look=None):
+    """The tile's :class:`~crackbake.bake.raster.CrackMaps` (periodic).
+
+    ``look``: the preset's :class:`crackbake.looks.Look`, without its chipping (its noise lives
+    in world space, which does not repeat with the tile's period: it would show a seam)."""
+    from dataclasses import replace
+
     from crackbake.bake.raster import DEFAULT_MAX_DISTANCE_FRACTION, bake_cracks
 
     reach = DEFAULT_MAX_DISTANCE_FRACTION * period * np.sqrt(2.0)
@@ -75,6 +80,7 @@ def bake_tile(pieces: list, uvmesh, period: float, res: int, profile: float, ctx
     return bake_cracks(
         uvmesh.vertices, uvmesh.faces, uvmesh.uv, segs, res, max_distance=reach,
         profile_shape=profile, ctx=ctx, normals=uvmesh.normals, tangents=uvmesh.tangents,
+        look=None if look is None else replace(look, chipping=0.0),
     )  # fmt: skip
 
 
@@ -99,7 +105,7 @@ def write_tile(stage, params, maps, pieces: list, stats: dict, timings: dict, t0
     """Write the PNG set, ``tile_cracks.exr``, ``tile_3x3.png``, ``cracks.json`` and
     ``manifest.json`` into the open :class:`~crackbake.exchange.output.OutputStage`."""
     t = time.perf_counter()
-    base = base_color(maps.mask, occlusion=maps.occlusion)
+    base = base_color(maps.mask, occlusion=maps.occlusion, look=getattr(maps, "look", None))
     depth_scale = max(float(np.max(maps.depth)), 1e-12)
     jobs = []
     for f in TARGETS["gltf"].files:

@@ -1,0 +1,52 @@
+// Look terms shared by crack_bake.frag and crack_normal.glsl (inserted by
+// crackbake/bake/normal_map.py where a shader says "// @crack_look.glsl"; compiled only for looks
+// that use them, so the default bake runs exactly the code it always ran).
+//
+// CRACK_CHIP: chipped, ragged edges.  The drawn width of every crack at a texel is scaled by
+// 1 + u_chip * n(p), n a seeded two-octave value noise in [-1, 1] of the texel's world point
+// (feature size u_chip_scale): a function of the point only, so both passes agree on it, it is
+// continuous across UV seams and the same seed gives the same pixels.
+// CRACK_CURL: curled cell edges.  Beside each crack a raised rim of height u_curl * D falls off
+// quadratically over CURL_REACH half widths (the normal map only; crack.depth stays >= 0).
+
+const float CURL_REACH = 1.5;
+
+#ifdef CRACK_CHIP
+uniform float u_chip;        // relative amplitude of the half-width noise, 0..0.9
+uniform float u_chip_scale;  // feature size of the noise, mesh units
+uniform uint u_chip_seed;
+
+uint chip_hash(ivec3 c, uint salt) {
+    uint h = (uint(c.x) * 0x8da6b343u) ^ (uint(c.y) * 0xd8163841u) ^ (uint(c.z) * 0xcb1ab31fu);
+    h ^= u_chip_seed + salt * 0x9e3779b9u;
+    h ^= h >> 16; h *= 0x7feb352du; h ^= h >> 15; h *= 0x846ca68bu; h ^= h >> 16;
+    return h;
+}
+
+float chip_corner(ivec3 c, uint salt) { return float(chip_hash(c, salt) >> 8u) / 8388607.5 - 1.0; }
+
+float chip_value_noise(vec3 q, uint salt) {
+    vec3 fl = floor(q);
+    ivec3 i = ivec3(fl);
+    vec3 f = q - fl;
+    f = f * f * (3.0 - 2.0 * f);
+    float x00 = mix(chip_corner(i, salt), chip_corner(i + ivec3(1, 0, 0), salt), f.x);
+    float x10 = mix(chip_corner(i + ivec3(0, 1, 0), salt), chip_corner(i + ivec3(1, 1, 0), salt), f.x);
+    float x01 = mix(chip_corner(i + ivec3(0, 0, 1), salt), chip_corner(i + ivec3(1, 0, 1), salt), f.x);
+    float x11 = mix(chip_corner(i + ivec3(0, 1, 1), salt), chip_corner(i + ivec3(1, 1, 1), salt), f.x);
+    return mix(mix(x00, x10, f.y), mix(x01, x11, f.y), f.z);
+}
+
+// Factor of the drawn width at world point p: 1 + u_chip * n, n in [-1, 1].
+float chip_factor(vec3 p) {
+    vec3 q = p / u_chip_scale;
+    float n = 0.65 * chip_value_noise(q, 1u) + 0.35 * chip_value_noise(2.7 * q, 2u);
+    return 1.0 + u_chip * clamp(2.0 * n, -1.0, 1.0);
+}
+#else
+float chip_factor(vec3 p) { return 1.0; }
+#endif
+
+#ifdef CRACK_CURL
+uniform float u_curl;  // rim height, of the crack's depth
+#endif

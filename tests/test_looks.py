@@ -1,0 +1,317 @@
+"""Crack looks (:mod:`crackbake.looks`): the presets' ``[look]`` tables and ``--look``, the width
+noise along each crack, chipped edges, curled rims and normal strength in the bake, the
+composite modes of the base colour, and what each preset's look measures on real runs.
+
+The runs build their meshes (a plate from :func:`crackbake.precompile.plate_obj`, or
+``examples/spot.obj``) and read back the files the command wrote: ``cracks.json`` for the
+network measures (:mod:`crackbake.metrics.looks`), the PNGs for the composited colours, the GLB's
+JSON chunk for the material.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from PIL import Image
+
+from crackbake.bake.raster import bake_cracks
+from crackbake.cli import main
+from crackbake.errors import CrackbakeError
+from crackbake.exchange.materials import SURFACE_RGB, base_color
+from crackbake.io.mesh import load_mesh
+from crackbake.looks import KEYS, Look, parse_look, resolve_look, vary_widths
+from crackbake.metrics.cells import network_stats
+from crackbake.metrics.looks import crack_area_share, width_cell_ratio, width_cv
+from crackbake.network import Crack, CrackNetwork, Segments, segments
+from crackbake.params import RunParams, load_preset, preset_names
+from crackbake.precompile import plate_obj
+
+ROOT = Path(__file__).resolve().parents[1]
+SPOT = ROOT / "examples" / "spot.obj"
+
+
+# --- the table and its overrides ------------------------------------------------------------
+
+
+def test_every_preset_has_a_complete_checked_look():
+    for name in preset_names():
+        table = load_preset(name)["look"]
+        assert set(table) == set(KEYS), name
+        look = RunParams(mesh=Path("x.obj"), preset=name).validate().crack_look()
+        assert look.mode in ("darken", "lighten", "multiply")
+    # Bright glass, dark stained hairlines for crackle and glaze, varied widths for concrete.
+    glass = resolve_look(load_preset("glass"), {})
+    assert glass.mode == "lighten" and min(glass.color) > max(SURFACE_RGB)
+    assert glass.roughness < 0.5
+    for name in ("crackle", "glaze"):
+        look = resolve_look(load_preset(name), {})
+        assert look.mode in ("darken", "multiply") and max(look.color) < 100
+    assert resolve_look(load_preset("concrete"), {}).width_variation >= 0.4
+
+
+def test_look_overrides_are_parsed_and_checked():
+    over = parse_look(["mode=lighten", "color=250,240,230", "normal-strength=3", "chipping=0.1"])
+    assert over == {"mode": "lighten", "color": (250.0, 240.0, 230.0), "normal_strength": 3.0,
+                    "chipping": 0.1}
+    look = resolve_look(load_preset("mud"), over)
+    assert look.mode == "lighten" and look.normal_strength == 3.0
+    assert look.curl == load_preset("mud")["look"]["curl"]  # the rest stays the preset's
+    bad = {
+        "mode=glow": "mode 'glow' is unknown",
+        "colour=1,2,3": "unknown look key 'colour'",
+        "color=1,2": "give three sRGB values",
+        "roughness=2": "roughness 2.0 is out of range",
+        "chipping=nan": "chipping nan is out of range",
+        "width_variation=x": "width_variation 'x' is not a number",
+        "roughness": "expected KEY=VALUE",
+    }
+    for text, message in bad.items():
+        with pytest.raises(CrackbakeError, match=message):
+            parse_look([text])
+    with pytest.raises(CrackbakeError, match="roughness"):
+        RunParams(mesh=Path("x.obj"), look={"roughness": -1}).validate()
+
+
+def test_bad_look_on_the_command_line_is_one_line_exit_2(tmp_path):
+    mesh = plate_obj(tmp_path / "plate.obj", 1)
+    r = CliRunner().invoke(main, [str(mesh), "--look", "mode=glow", "-o", str(tmp_path / "o")])
+    assert r.exit_code == 2
+    assert r.output.strip().splitlines() == [
+        "error: --look mode 'glow' is unknown; use one of darken, lighten, multiply"
+    ]
+    assert not (tmp_path / "o").exists()
+
+
+# --- width noise along the cracks -----------------------------------------------------------
+
+
+def _straight_network(n_cracks: int = 40, points: int = 60) -> CrackNetwork:
+    cracks = []
+    for i in range(n_cracks):
+        x = np.linspace(0.0, 1.0, points)
+        p = np.column_stack([x, np.full(points, 0.02 * i), np.zeros(points)])
+        w = np.full(points, 0.004)
+        cracks.append(Crack(id=i, points=p, faces=np.zeros(points, int), time=x, width=w,
+                            depth=0.5 * w))
+    return CrackNetwork(cracks=cracks, mesh={})
+
+
+def test_width_variation_gives_the_asked_spread_seeded_and_order_free():
+    net = vary_widths(_straight_network(), 0.5, seed=7, scale=0.02)
+    cv = width_cv([c.points for c in net.cracks], [c.width for c in net.cracks])
+    assert 0.35 < cv < 0.65
+    widths = np.concatenate([c.width for c in net.cracks])
+    assert widths.min() > 0
+    assert np.mean(widths) == pytest.approx(0.004, rel=0.1)  # the mean opening stays
+    for c in net.cracks:  # depth follows the width: the profile keeps its shape
+        np.testing.assert_allclose(c.depth, 0.5 * c.width)
+    again = vary_widths(_straight_network(), 0.5, seed=7, scale=0.02)
+    reordered = _straight_network()
+    reordered.cracks.reverse()
+    vary_widths(reordered, 0.5, seed=7, scale=0.02)
+    by_id = {c.id: c.width for c in reordered.cracks}
+    for a, b in zip(net.cracks, again.cracks, strict=True):
+        np.testing.assert_array_equal(a.width, b.width)
+        np.testing.assert_array_equal(a.width, by_id[a.id])
+    other = vary_widths(_straight_network(), 0.5, seed=8, scale=0.02)
+    assert not np.array_equal(other.cracks[0].width, net.cracks[0].width)
+    untouched = vary_widths(_straight_network(), 0.0, seed=7, scale=0.02)
+    assert all((c.width == 0.004).all() for c in untouched.cracks)
+
+
+# --- the bake: chipping, curl, normal strength ----------------------------------------------
+
+
+def _plane(n: int = 8):
+    t = np.linspace(0.0, 1.0, n + 1)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    v = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    idx = np.arange(v.shape[0]).reshape(n + 1, n + 1)
+    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
+    f = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]).reshape(-1, 3)
+    normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
+    tangents = np.tile([1.0, 0.0, 0.0, 1.0], (len(v), 1))
+    return v, f, v[:, :2].copy(), normals, tangents
+
+
+def _one_crack(width: float = 0.03) -> Segments:
+    p = np.column_stack([np.linspace(0.1, 0.9, 9), np.full(9, 0.5), np.zeros(9)])
+    w = np.full(9, width)
+    crack = Crack(id=0, points=p, faces=np.zeros(9, int), time=np.linspace(0, 1, 9), width=w,
+                  depth=0.5 * w)
+    return segments(CrackNetwork(cracks=[crack], mesh={}))
+
+
+def _bake(look, seed=0, res=256):
+    v, f, uv, n, t = _plane()
+    return bake_cracks(v, f, uv, _one_crack(), res, normals=n, tangents=t, look=look, seed=seed)
+
+
+@pytest.mark.usefixtures("gl_ctx")
+def test_default_look_bakes_exactly_as_no_look():
+    plain, looked = _bake(None), _bake(Look())
+    for name, image in plain.channels().items():
+        np.testing.assert_array_equal(image, looked.channels()[name], err_msg=name)
+
+
+@pytest.mark.usefixtures("gl_ctx")
+def test_chipping_ragged_edges_seeded_width_channel_physical():
+    plain = _bake(Look())
+    chipped = _bake(Look(chipping=0.5), seed=3)
+    # Columns across the crack: the drawn width varies along it only when chipped.
+    cols = slice(64, 192)
+    across_plain = plain.mask[:, cols].astype(np.float64).sum(axis=0)
+    across = chipped.mask[:, cols].astype(np.float64).sum(axis=0)
+    assert across_plain.std() / across_plain.mean() < 0.02
+    assert across.std() / across.mean() > 0.1
+    assert across.max() / across.min() > 1.4
+    np.testing.assert_array_equal(plain.width, chipped.width)  # crack.width stays physical
+    np.testing.assert_array_equal(chipped.mask, _bake(Look(chipping=0.5), seed=3).mask)
+    assert not np.array_equal(chipped.mask, _bake(Look(chipping=0.5), seed=4).mask)
+    # The normal map follows the drawn edge: tilted texels and covered texels coincide.
+    tilted = chipped.normal[..., 2] < 0.999
+    covered = chipped.mask > 0.5
+    assert (tilted & covered).sum() / covered.sum() > 0.9
+
+
+@pytest.mark.usefixtures("gl_ctx")
+def test_curl_raises_the_rims_and_normal_strength_steepens_the_walls():
+    plain, curled = _bake(Look()), _bake(Look(curl=0.4))
+    np.testing.assert_array_equal(plain.mask, curled.mask)
+    np.testing.assert_array_equal(plain.depth, curled.depth)  # crack.depth stays >= 0 as before
+    rim = (curled.mask == 0) & (curled.normal[..., 2] < 0.999)
+    assert rim.sum() > 0 and (plain.normal[..., 2][rim] == 1).all()
+    # A raised rim leans away from the crack (the crack runs along y = 0.5, row res / 2).
+    rows = np.nonzero(rim)[0]
+    ny = curled.normal[..., 1][rim]
+    above = rows < 128  # image row 0 is v = 1: above the crack in the image is +y
+    assert (ny[above] > 0).all() and (ny[~above] < 0).all()
+    steep = _bake(Look(normal_strength=2.0))
+    walls = (plain.mask > 0.99) & (plain.normal[..., 2] < 0.999)
+
+    def slope(n):
+        return np.hypot(n[..., 0], n[..., 1])[walls] / n[..., 2][walls]
+
+    np.testing.assert_allclose(slope(steep.normal), 2.0 * slope(plain.normal), rtol=1e-3)
+
+
+# --- composite modes --------------------------------------------------------------------------
+
+
+def test_composite_modes_on_grey_and_on_a_texture():
+    mask = np.array([[0.0, 1.0]], np.float16)
+    occ = np.array([[1.0, 0.5]], np.float16)
+    default = base_color(mask, occlusion=occ)
+    np.testing.assert_array_equal(base_color(mask, occlusion=occ, look=Look()), default)
+    dark = base_color(mask, occlusion=np.ones_like(occ), look=Look(color=(20, 30, 40)))
+    np.testing.assert_array_equal(dark[0, 1], [20, 30, 40])
+    bright = base_color(mask, occlusion=occ, look=Look(color=(250, 250, 255), mode="lighten"))
+    np.testing.assert_array_equal(bright[0, 0], np.round(SURFACE_RGB))
+    np.testing.assert_array_equal(bright[0, 1], [250, 250, 255])  # no occlusion: a bright line
+    mult = base_color(mask, occlusion=np.ones_like(occ),
+                      look=Look(color=(128, 255, 255), mode="multiply"))
+    np.testing.assert_allclose(mult[0, 1], SURFACE_RGB * [128 / 255, 1, 1], atol=1)
+    tex = np.array([[[100, 150, 200], [100, 150, 200]]], np.uint8)
+    lit = base_color(mask, occlusion=occ, texture=tex,
+                     look=Look(color=(250, 250, 255), mode="lighten"))
+    np.testing.assert_array_equal(lit[0, 0], tex[0, 0])
+    assert (lit[0, 1] > tex[0, 1]).all() and lit.max() <= 255
+
+
+# --- real runs ------------------------------------------------------------------------------
+
+
+def _run(tmp_path: Path, mesh: Path, name: str, *args: str, res: int = 1024) -> Path:
+    out = tmp_path / name
+    argv = [str(mesh), "--res", str(res), "--formats", "png,glb", "-o", str(out), "-q", *args]
+    result = CliRunner().invoke(main, argv, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def _network(out: Path):
+    cracks = json.loads((out / "cracks.json").read_text())["cracks"]
+    return [np.asarray(c["points"]) for c in cracks], [np.asarray(c["width"]) for c in cracks]
+
+
+def _glb_material(path: Path) -> dict:
+    data = path.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    return json.loads(data[20 : 20 + length])["materials"][0]
+
+
+@pytest.fixture(scope="module")
+def plate(tmp_path_factory) -> Path:
+    return plate_obj(tmp_path_factory.mktemp("plate") / "plate.obj", 12, uv_margin=0.0)
+
+
+@pytest.mark.parametrize("kind", ["plate", pytest.param("spot", marks=pytest.mark.slow)])
+def test_mud_opens_gaps_of_its_cell_size(tmp_path, plate, kind):
+    mesh = plate if kind == "plate" else SPOT
+    out = _run(tmp_path, mesh, "mud", "--preset", "mud", "--sim-faces", "40000")
+    pts, wid = _network(out)
+    surf = load_mesh(mesh)
+    st = network_stats(pts, wid, surf.vertices, surf.faces)
+    ratio = width_cell_ratio(st.mean_width, st.mean_cell_area)
+    area = crack_area_share(pts, wid, surf.vertices, surf.faces)
+    assert 0.03 <= ratio <= 0.08, ratio
+    assert 0.04 <= area <= 0.08, area
+    if kind == "plate":  # every texel of the plate has the same area: the mask's mean is a share
+        mask = np.asarray(Image.open(out / "plate_mask.png"), np.float64) / 255
+        assert 0.04 <= mask.mean() <= 0.09, mask.mean()
+        # Dark interiors: the crack centres are darker than the look's colour on the walls.
+        base = np.asarray(Image.open(out / "plate_basecolor.png"), np.float64).mean(axis=2)
+        assert base[mask > 0.99].mean() < 0.5 * base[mask == 0].mean()
+
+
+@pytest.mark.parametrize("impact", [False, True])
+def test_concrete_width_varies_along_each_crack(tmp_path, plate, impact):
+    args = ["--preset", "concrete", "--sim-faces", "30000"]
+    args += ["--impact", "0.5,0.5,0"] if impact else []
+    out = _run(tmp_path, plate, "concrete", *args, res=256)
+    pts, wid = _network(out)
+    assert width_cv(pts, wid) >= 0.4
+
+
+def test_glass_cracks_are_bright_glossy_lines_and_the_glb_says_so(tmp_path, plate):
+    out = _run(tmp_path, plate, "glass", "--preset", "glass", "--impact", "0.5,0.5,0",
+               "--sim-faces", "30000")
+    mask = np.asarray(Image.open(out / "plate_mask.png"), np.float64) / 255
+    base = np.asarray(Image.open(out / "plate_basecolor.png"), np.float64).mean(axis=2)
+    orm = np.asarray(Image.open(out / "plate_orm.png"), np.float64) / 255
+    on, off = mask > 0.9, mask == 0
+    assert on.sum() > 100
+    assert base[on].mean() > base[off].mean() + 20
+    assert orm[..., 1][on].mean() < orm[..., 1][off].mean() - 0.4  # glossier at the crack
+    look = _glb_material(out / "plate.glb")["extras"]["crackbake_look"]
+    assert look["mode"] == "lighten" and look["roughness"] == pytest.approx(0.15)
+
+
+def test_look_overrides_reach_the_outputs_and_runs_repeat(tmp_path, plate):
+    args = ["--preset", "mud", "--sim-faces", "20000", "--seed", "4"]
+    over = ["--look", "mode=lighten", "--look", "color=250,250,250", "--look", "roughness=0.1",
+            "--look", "width_variation=0"]
+    a = _run(tmp_path, plate, "a", *args, *over, res=256)
+    b = _run(tmp_path, plate, "b", *args, *over, res=256)
+    plain = _run(tmp_path, plate, "plain", *args, res=256)
+    mask = np.asarray(Image.open(a / "plate_mask.png"), np.float64) / 255
+    base = np.asarray(Image.open(a / "plate_basecolor.png"), np.float64)
+    orm = np.asarray(Image.open(a / "plate_orm.png"))
+    on = mask > 0.99
+    assert (base[on] >= 249).all()
+    assert np.abs(orm[..., 1][on].astype(int) - round(0.1 * 255)).max() <= 1
+    manifest = json.loads((a / "manifest.json").read_text())
+    assert manifest["params"]["look"]["mode"] == "lighten"
+    assert _glb_material(a / "plate.glb")["extras"]["crackbake_look"]["roughness"] == 0.1
+    # width_variation=0: the solver's widths as they were; the preset's own noise changes them.
+    pa, wa = _network(a)
+    pp, wp = _network(plain)
+    assert all(np.array_equal(x, y) for x, y in zip(pa, pp, strict=True))
+    assert width_cv(pa, wa) < width_cv(pp, wp)
+    for name in ("cracks.json", "plate_basecolor.png", "plate_normal.png", "plate_mask.png"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
