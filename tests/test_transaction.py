@@ -35,6 +35,10 @@ SLOW = [str(SPOT), "--preset", "mud", "--sim-faces", "20000", "--res", "2048"]
 QUICK = [str(SPOT), "--preset", "mud", "--sim-faces", "2000", "--res", "256", "--formats", "exr"]
 
 
+def _default_signals() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 class Run:
     """A crackbake process whose stderr lines are collected as they come."""
 
@@ -48,6 +52,9 @@ class Run:
             text=True,
             env=env,
             cwd=cwd,
+            # A shell's background job (``make test &``) ignores SIGINT and its children inherit
+            # that; the signals under test must reach crackbake as a terminal's Ctrl-C would.
+            preexec_fn=_default_signals,
         )
         self.lines: list[str] = []
         self._new = threading.Condition()

@@ -260,8 +260,10 @@ def fit_one_page(
     first = attempt(scale)
     if first is None:
         miss = scale
-        while len(tried) < MAX_ATTEMPTS and best is None:
-            scale *= SHRINK
+        while len(tried) < 2 * MAX_ATTEMPTS and best is None:
+            # Past MAX_ATTEMPTS the page is far too small for the first guess (a tiny --res
+            # with many charts, whose gutters dominate): halve the scale instead.
+            scale *= SHRINK if len(tried) < MAX_ATTEMPTS else 0.5
             fit = attempt(scale)
             best = None if fit is None else (scale, fit)
     else:
