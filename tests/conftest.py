@@ -14,6 +14,8 @@ checked for a pending GL error afterwards, as moderngl's own test suite does.
 from __future__ import annotations
 
 import os
+import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -60,6 +62,21 @@ def pytest_terminal_summary(terminalreporter):
         terminalreporter.write_line(
             "reference checks (Blender, glTF validator): "
             + ", ".join(f"{n} {k}" for k, n in counts.items()))
+
+
+def wait_for_staging(proc, folder: Path, timeout: float = 120.0) -> None:
+    """Block until a crackbake child has opened its output stage in ``folder`` (a
+    ``.<name>.crackbake-staging-*`` entry appears): from then on its SIGINT/SIGTERM handlers
+    are in place.
+
+    A fixed sleep is not enough on a loaded machine, where the child may still be importing
+    when the signal arrives (it then dies by the signal, -15, instead of exiting 143).
+    """
+    end = time.monotonic() + timeout
+    while not any(".crackbake-staging-" in p.name for p in folder.iterdir()):
+        if proc.poll() is not None or time.monotonic() > end:
+            raise AssertionError(f"the child never staged its output (exit {proc.poll()})")
+        time.sleep(0.05)
 
 
 def grid_faces(nx: int, ny: int) -> np.ndarray:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import wait_for_staging
 from PIL import Image
 
 from crackbake.errors import CrackbakeError
@@ -288,7 +289,8 @@ def test_sigterm_leaves_no_folder(tmp_path):
         [sys.executable, "-m", "crackbake", "decals", "-n", "64", "--res", "256", "-o", str(out)],
         stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
-    time.sleep(4.0)  # inside the variants' solves and bakes
+    wait_for_staging(proc, tmp_path)
+    time.sleep(1.0)  # inside the variants' solves and bakes
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err

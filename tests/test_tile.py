@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import wait_for_staging
 from PIL import Image
 
 from crackbake.exchange.exr import read_exr
@@ -247,7 +248,8 @@ def test_sigterm_leaves_no_folder(tmp_path):
          "--res", "2048", "-o", str(out)],
         stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
-    time.sleep(2.5)  # inside the solve
+    wait_for_staging(proc, tmp_path)
+    time.sleep(0.5)  # inside the solve
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, err
