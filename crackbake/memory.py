@@ -33,7 +33,8 @@ import numpy as np
 from crackbake.errors import CrackbakeError
 from crackbake.params import STRESS_RES_DEFAULT, TILE_DEFAULT
 
-__all__ = ["MemoryEstimate", "available_memory", "check_memory", "estimate_peak", "run_sizes"]
+__all__ = ["MemoryEstimate", "available_memory", "cgroup_limit", "check_memory", "estimate_peak",
+           "run_sizes"]
 
 GIB = 2**30
 # Bytes, least-squares fit of benchmarks/bench_memory.py's 15 runs (docs/memory.md), rounded up.
@@ -158,19 +159,64 @@ def _read_int(path: str) -> int | None:
     return int(text) if text.isdigit() else None
 
 
-def available_memory() -> tuple[int, str, bool]:
+def cgroup_limit(root: str | os.PathLike = "/sys/fs/cgroup",
+                 membership: str | os.PathLike = "/proc/self/cgroup") -> tuple[int, str] | None:
+    """The memory limit of this process's cgroup: bytes and the file it was read from.
+
+    The smallest limit from the process's own group up to the mount point (a parent's limit
+    caps its children; a ``systemd-run -p MemoryMax=`` slice or a container sets one): cgroup v2's
+    ``memory.max`` under the ``0::<path>`` line of ``membership``, and cgroup v1's
+    ``memory/<path>/memory.limit_in_bytes`` under its ``memory`` line (v1 writes "no limit" as
+    a huge number, v2 as ``max``).  None when no limit is set.
+
+    Parameters
+    ----------
+    root : path
+        Where the cgroup file system is mounted.
+    membership : path
+        The process's cgroup membership file.
+    """
+    root = Path(root)
+    try:
+        lines = Path(membership).read_text().splitlines()
+    except OSError:
+        lines = []
+    groups = {"0::": "/", "memory": None}
+    for line in lines:
+        _, controllers, path = (line.split(":", 2) + ["", ""])[:3]
+        if line.startswith("0::"):
+            groups["0::"] = path
+        elif "memory" in controllers.split(","):
+            groups["memory"] = path
+    # (mount, own group, limit file, "no limit" from): v2 unified, then the v1 memory controller
+    places = [(root, groups["0::"], "memory.max", 2**62)]
+    places.append((root / "memory", groups["memory"] or "/", "memory.limit_in_bytes", 2**60))
+    found: list[tuple[int, str]] = []
+    for mount, own, name, unlimited in places:
+        top = mount.resolve()
+        folder = (mount / own.lstrip("/")).resolve()
+        while True:  # up to the mount point: a parent's limit caps its children
+            value = _read_int(str(folder / name))
+            if value is not None and value < unlimited:
+                found.append((value, str(folder / name)))
+            if folder == top or top not in folder.parents:
+                break
+            folder = folder.parent
+    return min(found) if found else None
+
+
+def available_memory(cgroup_root: str | os.PathLike = "/sys/fs/cgroup",
+                     membership: str | os.PathLike = "/proc/self/cgroup") -> tuple[int, str, bool]:
     """The memory this process may use: bytes, where the figure comes from, and whether it
     limits address space (``RLIMIT_AS``) rather than resident memory.
 
-    The smallest of the cgroup limit (v2 ``memory.max``, v1 ``memory.limit_in_bytes``),
-    ``RLIMIT_AS`` and the physical memory.
+    The smallest of the cgroup limit (:func:`cgroup_limit`), ``RLIMIT_AS`` and the physical
+    memory.  ``cgroup_root`` and ``membership`` are where :func:`cgroup_limit` reads.
     """
     found: list[tuple[int, str, bool]] = []
-    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
-        value = _read_int(path)
-        if value is not None and value < 2**60:  # v1 writes "no limit" as a huge number
-            found.append((value, f"the cgroup limit ({path})", False))
-            break
+    limit = cgroup_limit(cgroup_root, membership)
+    if limit is not None:
+        found.append((limit[0], f"the cgroup limit ({limit[1]})", False))
     soft, _ = resource.getrlimit(resource.RLIMIT_AS)
     if soft != resource.RLIM_INFINITY:
         found.append((soft, "the address-space limit (ulimit -v)", True))

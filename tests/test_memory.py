@@ -14,6 +14,7 @@ from crackbake.memory import (
     GIB,
     MemoryEstimate,
     available_memory,
+    cgroup_limit,
     check_memory,
     estimate_peak,
     run_sizes,
@@ -87,3 +88,41 @@ def test_available_memory_reads_the_address_space_cap():
     assert limit == 3 * 2**30 and "ulimit -v" in source and address is True
     limit, _, _ = available_memory()
     assert 0 < limit <= os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def _cgroup_tree(root: Path, files: dict[str, str]) -> None:
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+
+
+@pytest.mark.parametrize("layout, membership, limit, source", [
+    # cgroup v2: a systemd slice with MemoryMax under an unlimited parent
+    ({"memory.max": "max\n", "user.slice/memory.max": "max\n",
+      "user.slice/run-1.scope/memory.max": "3221225472\n"},
+     "0::/user.slice/run-1.scope\n", 3 * 2**30, "user.slice/run-1.scope/memory.max"),
+    # v2: the parent's limit is smaller than the group's own
+    ({"a/memory.max": "1073741824\n", "a/b/memory.max": "max\n"},
+     "0::/a/b\n", 2**30, "a/memory.max"),
+    # cgroup v1 in a sub-group (this is how a job scheduler's process group looks)
+    ({"memory/memory.limit_in_bytes": "9223372036854771712\n",
+      "memory/jobs/42/memory.limit_in_bytes": "2147483648\n"},
+     "4:memory:/jobs/42\n0::/\n", 2 * 2**30, "memory/jobs/42/memory.limit_in_bytes"),
+    # v1 with no limit anywhere
+    ({"memory/memory.limit_in_bytes": "9223372036854771712\n"},
+     "4:memory:/\n0::/\n", None, None),
+])
+def test_cgroup_limit_reads_the_process_group_and_its_parents(tmp_path, layout, membership,
+                                                              limit, source):
+    root = tmp_path / "cgroup"
+    _cgroup_tree(root, layout)
+    (tmp_path / "self").write_text(membership)
+    found = cgroup_limit(root, tmp_path / "self")
+    if limit is None:
+        assert found is None
+        return
+    assert found[0] == limit and found[1].endswith(source)
+    got, said, address = available_memory(root, tmp_path / "self")
+    assert got == min(limit, os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    assert "cgroup" in said and address is False
+
