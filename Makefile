@@ -23,7 +23,7 @@ GLTFV    := $(NODE_DIR)/.installed-$(subst @,-,$(GLTFV_PIN))
 setup: syslibs $(STAMP)
 
 $(STAMP): pyproject.toml
-	@test -x $(VPY) || $(PY) -m venv $(VENV)
+	@$(VPY) -m pip --version >/dev/null 2>&1 || { rm -rf $(VENV) && $(PY) -m venv $(VENV); }
 	$(VPY) -m pip install --quiet --upgrade pip
 	$(VPY) -m pip install --quiet -e '.[test]'
 	@# numba compiles its kernels once into the on-disk cache here, not in the first run.
@@ -64,7 +64,8 @@ references: $(BPY_STAMP) $(GLTFV)
 
 $(BPY_STAMP):
 	@command -v $(PY311) >/dev/null 2>&1 || { echo "make test needs $(PY311) for Blender's bpy wheel (built for Python 3.11 only); install it or pass PY311=/path/to/python3.11"; exit 1; }
-	@test -x $(BPY) || $(PY311) -m venv $(BPY_VENV)
+	@# an environment left half-made (an interrupted venv has no pip) is made again
+	@$(BPY) -m pip --version >/dev/null 2>&1 || { rm -rf $(BPY_VENV) && $(PY311) -m venv $(BPY_VENV); }
 	$(BPY) -m pip install --quiet --upgrade pip
 	$(BPY) -m pip install --quiet $(BPY_PIN)
 	$(BPY) -c "import bpy"
@@ -83,7 +84,7 @@ test:
 	@$(MAKE) --no-print-directory -j2 setup references
 	$(VPY) -m ruff check crackbake tests benchmarks examples
 	CRACKBAKE_BLENDER_PYTHON=$(abspath $(BPY)) CRACKBAKE_GLTF_VALIDATOR=$(abspath $(NODE_DIR)) \
-	  CRACKBAKE_REFERENCE=require $(VPY) -m pytest -q
+	  CRACKBAKE_REFERENCE=require $(VPY) -m pytest -q -n auto --dist loadfile
 
 # The quick loop while editing: ruff and every test not marked slow or reference.
 check: setup
@@ -96,6 +97,7 @@ bench: setup
 	$(VPY) benchmarks/bench_pipeline.py
 	$(VPY) benchmarks/bench_scale.py
 	$(VPY) benchmarks/bench_compile.py
+	$(VPY) benchmarks/bench_resolution.py
 
 # numba's kernel cache (*.nbi, *.nbc) lives in the __pycache__ folders beside the sources.
 clean:

@@ -219,7 +219,7 @@ def gl_ctx(gl_session):
 
 
 # ------------------------------------------------------------------ solver fields (test_iben,
-# test_resolution)
+# benchmarks/bench_resolution.py)
 
 
 def stress_of(stress: np.ndarray, growth=None) -> SimpleNamespace:

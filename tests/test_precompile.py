@@ -54,9 +54,11 @@ def test_first_run_after_precompile_compiles_nothing(tmp_path):
                          capture_output=True, text=True, timeout=600)
     assert pre.returncode == 0, pre.stderr
     assert "kernels compiled" in pre.stdout
+    # glass: an impact; crackle on thesis: the other solver; glaze: growth (--shrink-rate).
     for options in (["--preset", "glass", "--impact", "0.334,0.044,0.287"],
-                    ["--preset", "crackle", "--method", "thesis"]):
-        out = tmp_path / f"out{len(options)}"
+                    ["--preset", "crackle", "--method", "thesis"],
+                    ["--preset", "glaze"]):
+        out = tmp_path / f"out_{options[1]}"
         run = subprocess.run(
             [sys.executable, "-c", _PROBE, str(REPO / "examples" / "spot.obj"), *options,
              "--res", "512", "-q", "-o", str(out)],
