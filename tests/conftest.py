@@ -251,3 +251,17 @@ def largest_eigen(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     tensors, by numpy."""
     w, v = np.linalg.eigh(tensors)
     return w[:, -1], v[:, :, -1]
+
+
+# ------------------------------------------------------------------ scheduling
+# ``make test`` hands whole files to its workers (pytest-xdist --dist loadfile) in collection
+# order.  The longest files (measured with --durations: a fresh numba cache compiled, about a
+# hundred CLI processes for the bad-input catalogue, the interrupted runs), then every file that
+# holds slow tests, go first, so no long file starts when the others are nearly done.
+_LONGEST = ("test_precompile.py", "test_bad_inputs.py", "test_transaction.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    slow = {item.path for item in items if item.get_closest_marker("slow")}
+    # stable: the order within a file is kept
+    items.sort(key=lambda item: (item.path.name not in _LONGEST, item.path not in slow))

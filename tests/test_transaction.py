@@ -66,7 +66,7 @@ class Run:
                 self.lines.append(line.rstrip("\n"))
                 self._new.notify_all()
 
-    def wait_for(self, text: str, timeout: float = 120.0) -> None:
+    def wait_for(self, text: str, timeout: float = 300.0) -> None:
         """Block until a stderr line contains ``text``."""
         end = time.monotonic() + timeout
         with self._new:
@@ -76,7 +76,7 @@ class Run:
                     raise AssertionError(f"never saw {text!r}; stderr: {self.lines}")
                 self._new.wait(0.5)
 
-    def finish(self, timeout: float = 120.0) -> int:
+    def finish(self, timeout: float = 300.0) -> int:
         rc = self.proc.wait(timeout)
         time.sleep(0.2)  # let the reader thread take the last lines
         return rc
