@@ -367,6 +367,7 @@ def solve(
         solver_steps=result.steps,
     )
     network = grow_from_impacts(network)  # crack.time grows out of the impact (timing.py)
+    _warn_no_star(network, sim, sources)
     look = params.crack_look()
     # Widths that swell and narrow along each crack (the look's width_variation), in the
     # network itself so cracks.json, crack.width and the drawn maps agree.
@@ -396,6 +397,42 @@ def _warn_once(first: list, second: list) -> None:
         said.add(kind)
         w = latest.get(kind, w)
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+
+
+def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
+    """One warning for the impacts that grew no star (too few radial arms cross the circle at
+    0.3 of their reach, :func:`crackbake.metrics.star.missing_stars`), when impacts are the
+    only stress: shrinkage, tension or curvature terms grow cell webs on purpose."""
+    from crackbake.metrics.star import STAR_MIN_ARMS, STAR_MIN_EDGES, impact_reach, missing_stars
+    from crackbake.simulate.stress import CurvatureSource, DirectionalSource, ShrinkSource
+
+    if not network.impacts or any(
+        isinstance(s, (ShrinkSource, DirectionalSource, CurvatureSource)) for s in sources
+    ):
+        return
+    missing = missing_stars(network, sim.vertices, sim.faces)
+    if not missing:
+        return
+    said = "; ".join(
+        f"({', '.join(f'{float(x):.4g}' for x in imp['point'])}) {arms}" for imp, arms in missing
+    )
+    radius = min(imp["radius"] for imp, _ in missing)
+    edge = float(sim.edge_length)
+    spans = 0.3 * impact_reach(radius) / max(edge, 1e-300)
+    if spans < STAR_MIN_EDGES:  # the sim mesh cannot resolve the arms
+        why = (f"the 0.3-reach circle spans only {spans:.1f} sim edges: give a finer --detail "
+               f"(about {0.3 * impact_reach(radius) / (2 * STAR_MIN_EDGES):.3g}) or a larger "
+               "radius")
+    else:
+        why = (f"the surface there (a thin feature, a small lobe or piece) is likely narrower "
+               f"than the star: give a smaller radius (--impact X,Y,Z:{0.5 * radius:.3g}), a "
+               f"point on a broader area, or a finer --detail (sim edge now {edge:.3g})")
+    warnings.warn(
+        f"no star formed at {len(missing)} impact(s): radial arms crossing the circle at 0.3 of "
+        f"the reach, at least {STAR_MIN_ARMS} in a star, measured: {said}; {why}",
+        CrackbakeWarning,
+        stacklevel=3,
+    )
 
 
 def _grow(sim, field, sp):

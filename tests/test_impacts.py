@@ -219,3 +219,46 @@ def test_touching_shells_crack_together(tmp_path):
     sim = build_simmesh(mesh, target_faces=40000)
     far = sim.vertices[sim.faces].mean(axis=1)[:, 2] > 0.2
     assert not stress_field(sim, mesh, [src]).stress[far].any()
+
+
+def _solve_warned(path: Path, impacts, sim_faces: int) -> tuple:
+    """:func:`_solve` keeping the CrackbakeWarnings' texts."""
+    params = RunParams(mesh=path, preset="glass", seed=0, sim_faces=sim_faces,
+                       impacts=tuple(Impact(tuple(p), r) for p, r in impacts)).validate()
+    resolved, relative = params.resolved()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        network, _, solved = solve(load_mesh(path), resolved, relative, {})
+    said = [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+    return network, solved, [s for s in said if s.startswith("no star formed")]
+
+
+def test_no_star_warns_once(tmp_path):
+    # An impact of 3 sim edges' radius on a plate cannot space a star's arms: the run says so in
+    # one line, with the arms it measured and the fix.  The same plate hit with a radius the sim
+    # mesh resolves grows a star and says nothing.
+    path = plate_obj(tmp_path / "plate.obj", 4, uv_margin=0.0)
+    network, solved, said = _solve_warned(path, [((0.5, 0.5, 0.0), 0.03)], 20000)
+    arms = star_metrics(network, network.impacts[0]["point"],
+                        impact_reach(network.impacts[0]["radius"]),
+                        solved.sim.vertices, solved.sim.faces)["arms"]
+    assert arms < 5
+    assert len(said) == 1
+    assert f"(0.5, 0.5, 0) {arms};" in said[0]
+    assert "--detail" in said[0]
+
+    network, solved, said = _solve_warned(path, [((0.5, 0.5, 0.0), 0.12)], 20000)
+    arms = star_metrics(network, network.impacts[0]["point"],
+                        impact_reach(network.impacts[0]["radius"]),
+                        solved.sim.vertices, solved.sim.faces)["arms"]
+    assert arms >= 5
+    assert said == []
+
+
+def test_no_star_names_only_the_starless_impact(tmp_path):
+    # Two impacts, one resolved, one too small: only the second is named.
+    path = plate_obj(tmp_path / "plate.obj", 4, uv_margin=0.0)
+    _, _, said = _solve_warned(path, [((0.3, 0.5, 0.0), 0.12), ((0.8, 0.5, 0.0), 0.03)], 20000)
+    assert len(said) == 1
+    assert "at 1 impact(s)" in said[0] and "(0.8, 0.5, 0)" in said[0]
+    assert "(0.3, 0.5, 0)" not in said[0]

@@ -14,7 +14,10 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from crackbake.bake import uv as U
+from crackbake.bake import xatlas_worker as W
+from crackbake.bake.uv.shapes import scan_blob
 from crackbake.bake.uv.unwrap import worker_error
+from crackbake.bake.uv.uvmesh import uv_area_coverage
 from crackbake.errors import CrackbakeError
 from crackbake.io.mesh import Mesh
 
@@ -221,3 +224,130 @@ def test_cache_hit_and_no_cache(tmp_path, monkeypatch):
     np.testing.assert_array_equal(third.uv, first.uv)
     with np.load(files[0]) as data:
         assert "uv" in data.files
+
+
+def _grid(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A flat n x n grid of squares split into triangles: (V, 2) positions, (2 n^2, 3) faces."""
+    pts, faces = uv_grid(n, n, 1.0, 1.0)
+    return np.asarray(pts, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+
+
+def test_face_neighbours_pair_faces_across_edges():
+    pts, faces = _grid(4)
+    nb = W.face_neighbours(faces)
+    assert nb.shape == faces.shape
+    for f, row in enumerate(nb):
+        for k, g in enumerate(row):
+            edge = {faces[f, k], faces[f, (k + 1) % 3]}
+            if g < 0:  # a border edge: no other face holds it
+                assert sum(edge <= set(h) for h in faces.tolist()) == 1
+            else:
+                assert edge <= set(faces[g].tolist()) and f in nb[g]
+    # A third face on an edge makes it non-manifold: no pairing across it.
+    fan = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    assert (W.face_neighbours(fan)[:, 0] == -1).all()
+
+
+def test_smooth_labels_removes_specks_and_keeps_straight_borders():
+    pts, faces = _grid(12)
+    left = (pts[faces].mean(axis=1)[:, 0] < 0.5).astype(np.int64)
+    nb = W.face_neighbours(faces)
+    # A straight cut along grid lines is already smooth.
+    np.testing.assert_array_equal(W.smooth_labels(left, nb), left)
+    # A single face of the other patch inside one (a speck) and a tooth on the border go.
+    specked = left.copy()
+    c = pts[faces].mean(axis=1)
+    speck = int(np.argmin(np.linalg.norm(c - [0.8, 0.5], axis=1)))
+    tooth = int(np.argmin(np.linalg.norm(c - [0.52, 0.3], axis=1)))
+    specked[speck] = 1
+    specked[tooth] = 1 - specked[tooth]
+    np.testing.assert_array_equal(W.smooth_labels(specked, nb), left)
+
+
+def test_patches_cover_every_face_once_in_compact_pieces():
+    blob = scan_blob(6000, 1.0)
+    parts = W.patches(blob.vertices, blob.faces, 1000)
+    every = np.sort(np.concatenate(parts))
+    np.testing.assert_array_equal(every, np.arange(len(blob.faces)))
+    assert len(parts) >= 6
+    # Smoothing moves only border faces: no patch grows far past the limit.
+    assert max(len(p) for p in parts) <= 1100
+    # Borders are smooth: no face (a tooth, a speck) has two neighbours in one other patch.
+    label = np.empty(len(blob.faces), dtype=np.int64)
+    for i, p in enumerate(parts):
+        label[p] = i
+    nb = W.face_neighbours(blob.faces)
+    near = np.where(nb >= 0, label[np.maximum(nb, 0)], label[:, None])
+    teeth = [(near[:, j] != label) & ((near == near[:, [j]]).sum(axis=1) >= 2) for j in range(3)]
+    assert not np.any(teeth)
+
+
+def _as_chart(pts: np.ndarray, faces: np.ndarray, crumbs: list[int]):
+    """The grid as one chart (UVs = positions) but ``crumbs`` cut out as charts of their own,
+    moved away: the worker's (vmap, indices, uv) for it."""
+    vmap, uv = list(range(len(pts))), [p for p in pts]
+    indices = faces.copy()
+    for i, f in enumerate(crumbs):
+        for k in range(3):
+            vmap.append(int(faces[f, k]))
+            uv.append(pts[faces[f, k]] + [3.0 + 2.0 * i, 0.0])
+            indices[f, k] = len(uv) - 1
+    return np.array(vmap), indices, np.array(uv, dtype=np.float64)
+
+
+def test_attach_crumbs_fills_holes_and_notches_of_the_chart_around():
+    pts, faces = _grid(8)
+    c = pts[faces].mean(axis=1)
+    hole = int(np.argmin(np.linalg.norm(c - [0.5, 0.5], axis=1)))  # three edges on the chart
+    # A notch: a border face (one edge on the grid's border, two on the chart).
+    notch = int(np.argmin(np.linalg.norm(c - [0.5, 0.02], axis=1)))
+    vmap, indices, uv = _as_chart(pts, faces, [hole, notch])
+    n_charts, _ = chart_labels(indices, len(uv))
+    assert n_charts == 3
+    vm2, ix2, uv2 = W.attach_crumbs(vmap, indices, uv, faces)
+    n_charts, _ = chart_labels(ix2, len(uv2))
+    assert n_charts == 1
+    # Every corner lands on its own vertex's position, the crumbs' copies are gone, and the
+    # UV area is the grid's (no overlap, no gap).
+    np.testing.assert_allclose(uv2[ix2], pts[faces])
+    assert len(uv2) == len(pts)
+    assert uv_area_coverage(uv2, ix2) == pytest.approx(1.0)
+
+
+def test_attach_crumbs_leaves_what_it_cannot_place():
+    pts, faces = _grid(8)
+    # A grid face with two border edges borders the chart along one edge only: its third corner
+    # is in no other face, so it has no place in the chart and stays a chart of its own.
+    nb = W.face_neighbours(faces)
+    lone = int(np.argmax((nb < 0).sum(axis=1)))
+    assert (nb[lone] < 0).sum() == 2
+    vmap, indices, uv = _as_chart(pts, faces, [lone])
+    vm2, ix2, uv2 = W.attach_crumbs(vmap, indices, uv, faces)
+    assert chart_labels(ix2, len(uv2))[0] == 2
+    # Same corners (the grid's now unused corner vertex is dropped, so indices shift).
+    np.testing.assert_array_equal(uv2[ix2], uv[indices])
+    np.testing.assert_array_equal(vm2[ix2], vmap[indices])
+    assert len(uv2) == len(uv) - 1
+
+
+def test_attach_crumbs_follows_a_mirrored_chart():
+    # xatlas lays some charts out mirrored; a hole is filled the chart's way round.
+    pts, faces = _grid(8)
+    c = pts[faces].mean(axis=1)
+    hole = int(np.argmin(np.linalg.norm(c - [0.5, 0.5], axis=1)))
+    vmap, indices, uv = _as_chart(pts, faces, [hole])
+    mirrored = uv * [-1.0, 1.0]
+    vm2, ix2, uv2 = W.attach_crumbs(vmap, indices, mirrored, faces)
+    assert chart_labels(ix2, len(uv2))[0] == 1
+    np.testing.assert_allclose(uv2[ix2], pts[faces] * [-1.0, 1.0])
+
+
+@pytest.mark.slow
+def test_a_large_scan_unwraps_into_half_the_page_without_crumbs():
+    # Above LIMIT_ABOVE faces the worker charts patches; crumbs are given back.
+    blob = scan_blob(W.LIMIT_ABOVE + 4000, 0.15)
+    got = U.unwrap(blob, 1024, cache=False)
+    assert uv_area_coverage(got.uv, got.faces) >= 0.5
+    n, label = chart_labels(got.faces, len(got.uv))
+    size = np.bincount(label)
+    assert (size <= W.CRUMB_FACES).sum() <= 0.01 * len(blob.faces)

@@ -63,18 +63,25 @@ import io  # noqa: E402  (after die_with_parent: the slow imports below run alre
 import numpy as np  # noqa: E402
 import xatlas  # noqa: E402
 
-# Chart growing costs xatlas far more than linear time in a chart's size (a 20k-face blob: 19 s
-# as 51 charts, 3 s when no chart may exceed 1/20 of the area), so a chart may cover at most the
-# area of this many average faces (fewer, larger charts pack no better).
-CHART_FACES = 2000
-# Meshes up to this many faces unwrap in seconds unlimited, and a flat one packs far better as
-# one chart (0.68 of the page) than cut into a few (0.38).
+# Meshes up to this many faces unwrap in seconds as one xatlas mesh, and a flat one packs far
+# better as one chart (0.68 of the page) than cut into a few (0.38).
 LIMIT_ABOVE = 20000
-# Faces per patch: the mesh is cut into patches of at most this many faces (each a separate
-# xatlas mesh, so xatlas grows their charts on all cores); a batch of PATCHES_PER_BATCH patches
-# is one xatlas call, and the progress line counts them.
-PATCH_FACES = 16384
-PATCHES_PER_BATCH = 4
+# Larger meshes are cut into patches of at most PATCH_FACES faces (each a separate xatlas mesh,
+# so xatlas grows their charts on all cores), and a patch bounds its charts' size.  Chart growing
+# costs xatlas far more than linear time in a chart's size (a 100k-face scan: 13 CPU s in
+# patches of 2k faces, 22 s in patches of 4k; a 20k-face blob: 19 s as 51 charts), while
+# larger charts need less gutter per texel.  Capping the charts' area within larger patches
+# instead (xatlas's max_chart_area) left ragged chart borders and many crumbs: 36 % of the
+# page on a 270k-face scan, against 52 % now.  Patches go to xatlas BATCH_FACES faces at a
+# time, one progress line per call.
+PATCH_FACES = 4096
+BATCH_FACES = 32768
+# Charts of at most this many faces are crumbs (see attach_crumbs), given back in at most
+# CRUMB_ROUNDS passes.
+CRUMB_FACES = 5
+CRUMB_ROUNDS = 4
+# Majority-vote rounds smoothing the patch borders (see patches()).
+SMOOTH_ROUNDS = 8
 # Share of the page the first packing try aims to fill (the chart area over the page area).
 # xatlas fits about 0.5-0.7 of the page with charts of real meshes; tries shrink the scale by SHRINK
 # until everything fits one page, then bisect between the last miss and the fit.
@@ -131,10 +138,8 @@ def _pack_options(res: int, padding: int, texels_per_unit: float):
     return pack
 
 
-def _chart_options(max_chart_area: float):
-    charts = xatlas.ChartOptions()
-    charts.max_chart_area = float(max_chart_area)
-    return charts
+def _chart_options():
+    return xatlas.ChartOptions()
 
 
 def _progress(message: str) -> None:
@@ -149,31 +154,84 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def patches(vertices: np.ndarray, faces: np.ndarray, limit: int = PATCH_FACES) -> list[np.ndarray]:
-    """Face indices of spatial patches of at most ``limit`` faces, cut along the longest axis.
+    """Face indices of spatial patches of about ``limit`` faces, cut along the longest axis.
 
     Recursive halving of the face centroids at their median: patches are compact blobs, so
-    their borders (which become chart borders) are short.  Deterministic.
+    their borders (which become chart borders) are short.  A plane cuts a triangle mesh along
+    a zigzag, and where the surface runs along the plane (a bump, a fold) into a scatter of
+    single faces; each tooth and speck would become a chart of its own, or a hole in one, and
+    cost a gutter.  So the borders are smoothed (:func:`smooth_labels`): a face joins the patch
+    that two of its neighbours are in.  Deterministic; sorted face indices per patch.
     """
     centroids = vertices[faces].mean(axis=1)
-    out, todo = [], [np.arange(len(faces))]
+    label = np.zeros(len(faces), dtype=np.int64)
+    n_parts, todo = 0, [np.arange(len(faces))]
     while todo:
         idx = todo.pop()
         if len(idx) <= limit:
-            out.append(idx)
+            label[idx] = n_parts
+            n_parts += 1
             continue
         c = centroids[idx]
         axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
         order = idx[np.argsort(c[:, axis], kind="stable")]
         half = len(order) // 2
         todo += [order[half:], order[:half]]
-    return out
+    if n_parts > 1:
+        label = smooth_labels(label, face_neighbours(faces))
+    order = np.argsort(label, kind="stable")
+    cuts = np.flatnonzero(np.diff(label[order])) + 1
+    return [part for part in np.split(order, cuts) if len(part)]
 
 
-def _chart_patches(vertices, faces, max_chart_area):
+def face_neighbours(faces: np.ndarray) -> np.ndarray:
+    """(F, 3) int64: the face across each edge (edge k runs from corner k to k + 1), -1 where the
+    edge is a border or shared by more than two faces."""
+    n = len(faces)
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    key = edges[:, 0] * (int(faces.max(initial=0)) + 1) + edges[:, 1]
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    pair = np.flatnonzero(k[1:] == k[:-1])
+    # Only edges with exactly two faces: a third face on the same key is left unpaired.
+    lone = np.ones(len(pair), dtype=bool)
+    if len(pair) > 1:
+        lone &= np.r_[True, pair[1:] != pair[:-1] + 1] & np.r_[pair[:-1] + 1 != pair[1:], True]
+    a, b = order[pair[lone]], order[pair[lone] + 1]
+    nb = np.full(3 * n, -1, dtype=np.int64)
+    nb[a], nb[b] = b % n, a % n
+    return nb.reshape(3, n).T.copy()
+
+
+def smooth_labels(
+    label: np.ndarray, neighbours: np.ndarray, rounds: int = SMOOTH_ROUNDS
+) -> np.ndarray:
+    """Patch labels (F,) after ``rounds`` of majority votes: a face two or three of whose
+    ``neighbours`` (F, 3) share another label takes it.  Removes single-face teeth and specks
+    along the cuts; a straight border is left as it is."""
+    label = label.copy()
+    for _ in range(rounds):
+        near = np.where(neighbours >= 0, label[np.maximum(neighbours, 0)], -1)
+        vote = np.where((near[:, 0] == near[:, 1]) | (near[:, 0] == near[:, 2]), near[:, 0],
+                        near[:, 1])  # fmt: skip
+        move = ((near == vote[:, None]).sum(axis=1) >= 2) & (vote >= 0) & (vote != label)
+        if not move.any():
+            break
+        label[move] = vote[move]
+    return label
+
+
+def _chart_patches(vertices, faces, patch_faces):
     """Charts of every patch: (vertex index (C,), faces (F, 3) into it, uv (C, 2)) in the
     normalised frame's units, face order as ``faces``; xatlas's own packing is thrown away."""
-    parts = patches(vertices, faces)
-    batches = [parts[i : i + PATCHES_PER_BATCH] for i in range(0, len(parts), PATCHES_PER_BATCH)]
+    parts = patches(vertices, faces, patch_faces)
+    batches, size = [], BATCH_FACES
+    for part in parts:
+        if size + len(part) > BATCH_FACES:
+            batches.append([])
+            size = 0
+        batches[-1].append(part)
+        size += len(part)
     # xatlas packs each batch too; packing it coarsely costs next to nothing.
     tpu = 256.0 / np.sqrt(max(face_areas(vertices, faces).sum() / len(batches), 1e-30))
     vmap, uv, out_faces = [], [], np.empty_like(faces)
@@ -186,7 +244,7 @@ def _chart_patches(vertices, faces, max_chart_area):
             locals_.append((face_idx, used))
             atlas.add_mesh(vertices[used].astype(np.float32),
                            local.reshape(-1, 3).astype(np.uint32))  # fmt: skip
-        atlas.generate(_chart_options(max_chart_area), _pack_options(0, 0, tpu))
+        atlas.generate(_chart_options(), _pack_options(0, 0, tpu))
         for m, (face_idx, used) in enumerate(locals_):
             vm, ix, uvm = atlas[m]
             vmap.append(used[vm.astype(np.int64)])
@@ -199,6 +257,103 @@ def _chart_patches(vertices, faces, max_chart_area):
         done += sum(len(f) for f in batch)
         _progress(f"charts {done * 100 // len(faces)}% ({b + 1}/{len(batches)} batches)")
     return np.concatenate(vmap), out_faces, np.concatenate(uv)
+
+
+def _charts_of(indices: np.ndarray, n_uv: int) -> np.ndarray:
+    """Chart (connected UV island) of every face, (F,) int64: faces sharing a UV vertex."""
+    from scipy.sparse import coo_matrix  # only here: the worker starts without scipy
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(indices)
+    # Face-vertex incidence; faces linked through a shared vertex are one island.
+    rows = np.repeat(np.arange(n), 3)
+    inc = coo_matrix((np.ones(3 * n), (rows, indices.ravel())), shape=(n, n_uv)).tocsr()
+    _, label = connected_components(inc @ inc.T, directed=False)
+    return label.astype(np.int64)
+
+
+def _corner_angles(t: np.ndarray) -> np.ndarray:
+    """Interior angles (F, 3) of UV triangles ``t`` (F, 3, 2) at their three corners."""
+    out = np.empty(t.shape[:2])
+    for k in range(3):
+        a, b = t[:, (k + 1) % 3] - t[:, k], t[:, (k + 2) % 3] - t[:, k]
+        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        out[:, k] = np.abs(np.arctan2(cross, np.einsum("ij,ij->i", a, b)))
+    return out
+
+
+def attach_crumbs(
+    vmap: np.ndarray, indices: np.ndarray, uv: np.ndarray, faces: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Give xatlas's crumbs (charts of at most :data:`CRUMB_FACES` faces) back to a neighbour.
+
+    xatlas leaves single faces out of the charts it grows (holes and notches along their
+    borders) and makes each a chart of its own; every such crumb costs a whole gutter ring in
+    the page (on a 270k-face scan a thousand crumbs, 0.6 % of the faces, cost 7 % of the page).
+    A crumb face two or three of whose edges border one large chart has all three corners in
+    that chart already: it takes those corners' UVs, which fills the hole or notch exactly.  It
+    is kept only when it keeps the chart's orientation and no corner's angles then sum past a
+    full turn (so it overlaps no face around its corners).
+
+    ``vmap`` (V',) welded vertex of each UV vertex, ``indices`` (F, 3) into ``uv`` (V', 2),
+    ``faces`` (F, 3) the welded faces (same order).  Returns the three arrays with the attached
+    faces re-indexed and unused UV vertices dropped.
+    """
+    indices = indices.copy()
+    neighbours = face_neighbours(faces)
+    n_vertices = int(vmap.max(initial=-1)) + 1
+    for _ in range(CRUMB_ROUNDS):
+        chart = _charts_of(indices, len(uv))
+        size = np.bincount(chart)
+        crumb = size[chart] <= CRUMB_FACES
+        if not crumb.any():
+            break
+        near = np.where(neighbours >= 0, chart[np.maximum(neighbours, 0)], -1)
+        vote = np.where((near[:, 0] == near[:, 1]) | (near[:, 0] == near[:, 2]), near[:, 0],
+                        near[:, 1])  # fmt: skip
+        cand = np.flatnonzero(crumb & (vote >= 0) & ((near == vote[:, None]).sum(axis=1) >= 2))
+        cand = cand[size[vote[cand]] > CRUMB_FACES]
+        if not len(cand):
+            break
+        # The UV vertex of (chart, welded vertex), for the large charts' vertices.
+        big = np.zeros(len(uv), dtype=bool)
+        big[indices[~crumb].ravel()] = True
+        owner = np.full(len(uv), -1, dtype=np.int64)
+        owner[indices.ravel()] = np.repeat(chart, 3)
+        ids = np.flatnonzero(big)
+        keys = owner[ids] * n_vertices + vmap[ids]
+        order = np.argsort(keys, kind="stable")
+        keys, ids = keys[order], ids[order]
+        want = vote[cand][:, None] * n_vertices + faces[cand]
+        pos = np.minimum(np.searchsorted(keys, want), len(keys) - 1)
+        found = (keys[pos] == want).all(axis=1)
+        cand, corners = cand[found], ids[pos[found]]
+        # Orientation of each large chart (xatlas mirrors some charts): sign of its UV area.
+        t = uv[indices]
+        signed = (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1]) - (
+            t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])  # fmt: skip
+        chart_sign = np.sign(np.bincount(chart, signed, minlength=len(size)))
+        tc = uv[corners]
+        s_new = (tc[:, 1, 0] - tc[:, 0, 0]) * (tc[:, 2, 1] - tc[:, 0, 1]) - (
+            tc[:, 1, 1] - tc[:, 0, 1]) * (tc[:, 2, 0] - tc[:, 0, 0])  # fmt: skip
+        scale = np.median(np.abs(signed)) if len(signed) else 1.0
+        ok = (s_new * chart_sign[vote[cand]] > 1e-9 * scale)
+        cand, corners = cand[ok], corners[ok]
+        # Angle sums around the corners with every candidate in: a corner past a full turn
+        # drops the candidates at it.
+        trial = indices.copy()
+        trial[cand] = corners
+        keep = ~crumb
+        keep[cand] = True
+        ang = _corner_angles(uv[trial[keep]])
+        total = np.bincount(trial[keep].ravel(), ang.ravel(), minlength=len(uv))
+        full = total > 2.0 * np.pi * (1.0 + 1e-6)
+        ok = ~full[corners].any(axis=1)
+        if not ok.any():
+            break
+        indices[cand[ok]] = corners[ok]
+    used, inverse = np.unique(indices, return_inverse=True)
+    return vmap[used], inverse.reshape(-1, 3).astype(np.int64), uv[used]
 
 
 def _pack(uv_units, indices, res, padding, scale):
@@ -222,11 +377,10 @@ def fit_one_page(
     """
     faces = np.asarray(faces, dtype=np.int64)
     v = normalised(vertices, faces)
-    area = face_areas(v, faces).sum()
     limited = len(faces) > LIMIT_ABOVE
-    max_chart_area = area * CHART_FACES / len(faces) if limited else 0.0
     _progress(f"charts of {len(faces)} faces")
-    vmap, ix, uv_units = _chart_patches(v, faces, max_chart_area)
+    vmap, ix, uv_units = _chart_patches(v, faces, PATCH_FACES if limited else len(faces))
+    vmap, ix, uv_units = attach_crumbs(vmap, ix, uv_units, faces)
     n_charts = 0
     chart_area = max(float(face_areas(np.pad(uv_units, ((0, 0), (0, 1))), ix).sum()), 1e-30)
 

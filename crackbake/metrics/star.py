@@ -37,6 +37,7 @@ __all__ = [
     "arm_straightness",
     "impact_reach",
     "length_beyond",
+    "missing_stars",
     "own_cracks",
     "polylines",
     "radial_arms",
@@ -44,6 +45,13 @@ __all__ = [
     "surface_distance",
     "tangential_share",
 ]
+
+#: A star has at least this many radial arms crossing the 0.3-reach circle
+#: (:func:`radial_arms`): plates and spot's flank, leg, horn and ear grow 9-18.
+STAR_MIN_ARMS = 5
+#: Below this many sim edges across the 0.3-reach circle's radius the sim mesh itself cannot
+#: space a star's arms (a plate hit with a radius of 3 sim edges grows 3).
+STAR_MIN_EDGES = 4.0
 
 #: A segment counts as radial when it runs within this angle of the radial direction (degrees).
 RADIAL_DEG = 45.0
@@ -411,3 +419,36 @@ def star_metrics(
         "beyond": length_beyond(polys, dists, reach),
         "length": float(sum(np.linalg.norm(np.diff(p, axis=0), axis=1).sum() for p in polys)),
     }
+
+
+def missing_stars(network: Any, vertices: np.ndarray | None = None,
+                  faces: np.ndarray | None = None) -> list[tuple[dict, int]]:
+    """The impacts of ``network`` whose cracks hold no star.
+
+    Per impact, its radial arms crossing the circle at 0.3 reach (:func:`radial_arms`, on its
+    own cracks: :func:`own_cracks`), distances over ``vertices``/``faces`` (a fine mesh of the
+    surface, the sim mesh; straight without).  One fast-marching pass per impact, stopped at
+    the reach.
+
+    Returns
+    -------
+    list of (impact dict, arms)
+        The impacts (``network.impacts`` entries) with fewer than :data:`STAR_MIN_ARMS`.
+    """
+    impacts = list(network.impacts if hasattr(network, "impacts") else network["impacts"])
+    polys = polylines(network)
+    out = []
+    for k, imp in enumerate(impacts):
+        reach = impact_reach(imp["radius"])
+        others = [(o["point"], impact_reach(o["radius"]))
+                  for i, o in enumerate(impacts) if i != k]
+        own = own_cracks(polys, imp["point"], reach, others)
+        arms = 0
+        if own:
+            flat = np.concatenate(own)
+            d = surface_distance(flat, imp["point"], vertices, faces, max_distance=reach)
+            dists = np.split(d, np.cumsum([len(p) for p in own])[:-1])
+            arms = len(radial_arms(own, dists, reach))
+        if arms < STAR_MIN_ARMS:
+            out.append((imp, arms))
+    return out

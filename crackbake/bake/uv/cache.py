@@ -16,7 +16,7 @@ from crackbake.errors import CrackbakeWarning
 from crackbake.io.mesh import Mesh
 
 # Bump whenever the worker's output or the fitting changes, so old cache files are not reused.
-CACHE_FORMAT_VERSION = 3
+CACHE_FORMAT_VERSION = 4
 
 
 def xatlas_version() -> str:

@@ -60,6 +60,10 @@ def scan_blob(n_faces: int = 5000, diagonal: float = 0.15, seed: int = 0) -> Mes
     rng = np.random.default_rng(seed)
     n = max(2, int(round(np.sqrt(n_faces / 12.0))))
     v, f = _cube_sphere(n)
+    # Wound on the plain cube, where every face's normal points away from the centre; the
+    # jitter and the bumps below move vertices along rays and keep that winding (winding the
+    # bumpy surface by the same test flipped faces on the flanks of bumps).
+    f = _outward(v, f)
     v = v + rng.uniform(-0.3, 0.3, v.shape) / n
     d = v / np.linalg.norm(v, axis=1, keepdims=True)
     centres = rng.normal(size=(40, 3))
@@ -69,7 +73,7 @@ def scan_blob(n_faces: int = 5000, diagonal: float = 0.15, seed: int = 0) -> Mes
     r = 1.0 + (amp * np.exp(-((1.0 - d @ centres.T) / width**2))).sum(axis=1)
     r += 0.01 * np.sin(25.0 * d[:, 0]) * np.sin(23.0 * d[:, 1])  # fine detail, as scans have
     v = d * r[:, None] * np.array([0.8, 1.0, 0.9])
-    return _finish(v, _outward(v, f), diagonal, "scan_blob")
+    return _finish(v, f, diagonal, "scan_blob")
 
 
 def relief_plane(

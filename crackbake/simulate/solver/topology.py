@@ -1,8 +1,8 @@
 """Mesh topology kernels of the iben solver: the node -> face table, edge and node splits.
 
-They work on the solver's preallocated arrays (:class:`crackbake.simulate.solver.iben.state.State`)
-without allocating, so the compiled crack loop can call them.  ``cnt[1]``, ``cnt[2]`` and
-``cnt[3]`` are the node, face and segment counts.
+:func:`split_edge` and :func:`separate` work on the solver's preallocated state (the struct
+reference of :class:`crackbake.simulate.solver.iben.state.State`) without allocating, so the
+compiled crack loop can call them; the helpers take the node -> face table alone.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit
 
 from crackbake.grouping import find_root, number_roots
+from crackbake.simulate.solver.iben.state import FACES, NODES, SEGS
 
 
 @njit(cache=True)
@@ -55,15 +56,18 @@ def on_boundary(F, NF, NFc, c):
 
 
 @njit(cache=True)
-def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crack_of, nver,
-               segp, seg_alive, seg_info, segof, cnt, per0=0.0, per1=0.0):
-    """Split edge (a, b) at ``a + tt (b - a)``: one new node, each face on the edge in two.
+def split_edge(s, a, b, tt):
+    """Split edge (a, b) of state ``s`` at ``a + tt (b - a)``: one new node, each face on the
+    edge in two.
 
     Children keep the parent's world stress (so its in-frame rotation is implicit), asset face and
     growth.  If the edge is a crack side, the recorded crack segment is split too so the network
     keeps its junction there; ``segof`` maps a node to the last live segment starting or ending
     at it, which finds that segment without a search.  Returns the new node.
     """
+    X, F, NF, NFc, pid, onb, hn, taun = s.X, s.F, s.NF, s.NFc, s.pid, s.onb, s.hn, s.taun
+    segp, seg_alive, seg_info, segof, cnt = s.segp, s.seg_alive, s.seg_info, s.segof, s.cnt
+    per = s.period
     f_0 = -1
     f_1 = -1
     nfl = 0
@@ -75,29 +79,30 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
             elif nfl == 1:
                 f_1 = f
             nfl += 1
-    p = cnt[1]
-    cnt[1] += 1
+    p = cnt[NODES]
+    cnt[NODES] += 1
     for q in range(3):
         X[p, q] = X[a, q] + tt * (X[b, q] - X[a, q])
-    if per0 != 0.0:
+    if per != 0.0:
         # Periodic plate: along the shorter way round, back into [0, per).
-        for q, per in ((0, per0), (1, per1)):
+        for q in range(2):
             d = X[b, q] - X[a, q]
             d -= per * np.floor(d / per + 0.5)
             X[p, q] = (X[a, q] + tt * d) % per
     pid[p] = p
     hn[p] = 0.5 * (hn[a] + hn[b])
     taun[p] = 0.5 * (taun[a] + taun[b])
-    rho[p] = 0.0
-    crack_of[p] = -1
-    nver[p] = 0
+    s.rho[p] = 0.0
+    s.crack_of[p] = -1
+    s.nver[p] = 0
     NFc[p] = 0
     onb[p] = False
     segof[p] = -1
+    S, AF, GR = s.S, s.AF, s.GR
     for i in range(min(nfl, 2)):
         f = f_0 if i == 0 else f_1
-        g = cnt[2]
-        cnt[2] += 1
+        g = cnt[FACES]
+        cnt[FACES] += 1
         for k in range(3):
             F[g, k] = F[f, k]
         o = -1
@@ -134,22 +139,22 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
                 break
         if found < 0:
             # Not the last segment at either end: fall back to a search from the newest.
-            for s in range(cnt[3] - 1, -1, -1):
-                if seg_alive[s] and ((segp[s, 0] == pa and segp[s, 1] == pb)
-                                     or (segp[s, 0] == pb and segp[s, 1] == pa)):
-                    found = s
+            for k in range(cnt[SEGS] - 1, -1, -1):
+                if seg_alive[k] and ((segp[k, 0] == pa and segp[k, 1] == pb)
+                                     or (segp[k, 0] == pb and segp[k, 1] == pa)):
+                    found = k
                     break
         if found >= 0:
-            s = found
-            seg_alive[s] = False
+            k = found
+            seg_alive[k] = False
             for q in range(2):
-                t = cnt[3]
-                cnt[3] += 1
-                segp[t, 0] = segp[s, 0] if q == 0 else p
-                segp[t, 1] = p if q == 0 else segp[s, 1]
+                t = cnt[SEGS]
+                cnt[SEGS] += 1
+                segp[t, 0] = segp[k, 0] if q == 0 else p
+                segp[t, 1] = p if q == 0 else segp[k, 1]
                 seg_alive[t] = True
                 for q2 in range(3):
-                    seg_info[t, q2] = seg_info[s, q2]
+                    seg_info[t, q2] = seg_info[k, q2]
                 segof[segp[t, 0]] = t
                 segof[segp[t, 1]] = t
         else:
@@ -158,15 +163,17 @@ def split_edge(a, b, tt, X, F, S, AF, GR, NF, NFc, pid, onb, hn, taun, rho, crac
 
 
 @njit(cache=True)
-def separate(c, cut1, cut2, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of, nver, cnt, out,
-             par, comp, faces):
-    """Split node ``c`` into one node per edge-connected group of its faces.
+def separate(s, w, c, cut1, cut2):
+    """Split node ``c`` of state ``s`` into one node per edge-connected group of its faces
+    (``s``, ``w``: the struct references of the state and the scratch).
 
     Faces around ``c`` are connected through shared edges (c, x), except through the cut edges
     (c, cut1) and (c, cut2): cutting them opens the crack; with no cuts this only mends pinched
-    (bow-tie) nodes left where a crack reached a boundary.  New nodes are written to ``out``;
-    returns their number.  ``par``, ``comp``, ``faces`` are scratch rows at least the table width.
+    (bow-tie) nodes left where a crack reached a boundary.  New nodes are written to ``w.buf``;
+    returns their number.
     """
+    F, NF, NFc, cnt = s.F, s.NF, s.NFc, s.cnt
+    out, par, comp, faces = w.buf, w.par, w.comp, w.fbuf
     k = NFc[c]
     for i in range(k):
         par[i] = i
@@ -192,18 +199,19 @@ def separate(c, cut1, cut2, X, F, NF, NFc, pid, onb, hn, taun, rho, crack_of, nv
     for i in range(k):
         if comp[i] == 0:
             nf_add(NF, NFc, c, faces[i])
+    X, pid, onb, hn, taun = s.X, s.pid, s.onb, s.hn, s.taun
     for q in range(1, ncomp):
-        c2 = cnt[1]
-        cnt[1] += 1
+        c2 = cnt[NODES]
+        cnt[NODES] += 1
         for m in range(3):
             X[c2, m] = X[c, m]
         pid[c2] = pid[c]
         onb[c2] = onb[c]
         hn[c2] = hn[c]
         taun[c2] = taun[c]
-        rho[c2] = 0.0
-        crack_of[c2] = -1
-        nver[c2] = 0
+        s.rho[c2] = 0.0
+        s.crack_of[c2] = -1
+        s.nver[c2] = 0
         NFc[c2] = 0
         for i in range(k):
             if comp[i] == q:

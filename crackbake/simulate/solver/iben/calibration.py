@@ -106,8 +106,8 @@ def percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
 def shadow_grid(
     X0: np.ndarray, period: float = 0.0, radius: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Empty shadow grid over the bounding box and its parameters ``origin (3), cell, radius,
-    period x, period y`` (7,).
+    """Empty shadow grid over the bounding box and its parameters ``origin (3), cell, radius``
+    (5,).
 
     ``radius`` (mesh units) is the shadow radius a localized field asks for (an impact's
     star scales with the impact, not with the mesh: ``StressField.shadow_radius``); ``None``
@@ -130,7 +130,7 @@ def shadow_grid(
         cell *= 1.25
     origin = lo - pad * cell
     G = np.zeros((int(dims[0]), int(dims[1]), int(dims[2]), 6))
-    return G, np.array([origin[0], origin[1], origin[2], cell, radius, 0.0, 0.0])
+    return G, np.array([origin[0], origin[1], origin[2], cell, radius])
 
 
 def _periodic_grid(
@@ -145,4 +145,4 @@ def _periodic_grid(
         n = int(n / 1.25)
     cell = period / n
     z0 = float(X0[:, 2].min()) - 2 * cell
-    return np.zeros((n, n, 5, 6)), np.array([0.0, 0.0, z0, cell, radius, period, period])
+    return np.zeros((n, n, 5, 6)), np.array([0.0, 0.0, z0, cell, radius])

@@ -88,15 +88,15 @@ def crossings(s, w, c):
             k += 1
         a = F[f, (k + 1) % 3]
         b = F[f, (k + 2) % 3]
-        da = dot3(wrap(X[a, 0] - xc0, s.gp[5]), wrap(X[a, 1] - xc1, s.gp[6]),
+        da = dot3(wrap(X[a, 0] - xc0, s.period), wrap(X[a, 1] - xc1, s.period),
                   X[a, 2] - xc2, nc0, nc1, nc2)
-        db = dot3(wrap(X[b, 0] - xc0, s.gp[5]), wrap(X[b, 1] - xc1, s.gp[6]),
+        db = dot3(wrap(X[b, 0] - xc0, s.period), wrap(X[b, 1] - xc1, s.period),
                   X[b, 2] - xc2, nc0, nc1, nc2)
         if da == db or da * db > 0:
             continue
         tt = da / (da - db)
-        p0 = wrap(X[a, 0] + tt * wrap(X[b, 0] - X[a, 0], s.gp[5]) - xc0, s.gp[5])
-        p1 = wrap(X[a, 1] + tt * wrap(X[b, 1] - X[a, 1], s.gp[6]) - xc1, s.gp[6])
+        p0 = wrap(X[a, 0] + tt * wrap(X[b, 0] - X[a, 0], s.period) - xc0, s.period)
+        p1 = wrap(X[a, 1] + tt * wrap(X[b, 1] - X[a, 1], s.period) - xc1, s.period)
         p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - xc2
         along = dot3(p0, p1, p2, tc0, tc1, tc2)
         side = 0 if along > 0 else 1
@@ -113,8 +113,8 @@ def _crossing(s, w, side):
     """Crossing point on ``side``, relative to the centre."""
     X = s.X
     a, b, tt = w.sa[side], w.sb[side], w.st[side]
-    p0 = wrap(X[a, 0] + tt * wrap(X[b, 0] - X[a, 0], s.gp[5]) - w.geo[0, 0], s.gp[5])
-    p1 = wrap(X[a, 1] + tt * wrap(X[b, 1] - X[a, 1], s.gp[6]) - w.geo[0, 1], s.gp[6])
+    p0 = wrap(X[a, 0] + tt * wrap(X[b, 0] - X[a, 0], s.period) - w.geo[0, 0], s.period)
+    p1 = wrap(X[a, 1] + tt * wrap(X[b, 1] - X[a, 1], s.period) - w.geo[0, 1], s.period)
     p2 = X[a, 2] + tt * (X[b, 2] - X[a, 2]) - w.geo[0, 2]
     return p0, p1, p2
 
@@ -134,10 +134,10 @@ def choose_tips(s, p, w, c):
             continue
         a, b, tt = w.sa[side], w.sb[side], w.st[side]
         p0, p1, p2 = _crossing(s, w, side)
-        ang_a = angle(p0, p1, p2, wrap(X[a, 0] - xc0, s.gp[5]),
-                        wrap(X[a, 1] - xc1, s.gp[6]), X[a, 2] - xc2)
-        ang_b = angle(p0, p1, p2, wrap(X[b, 0] - xc0, s.gp[5]),
-                        wrap(X[b, 1] - xc1, s.gp[6]), X[b, 2] - xc2)
+        ang_a = angle(p0, p1, p2, wrap(X[a, 0] - xc0, s.period),
+                        wrap(X[a, 1] - xc1, s.period), X[a, 2] - xc2)
+        ang_b = angle(p0, p1, p2, wrap(X[b, 0] - xc0, s.period),
+                        wrap(X[b, 1] - xc1, s.period), X[b, 2] - xc2)
         thr_a = p.snap_b if on_boundary(F, NF, NFc, a) else p.snap
         thr_b = p.snap_b if on_boundary(F, NF, NFc, b) else p.snap
         snap_a = ang_a < thr_a or tt < p.snap_t
@@ -174,8 +174,8 @@ def drop_back_cuts(s, p, w, c):
             for q in range(3):
                 y = F[f, q]
                 if y != c and y != tip[side] and spoke_count(F, NF, NFc, c, y) == 1:
-                    if angle(p0, p1, p2, wrap(X[y, 0] - xc0, s.gp[5]),
-                             wrap(X[y, 1] - xc1, s.gp[6]), X[y, 2] - xc2) < p.back:
+                    if angle(p0, p1, p2, wrap(X[y, 0] - xc0, s.period),
+                             wrap(X[y, 1] - xc1, s.period), X[y, 2] - xc2) < p.back:
                         tip[side] = -1
                         split[side] = False
 
@@ -208,10 +208,7 @@ def split_tips(s, w):
     tip = w.tip
     for side in range(2):
         if w.split[side]:
-            tip[side] = split_edge(w.sa[side], w.sb[side], w.st[side], X, F, s.S, s.AF, s.GR,
-                                   NF, NFc, s.pid, s.onb, hn, taun, s.rho, s.crack_of, s.nver,
-                                   s.segp, s.seg_alive, s.seg_info, s.segof, s.cnt,
-                                   s.gp[5], s.gp[6])
+            tip[side] = split_edge(s, w.sa[side], w.sb[side], w.st[side])
             s.nevl[tip[side]] = -1
     for side in range(2):
         if w.split[side]:
@@ -223,20 +220,14 @@ def split_tips(s, w):
                 for q in range(3):
                     y = F[f, q]
                     if y != p:
-                        hsum += np.sqrt(wrap(X[y, 0] - X[p, 0], s.gp[5]) ** 2
-                                        + wrap(X[y, 1] - X[p, 1], s.gp[6]) ** 2
+                        hsum += np.sqrt(wrap(X[y, 0] - X[p, 0], s.period) ** 2
+                                        + wrap(X[y, 1] - X[p, 1], s.period) ** 2
                                         + (X[y, 2] - X[p, 2]) ** 2)
                         hcnt += 1
             if hcnt > 0:
                 scale = (hsum / hcnt) / hn[p]
                 hn[p] *= scale
                 taun[p] *= scale
-
-
-@njit(cache=True, inline="always")
-def _separate(s, w, c, cut1, cut2):
-    return separate(c, cut1, cut2, s.X, s.F, s.NF, s.NFc, s.pid, s.onb, s.hn, s.taun, s.rho,
-                    s.crack_of, s.nver, s.cnt, w.buf, w.par, w.comp, w.fbuf)
 
 
 @njit(cache=True, no_cpython_wrapper=True, no_cfunc_wrapper=True)
@@ -248,7 +239,7 @@ def open_node(s, w, c):
     nodes split off ``c`` and the centre count (``nsplit == 0``: the cut opened nothing).
     """
     tip, centers = w.tip, w.centers
-    nsplit = _separate(s, w, c, tip[0], tip[1])
+    nsplit = separate(s, w, c, tip[0], tip[1])
     if nsplit == 0:
         return 0, 0
     ncen = 0
@@ -264,7 +255,7 @@ def open_node(s, w, c):
         centers[ncen] = tip[side]
         ncen += 1
         # A tip that lay on a boundary is pinched by the cut: mend it; its crack is finished.
-        m = _separate(s, w, tip[side], -1, -1)
+        m = separate(s, w, tip[side], -1, -1)
         w.free_tip[side] = m == 0
         for q in range(m):
             centers[ncen] = w.buf[q]

@@ -27,11 +27,12 @@ def _principal(a, b, c):
 
 
 @njit(cache=True)
-def face_frame(f, X, F, nrm, fr, gp):
-    """In-plane frame of face f: u along edge 0->1 -> fr[0], w = n x u -> fr[1]."""
+def face_frame(f, X, F, nrm, per, fr):
+    """In-plane frame of face f: u along edge 0->1 -> fr[0], w = n x u -> fr[1] (``per``:
+    the tile period, 0: not periodic)."""
     i0, i1 = F[f, 0], F[f, 1]
-    e0 = wrap(X[i1, 0] - X[i0, 0], gp[5])
-    e1 = wrap(X[i1, 1] - X[i0, 1], gp[6])
+    e0 = wrap(X[i1, 0] - X[i0, 0], per)
+    e1 = wrap(X[i1, 1] - X[i0, 1], per)
     e2 = X[i1, 2] - X[i0, 2]
     le = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
     fr[0, 0] = e0 / le
@@ -61,8 +62,9 @@ def _quad6(r, x, y):
 
 
 @njit(cache=True)
-def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
-    """Geometry and the principal split of the effective stress of face ``f``.
+def face_update(s, f, fr, r6):
+    """Geometry and the principal split of the effective stress of face ``f`` of state ``s``
+    (its struct reference): ``area``, ``nrm``, ``grad`` and ``pr`` from ``X``, ``F``, ``S``.
 
     Effective stress = stress minus the shadow-grid release at the centroid, projected on the
     face plane.  The release may not create compression the raw stress did not have (a crack
@@ -70,12 +72,13 @@ def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
     clamped at ``min(0, smallest raw principal stress)``.  ``fr`` (2, 3) and ``r6`` (6,) are
     scratch rows.
     """
+    X, F, area, nrm, grad, pr, per = s.X, s.F, s.area, s.nrm, s.grad, s.pr, s.period
     i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-    e10 = wrap(X[i1, 0] - X[i0, 0], gp[5])
-    e11 = wrap(X[i1, 1] - X[i0, 1], gp[6])
+    e10 = wrap(X[i1, 0] - X[i0, 0], per)
+    e11 = wrap(X[i1, 1] - X[i0, 1], per)
     e12 = X[i1, 2] - X[i0, 2]
-    e20 = wrap(X[i2, 0] - X[i0, 0], gp[5])
-    e21 = wrap(X[i2, 1] - X[i0, 1], gp[6])
+    e20 = wrap(X[i2, 0] - X[i0, 0], per)
+    e21 = wrap(X[i2, 1] - X[i0, 1], per)
     e22 = X[i2, 2] - X[i0, 2]
     c0 = e11 * e22 - e12 * e21
     c1 = e12 * e20 - e10 * e22
@@ -96,23 +99,24 @@ def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
     for i in range(3):
         j = F[f, (i + 1) % 3]
         k = F[f, (i + 2) % 3]
-        d0 = wrap(X[k, 0] - X[j, 0], gp[5])
-        d1 = wrap(X[k, 1] - X[j, 1], gp[6])
+        d0 = wrap(X[k, 0] - X[j, 0], per)
+        d1 = wrap(X[k, 1] - X[j, 1], per)
         d2 = X[k, 2] - X[j, 2]
         # grad N_i = n x (x_k - x_j) / (2A).
         grad[f, i, 0] = (n1 * d2 - n2 * d1) / ta
         grad[f, i, 1] = (n2 * d0 - n0 * d2) / ta
         grad[f, i, 2] = (n0 * d1 - n1 * d0) / ta
-    face_frame(f, X, F, nrm, fr, gp)
+    face_frame(f, X, F, nrm, per, fr)
     u = fr[0]
     w = fr[1]
-    s = S[f]
-    a = _quad(s, u, u)
-    b = 0.5 * (_quad(s, u, w) + _quad(s, w, u))
-    c = _quad(s, w, w)
+    sf = s.S[f]
+    a = _quad(sf, u, u)
+    b = 0.5 * (_quad(sf, u, w) + _quad(sf, w, u))
+    c = _quad(sf, w, w)
     l1r, l2r, th = _principal(a, b, c)
+    G = s.G
     if G.shape[0] >= 2:
-        face_shadow(f, X, F, G, gp, r6)
+        face_shadow(f, X, F, G, s.gp, per, r6)
         ra = _quad6(r6, u, u)
         rc = _quad6(r6, w, w)
         if ra != 0.0 or rc != 0.0:
@@ -130,8 +134,9 @@ def face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6):
 
 
 @njit(cache=True)
-def tip_principal(f, X, F, S, nrm, G, gp, n0, n1, n2, fr, out):
-    """Principal split of the stress a crack tip with normal ``n`` sees in face f -> out[:8].
+def tip_principal(s, f, n0, n1, n2, fr, out):
+    """Principal split of the stress a crack tip with normal ``n`` sees in face f of state
+    ``s`` (its struct reference) -> out[:8].
 
     The stress minus the shadow-grid release with the component along the tip's own crack
     normal projected out (``P R P``, ``P = I - n̂n̂ᵀ`` in the face plane): the tip's own crack
@@ -141,20 +146,21 @@ def tip_principal(f, X, F, S, nrm, G, gp, n0, n1, n2, fr, out):
     instead of turning back into the raw hoop direction.  Clamped like :func:`face_update`.
     ``out`` needs 14 entries (8 to 13 are scratch).
     """
-    face_frame(f, X, F, nrm, fr, gp)
+    X, F, G = s.X, s.F, s.G
+    face_frame(f, X, F, s.nrm, s.period, fr)
     u = fr[0]
     w = fr[1]
-    s = S[f]
-    a = _quad(s, u, u)
-    b = 0.5 * (_quad(s, u, w) + _quad(s, w, u))
-    c = _quad(s, w, w)
+    sf = s.S[f]
+    a = _quad(sf, u, u)
+    b = 0.5 * (_quad(sf, u, w) + _quad(sf, w, u))
+    c = _quad(sf, w, w)
     l1, l2, th = _principal(a, b, c)
     p0 = n0 * u[0] + n1 * u[1] + n2 * u[2]
     p1 = n0 * w[0] + n1 * w[1] + n2 * w[2]
     lp = np.sqrt(p0 * p0 + p1 * p1)
     if G.shape[0] >= 2 and lp > 0.0:
         r6 = out[8:14]
-        face_shadow(f, X, F, G, gp, r6)
+        face_shadow(f, X, F, G, s.gp, s.period, r6)
         ra = _quad6(r6, u, u)
         rb = _quad6(r6, u, w)
         rc = _quad6(r6, w, w)

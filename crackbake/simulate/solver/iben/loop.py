@@ -106,18 +106,15 @@ def loop(s, p, w, chunk):
 
 @njit(cache=True, inline="always")
 def _node_update(s, w, p, n, raw):
-    node_update(n, s.X, s.F, s.S, s.NF, s.NFc, s.area, s.nrm, s.grad, s.pr, s.rho, s.val, s.vec,
-                raw, p.grain, p.seed, w.sc, w.acc, w.ev, s.G, s.gp, s.tipn)
+    node_update(s, n, raw, p.grain, p.seed, w.sc, w.acc, w.ev)
 
 
 @njit(cache=True, inline="always")
 def _update_faces(s, w, faces, count):
-    """Recompute ``faces[:count]`` (the state's fields are read once: each read of a field
-    costs a reference count in the loop)."""
-    X, F, S, area, nrm, grad, pr, G, gp, fr, r6 = (s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr,
-                                                   s.G, s.gp, w.fr, w.r6)
+    """Recompute ``faces[:count]``."""
+    fr, r6 = w.fr, w.r6
     for i in range(count):
-        face_update(faces[i], X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
+        face_update(s, faces[i], fr, r6)
 
 
 @njit(cache=True, inline="always")
@@ -324,18 +321,18 @@ def record(s, p, w, c, nucleate, interior, sig_n):
         s.pcid[pid[c]] = cid
         s.pcid[pid[t]] = cid
         # A new crack's first segments start its direction afresh (c may lie on another).
-        smooth_dir(pid[c], pid[t], wrap(X[t, 0] - xc0, s.gp[5]),
-                   wrap(X[t, 1] - xc1, s.gp[6]), X[t, 2] - xc2,
+        smooth_dir(pid[c], pid[t], wrap(X[t, 0] - xc0, s.period),
+                   wrap(X[t, 1] - xc1, s.period), X[t, 2] - xc2,
                    0.0 if nucleate else dir_len, pdir)
-        d0 = wrap(X[t, 0] - xc0, s.gp[5])
-        d1 = wrap(X[t, 1] - xc1, s.gp[6])
+        d0 = wrap(X[t, 0] - xc0, s.period)
+        d1 = wrap(X[t, 1] - xc1, s.period)
         d2 = X[t, 2] - xc2
         seglen = norm3(d0, d1, d2)
         w.segl[side] = seglen
         s.clen[cid] += seglen
         if s.G.shape[0] >= 2 and sig_n > 0.0:
-            shadow_add(xc0 + 0.5 * d0, xc1 + 0.5 * d1, xc2 + 0.5 * d2,
-                       p.gain * seglen * sig_n, nc0, nc1, nc2, s.G, s.gp)
+            shadow_add(s, xc0 + 0.5 * d0, xc1 + 0.5 * d1, xc2 + 0.5 * d2,
+                       p.gain * seglen * sig_n, nc0, nc1, nc2)
             cnt[DEPOSITS] += 1
     pc = pid[c]
     if pdir[pc, 0] == 0.0 and pdir[pc, 1] == 0.0 and pdir[pc, 2] == 0.0:
@@ -409,16 +406,12 @@ def push_residual(s, p, w, cid, excess):
 def update_region(s, p, w, nrn):
     """Recompute the region's nodes, apply the tip rules to this event's tips (ligament
     failure, near-crack end) and re-queue the nodes."""
-    X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec = (s.X, s.F, s.S, s.NF, s.NFc, s.area,
-                                                            s.nrm, s.grad, s.pr, s.rho, s.val,
-                                                            s.vec)
-    crack_of, taun, nevl, G, gp, tipn, cnt = s.crack_of, s.taun, s.nevl, s.G, s.gp, s.tipn, s.cnt
+    rho, val, crack_of, taun, nevl, cnt = s.rho, s.val, s.crack_of, s.taun, s.nevl, s.cnt
     sc, acc, ev, regn, tip, near_end = w.sc, w.acc, w.ev, w.regn, w.tip, w.near_end
     grain, seed = p.grain, p.seed
     for i in range(nrn):
         n = regn[i]
-        node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of[n] >= 0,
-                    grain, seed, sc, acc, ev, G, gp, tipn)
+        node_update(s, n, crack_of[n] >= 0, grain, seed, sc, acc, ev)
         nevl[n] = cnt[DEPOSITS]
         # Only this event's tips: an older arrested tip was looked at when it stopped, and
         # looking again at every nearby event would cost a search per event.
@@ -433,8 +426,7 @@ def update_region(s, p, w, nrn):
             for a in range(3):
                 for b in range(3):
                     rho[n, a, b] = 0.0
-            node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, False, grain,
-                        seed, sc, acc, ev, G, gp, tipn)
+            node_update(s, n, False, grain, seed, sc, acc, ev)
             cnt[TIPS_NEAR] += 1
         push(s, n, p.tip_first)
 

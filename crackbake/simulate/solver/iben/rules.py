@@ -27,8 +27,8 @@ def _enqueue_near(s, w, n, x0, x1, x2, r2, vstamp, tail):
             if vst[y] == vstamp:
                 continue
             vst[y] = vstamp
-            e0 = wrap(X[y, 0] - x0, s.gp[5])
-            e1 = wrap(X[y, 1] - x1, s.gp[6])
+            e0 = wrap(X[y, 0] - x0, s.period)
+            e1 = wrap(X[y, 1] - x1, s.period)
             e2 = X[y, 2] - x2
             if dot3(e0, e1, e2, e0, e1, e2) <= r2:
                 queue[tail] = y
@@ -80,8 +80,8 @@ def bridge(s, w, t, cid, rad, coscone, own_len):
     for i in range(1, ball(s, w, t, rad)):
         n = queue[i]
         if (pcid[pid[n]] >= 0 and pcid[pid[n]] != cid) or (onb[n] and to_boundary):
-            e0 = wrap(X[n, 0] - x0, s.gp[5])
-            e1 = wrap(X[n, 1] - x1, s.gp[6])
+            e0 = wrap(X[n, 0] - x0, s.period)
+            e1 = wrap(X[n, 1] - x1, s.period)
             e2 = X[n, 2] - x2
             le = norm3(e0, e1, e2)
             if 0.0 < le < bd and dot3(e0, e1, e2, d0, d1, d2) >= coscone * le * ld:
@@ -95,8 +95,8 @@ def bridge(s, w, t, cid, rad, coscone, own_len):
         vn0 += area[f] * nrm[f, 0]
         vn1 += area[f] * nrm[f, 1]
         vn2 += area[f] * nrm[f, 2]
-    e0 = wrap(X[best, 0] - x0, s.gp[5])
-    e1 = wrap(X[best, 1] - x1, s.gp[6])
+    e0 = wrap(X[best, 0] - x0, s.period)
+    e1 = wrap(X[best, 1] - x1, s.period)
     e2 = X[best, 2] - x2
     # Cut normal: in the tangent plane, perpendicular to the way to the target.
     c0, c1, c2 = cross3(vn0, vn1, vn2, e0, e1, e2)
@@ -133,8 +133,8 @@ def near_other(s, w, t, cid, d0, d1, d2, rad, cospar, rad_any):
         p = pid[n]
         o = pcid[p]
         if o >= 0 and o != cid:
-            e0 = wrap(X[n, 0] - x0, s.gp[5])
-            e1 = wrap(X[n, 1] - x1, s.gp[6])
+            e0 = wrap(X[n, 0] - x0, s.period)
+            e1 = wrap(X[n, 1] - x1, s.period)
             e2 = X[n, 2] - x2
             if dot3(e0, e1, e2, e0, e1, e2) <= ra2:
                 return 1

@@ -58,9 +58,9 @@ def grain_angle(seed, n):
 
 
 @njit(cache=True)
-def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, grain, seed, sc,
-                acc, ev, G, gp, tipn):
-    """Separation tensor (plus residual) of node ``n``; stores its largest eigenpair.
+def node_update(s, n, raw, grain, seed, sc, acc, ev):
+    """Separation tensor (plus residual) of node ``n`` of state ``s`` (its struct reference);
+    stores its largest eigenpair in ``val[n]``, ``vec[n]``.
 
     The paper's ``ς = ½(−m(Σf⁺) + Σm(f⁺) + m(Σf⁻) − Σm(f⁻))`` sees how the mesh is laid out
     (the paper is silent on this): under isotropic stress ``Σm(f)`` equals
@@ -83,9 +83,10 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
     Corner forces ``f = -A (l1 (d1.g) d1 [+ or -] l2 (d2.g) d2)`` are rebuilt from the principal
     split, the effective one from ``pr`` unless ``raw`` (crack tips: :func:`tip_principal`
     with the tip's crack normal ``tipn[n]``, so the world-scale shadow that their own crack
-    casts over them does not stall them).  ``sc`` (14,), ``acc`` (2, 3, 3), ``ev`` (3, 3) are
-    scratch; ``G``, ``gp`` the shadow grid.
+    casts over them does not stall them).  ``grain`` and ``seed`` are the grain's weight and
+    seed; ``sc`` (14,), ``acc`` (2, 3, 3), ``ev`` (3, 3) are scratch.
     """
+    F, NF, NFc, area, nrm, grad, pr = s.F, s.NF, s.NFc, s.area, s.nrm, s.grad, s.pr
     t = acc[0]
     u = acc[1]
     for i in range(3):
@@ -101,7 +102,8 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
         while F[f, k] != n:
             k += 1
         if raw:
-            tip_principal(f, X, F, S, nrm, G, gp, tipn[n, 0], tipn[n, 1], tipn[n, 2], ev, sc)
+            tipn = s.tipn
+            tip_principal(s, f, tipn[n, 0], tipn[n, 1], tipn[n, 2], ev, sc)
             p = sc
         else:
             p = pr[f]
@@ -154,7 +156,7 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
     add_m(t, sm0, sm1, sm2, 1.0)
     add_m(u, sp0, sp1, sp2, -1.0)
     add_m(u, sm0, sm1, sm2, 1.0)
-    r = rho[n]
+    r = s.rho[n]
     for i in range(3):
         for j in range(i, 3):
             t[i, j] = 0.5 * t[i, j] + r[i, j]
@@ -167,7 +169,7 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
             t[i, j] = t[j, i]
             u[i, j] = u[j, i]
     v = eig_max_into(t, ev)
-    val[n] = v
+    s.val[n] = v
     lvn = np.sqrt(vn0 * vn0 + vn1 * vn1 + vn2 * vn2)
     if grain > 0.0 and v > 0.0 and lvn > 0.0:
         vn0 /= lvn
@@ -189,15 +191,16 @@ def node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, raw, gr
         y1 = vn2 * x0 - vn0 * x2
         y2 = vn0 * x1 - vn1 * x0
         th = grain_angle(seed, n)
-        c = np.cos(th)
-        s = np.sin(th)
-        d0 = c * x0 + s * y0
-        d1 = c * x1 + s * y1
-        d2 = c * x2 + s * y2
+        ct = np.cos(th)
+        st = np.sin(th)
+        d0 = ct * x0 + st * y0
+        d1 = ct * x1 + st * y1
+        d2 = ct * x2 + st * y2
         add_dd(u, grain * v, d0, d1, d2)
         u[1, 0] = u[0, 1]
         u[2, 0] = u[0, 2]
         u[2, 1] = u[1, 2]
     eig_max_into(u, ev)
+    vec = s.vec
     for q in range(3):
         vec[n, q] = ev[q, 0]

@@ -1,4 +1,10 @@
-"""The world-scale stress shadow: a uniform grid of released stress (docs/solver.md)."""
+"""The world-scale stress shadow: a uniform grid of released stress (docs/solver.md).
+
+The grid ``G`` (nx, ny, nz, 6) holds the released stress per cell (xx xy xz yy yz zz); its
+parameters ``gp`` are ``origin (3), cell, kernel radius`` (5,), followed with several impacts
+by the table below.  The tile period (``State.period``, 0: not periodic) is its own field;
+with it the grid spans one period in x and y and its cells wrap around.
+"""
 
 from __future__ import annotations
 
@@ -9,20 +15,21 @@ from crackbake.simulate.solver.iben.vec import wrap
 
 
 @njit(cache=True)
-def shadow_at(x0, x1, x2, G, gp, out):
-    """Released stress at a point: trilinear interpolation of the cell-centred grid -> out[6]."""
+def shadow_at(x0, x1, x2, G, gp, per, out):
+    """Released stress at a point: trilinear interpolation of the cell-centred grid -> out[6]
+    (``per``: the tile period, 0: not periodic)."""
     for q in range(6):
         out[q] = 0.0
     if G.shape[0] < 2:
         return
-    if gp.shape[0] > 7:
+    if gp.shape[0] > IMPACTS:
         _blocks_at(x0, x1, x2, G, gp, out)
         return
     cs = gp[3]
     u0 = (x0 - gp[0]) / cs - 0.5
     u1 = (x1 - gp[1]) / cs - 0.5
     u2 = (x2 - gp[2]) / cs - 0.5
-    if gp[5] != 0.0:
+    if per != 0.0:
         _periodic_at(u0, u1, u2, G, out)
         return
     i0 = min(max(int(np.floor(u0)), 0), G.shape[0] - 2)
@@ -44,24 +51,26 @@ def shadow_at(x0, x1, x2, G, gp, out):
 
 
 @njit(cache=True)
-def face_shadow(f, X, F, G, gp, out):
+def face_shadow(f, X, F, G, gp, per, out):
     """Released stress at the centroid of face f -> out[6] (see :func:`shadow_at`)."""
     i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-    if gp[5] != 0.0:
+    if per != 0.0:
         # Periodic plate: the centroid of the corners' nearest images of corner 0.
-        shadow_at(X[i0, 0] + (wrap(X[i1, 0] - X[i0, 0], gp[5]) + wrap(X[i2, 0] - X[i0, 0], gp[5]))
+        shadow_at(X[i0, 0] + (wrap(X[i1, 0] - X[i0, 0], per) + wrap(X[i2, 0] - X[i0, 0], per))
                   / 3.0,
-                  X[i0, 1] + (wrap(X[i1, 1] - X[i0, 1], gp[6]) + wrap(X[i2, 1] - X[i0, 1], gp[6]))
-                  / 3.0, (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, out)
+                  X[i0, 1] + (wrap(X[i1, 1] - X[i0, 1], per) + wrap(X[i2, 1] - X[i0, 1], per))
+                  / 3.0, (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, per, out)
         return
     shadow_at((X[i0, 0] + X[i1, 0] + X[i2, 0]) / 3.0, (X[i0, 1] + X[i1, 1] + X[i2, 1]) / 3.0,
-              (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, out)
+              (X[i0, 2] + X[i1, 2] + X[i2, 2]) / 3.0, G, gp, per, out)
 
 
-#: Several impacts (docs/solver.md, "Several impacts"): ``gp[7]`` = K, then K rows of
+#: Several impacts (docs/solver.md, "Several impacts"): ``gp[IMPACTS]`` = K, then K rows of
 #: ``centre (3), reach, radius, block`` (block -1: the base grid), then ``nx`` of the base grid
 #: and per extra block ``origin (3), cell, x offset, nx, ny, nz``; the blocks are stacked along
-#: the grid's first axis after the base grid.
+#: the grid's first axis after the base grid.  ``gp`` longer than ``IMPACTS``: several impacts.
+IMPACTS = 5
+ROWS = IMPACTS + 1
 IMPACT_ROW = 6
 BLOCK_ROW = 8
 
@@ -71,8 +80,8 @@ def nearest_impact(x0, x1, x2, gp):
     """Row of the impact nearest to a point in reaches (``gp`` with several impacts)."""
     best = np.inf
     k = 0
-    for i in range(int(gp[7])):
-        b = 8 + IMPACT_ROW * i
+    for i in range(int(gp[IMPACTS])):
+        b = ROWS + IMPACT_ROW * i
         d = np.sqrt((x0 - gp[b]) ** 2 + (x1 - gp[b + 1]) ** 2 + (x2 - gp[b + 2]) ** 2) / gp[b + 3]
         if d < best:
             best = d
@@ -84,16 +93,16 @@ def nearest_impact(x0, x1, x2, gp):
 def radius_at(x0, x1, x2, gp):
     """The shadow radius at a point: ``gp[4]``, or with several impacts the radius of the
     impact nearest to the point in reaches (docs/solver.md, "Several impacts")."""
-    if gp.shape[0] <= 7:
+    if gp.shape[0] <= IMPACTS:
         return gp[4]
-    return gp[8 + IMPACT_ROW * nearest_impact(x0, x1, x2, gp) + 4]
+    return gp[ROWS + IMPACT_ROW * nearest_impact(x0, x1, x2, gp) + 4]
 
 
 @njit(cache=True)
 def radius_scale(x0, x1, x2, gp):
     """:func:`radius_at` over ``gp[4]``: 1.0 exactly with one shadow radius, so the world
     lengths the rules scale by it are unchanged bit for bit."""
-    if gp.shape[0] <= 7:
+    if gp.shape[0] <= IMPACTS:
         return 1.0
     return radius_at(x0, x1, x2, gp) / gp[4]
 
@@ -102,9 +111,9 @@ def radius_scale(x0, x1, x2, gp):
 def _block(gp, j):
     """Origin (3), cell, x offset, nx, ny, nz of grid block ``j`` (-1: the base grid)."""
     if j < 0:
-        base = 8 + IMPACT_ROW * int(gp[7])
+        base = ROWS + IMPACT_ROW * int(gp[IMPACTS])
         return gp[0], gp[1], gp[2], gp[3], 0, int(gp[base]), -1, -1
-    b = 8 + IMPACT_ROW * int(gp[7]) + 1 + BLOCK_ROW * j
+    b = ROWS + IMPACT_ROW * int(gp[IMPACTS]) + 1 + BLOCK_ROW * j
     return (gp[b], gp[b + 1], gp[b + 2], gp[b + 3], int(gp[b + 4]), int(gp[b + 5]),
             int(gp[b + 6]), int(gp[b + 7]))
 
@@ -138,8 +147,8 @@ def _blocks_at(x0, x1, x2, G, gp, out):
     """Released stress at a point with several impacts: the sum over the base grid and every
     impact's block (each holds the deposits of the cracks nearest its impact)."""
     n_blocks = 0
-    for i in range(int(gp[7])):
-        n_blocks = max(n_blocks, int(gp[8 + IMPACT_ROW * i + 5]) + 1)
+    for i in range(int(gp[IMPACTS])):
+        n_blocks = max(n_blocks, int(gp[ROWS + IMPACT_ROW * i + 5]) + 1)
     for j in range(-1, n_blocks):
         ox, oy, oz, cs, off, nx, ny, nz = _block(gp, j)
         if ny < 0:
@@ -149,19 +158,21 @@ def _blocks_at(x0, x1, x2, G, gp, out):
 
 
 @njit(cache=True)
-def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
-    """Deposit ``amount * n n^T * k(r)`` with a compact kernel around p into the grid.
+def shadow_add(s, p0, p1, p2, amount, n0, n1, n2):
+    """Deposit ``amount * n n^T * k(r)`` with a compact kernel around p into the grid of state
+    ``s`` (its struct reference).
 
     ``k(r) = (1 - r²/R²)² / (16 R / 15)`` for ``r < R`` (R = ``gp[4]``, or with several
     impacts that of the impact nearest to p: :func:`radius_at`): its integral across a
     straight line is 1, so a long crack whose segments each deposit ``length x normal stress``
     releases exactly its normal stress on the crack line, fading to nothing at distance R.
     """
+    G, gp = s.G, s.gp
     if G.shape[0] < 2:
         return
-    if gp.shape[0] > 7:
+    if gp.shape[0] > IMPACTS:
         k = nearest_impact(p0, p1, p2, gp)
-        row = 8 + IMPACT_ROW * k
+        row = ROWS + IMPACT_ROW * k
         ox, oy, oz, cs, off, nx, ny, nz = _block(gp, int(gp[row + 5]))
         if ny < 0:
             ny = G.shape[1]
@@ -177,7 +188,7 @@ def shadow_add(p0, p1, p2, amount, n0, n1, n2, G, gp):
     lo1 = max(int(np.floor((p1 - rk - gp[1]) / cs)), 0)
     hi1 = min(int(np.floor((p1 + rk - gp[1]) / cs)), G.shape[1] - 1)
     nx, ny = G.shape[0], G.shape[1]
-    if gp[5] != 0.0:
+    if s.period != 0.0:
         # Periodic plate (the grid spans one period): every image of the kernel, cells mod n.
         lo0 = int(np.floor((p0 - rk - gp[0]) / cs))
         hi0 = int(np.floor((p0 + rk - gp[0]) / cs))

@@ -152,7 +152,7 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
         hk=np.zeros(ncap + 65536), hnode=zi(ncap + 65536), hv=zi(ncap + 65536),
         segp=np.zeros((scap, 2), np.int64), seg_alive=np.zeros(scap, bool),
         seg_info=np.zeros((scap, 3)), clen=clen, corig=np.zeros((len(clen), 5)), G=G, gp=gp,
-        cnt=cnt,
+        period=period, cnt=cnt,
     )
     incidence(m0, s.F, s.NF, s.NFc)
     mesh = SimpleNamespace(X0=X0, F0=F0, S0=S0, n0=n0, m0=m0, bnd=bnd, h_node=h_node,
@@ -226,9 +226,8 @@ def _wrapped(d: np.ndarray, period: float) -> np.ndarray:
 def _update_all(s: State, mesh: SimpleNamespace, stress: np.ndarray, nn: int | None = None,
                 nf: int | None = None) -> None:
     """Recompute the initial (or the first nn / nf) faces and nodes of ``s`` with ``stress``."""
-    update_all(mesh.n0 if nn is None else nn, mesh.m0 if nf is None else nf, s.X, s.F, stress,
-               s.area, s.nrm, s.grad, s.pr, s.NF, s.NFc, s.rho, s.val, s.vec, s.crack_of, s.G,
-               s.gp, C.GRAIN, mesh.seed, s.tipn)
+    update_all(s._replace(S=stress), mesh.n0 if nn is None else nn,
+               mesh.m0 if nf is None else nf, C.GRAIN, mesh.seed)
 
 
 def _calibrate(s: State, mesh: SimpleNamespace, params: SolverParams) -> SimpleNamespace:
@@ -264,7 +263,7 @@ def _loop_params(s: State, mesh: SimpleNamespace, cal: SimpleNamespace,
         np.linalg.norm(X0.max(0) - X0.min(0)))
     # The tip factor's reference step: the edge of an equilateral triangle of a
     # TIP_REF_FACES-face mesh of this surface (about the default simulation's edge length).
-    per = float(s.gp[5])
+    per = s.period
     total_area = 0.5 * float(np.linalg.norm(
         np.cross(_wrapped(X0[F0[:, 1]] - X0[F0[:, 0]], per),
                  _wrapped(X0[F0[:, 2]] - X0[F0[:, 0]], per)), axis=1).sum())
@@ -388,8 +387,7 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool,
             continue
         if code == DRIED:
             nn, nf = int(s.cnt[NODES]), int(s.cnt[FACES])
-            update_all(nn, nf, s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr, s.NF, s.NFc, s.rho,
-                       s.val, s.vec, s.crack_of, s.G, s.gp, p.grain, p.seed, s.tipn)
+            update_all(s, nn, nf, p.grain, p.seed)
             requeue_all(s, p.tip_first)
             code = MORE
         if now - t_call < 0.05:
@@ -405,9 +403,7 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool,
             s.S[:nf] += stages.pop(0)[s.AF[:nf]]
             if landed is not None:
                 landed.append(int(s.cnt[STEP]))
-            update_all(int(s.cnt[NODES]), nf, s.X, s.F, s.S, s.area, s.nrm, s.grad, s.pr, s.NF,
-                       s.NFc, s.rho, s.val, s.vec, s.crack_of, s.G, s.gp, p.grain, p.seed,
-                       s.tipn)
+            update_all(s, int(s.cnt[NODES]), nf, p.grain, p.seed)
             requeue_all(s, p.tip_first)
             continue
         if code == DONE:
@@ -435,7 +431,7 @@ def _result(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, params: Solve
         af = info[:, 0].astype(np.int64)
         info[:, 0] = np.where(af >= 0, mesh.asset_face[np.maximum(af, 0)], -1)
     cracks = chain(s.segp[:ns][alive], info, s.X, s.onb, steps, params,
-                   mesh.X0, float(s.gp[5]))
+                   mesh.X0, s.period)
     sep = _relative(s.val[:nn], s.taun[:nn])
     pr = s.pr[:nf]
     # Effective stress (what the cracks left): l1 d1 d1^T + l2 d2 d2^T.

@@ -1,20 +1,39 @@
 """The solver state (named arrays), the loop's parameters and scratch, and their growth.
 
-Everything the compiled loop reads or writes travels in three named tuples (numba passes them
-as heterogeneous tuples, so field access costs nothing): :class:`State` (the mesh, the crack
-network and the heap, grown by :func:`grow` when full), :class:`LoopParams` (scalars by name)
-and :class:`Work` (scratch rows of one :func:`crackbake.simulate.solver.iben.loop.run` call).
-Mutable scalars (counts, stamps) are slots of the int array ``State.cnt`` named below.
+Everything the compiled loop reads or writes travels in three named tuples: :class:`State`
+(the mesh, the crack network and the heap, grown by :func:`grow` when full),
+:class:`LoopParams` (scalars by name) and :class:`Work` (scratch rows of one
+:func:`crackbake.simulate.solver.iben.loop.run` call).  Mutable scalars (counts, stamps) are
+slots of the int array ``State.cnt`` named below.
+
+The class bodies of ``State`` and ``Work`` are the one list of their fields: each annotation
+names a field's dtype and rank (``F1`` ... ``B1`` below), and :mod:`.structs` generates from
+them the numba struct references the kernels take.  The compiled entry points take the named
+tuples and turn them into struct references, because (benchmarks/bench_state.py) a kernel
+taking the 43-field ``State`` as a tuple (passed flattened, some 340 values) compiles about
+1.6x slower than one taking its struct reference (one pointer); a field read costs the same
+in either, and each call from Python unboxes the tuple's arrays one by one (some 16 µs), so
+the entry points are called per chunk of work, never per item.
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Annotated, NamedTuple
 
 import numpy as np
 
-# Slots of State.cnt.  topology.py's kernels use the first four by number (heap size, nodes,
-# faces, segments), so their order is fixed.
+# The field types of State and Work: C-contiguous arrays of one dtype and rank.  The class
+# bodies below are the one list of their fields; structs.py builds the numba struct types
+# from them (a field is added in one place).
+F1 = Annotated[np.ndarray, np.float64, 1]
+F2 = Annotated[np.ndarray, np.float64, 2]
+F3 = Annotated[np.ndarray, np.float64, 3]
+F4 = Annotated[np.ndarray, np.float64, 4]
+I1 = Annotated[np.ndarray, np.int64, 1]
+I2 = Annotated[np.ndarray, np.int64, 2]
+B1 = Annotated[np.ndarray, np.bool_, 1]
+
+# Slots of State.cnt.  heap.py's kernels use the first (the heap size) by number.
 (HEAP, NODES, FACES, SEGS, STEP, EVENTS, STAMP, CRACKS, ABORTED, GROWTH_STEPS, DEPOSITS,
  REFRESHED, NUC_EDGE, NUC_VETOED, NUC_NEAR, TIPS_NEAR, IDLE, FIRST_CRACK, SATURATED,
  BRIDGED, CROSSED) = range(21)
@@ -33,48 +52,49 @@ class State(NamedTuple):
     (the node it was split from, recursively): crack segments join points.
     """
 
-    X: np.ndarray  #: (Ncap, 3) node positions
-    F: np.ndarray  #: (Mcap, 3) faces
-    S: np.ndarray  #: (Mcap, 3, 3) world in-plane stress per face (tension positive)
-    AF: np.ndarray  #: (Mcap,) asset face
-    GR: np.ndarray  #: (Mcap, 3, 3) growth per step, or (1, 3, 3) zeros without growth
-    area: np.ndarray  #: (Mcap,)
-    nrm: np.ndarray  #: (Mcap, 3) unit normals
-    grad: np.ndarray  #: (Mcap, 3, 3) barycentric gradients
-    pr: np.ndarray  #: (Mcap, 8) principal split of the effective stress: l1, l2, d1, d2
-    fst: np.ndarray  #: (Mcap,) face stamp of the last event that touched it
-    NF: np.ndarray  #: (Ncap, W) incident faces per node
-    NFc: np.ndarray  #: (Ncap,) their count
-    rho: np.ndarray  #: (Ncap, 3, 3) persistent residual
-    val: np.ndarray  #: (Ncap,) largest separation eigenvalue
-    vec: np.ndarray  #: (Ncap, 3) its eigenvector (crack normal)
-    taun: np.ndarray  #: (Ncap,) toughness in separation units
-    hn: np.ndarray  #: (Ncap,) mean edge length at the node
-    pid: np.ndarray  #: (Ncap,) point of the node
-    onb: np.ndarray  #: (Ncap,) on the mesh boundary
-    crack_of: np.ndarray  #: (Ncap,) crack whose free tip the node is, else -1
-    nver: np.ndarray  #: (Ncap,) heap version
-    dead: np.ndarray  #: (Ncap,) never cut again
-    nonuc: np.ndarray  #: (Ncap,) no crack may start here (beside an existing one)
-    nst: np.ndarray  #: (Ncap,) node stamp of the last event that touched it
-    nevl: np.ndarray  #: (Ncap,) shadow deposit count when last evaluated (lazy heap)
-    lchk: np.ndarray  #: (Ncap,) event count + 1 when last checked for a ligament at rest
-    tipn: np.ndarray  #: (Ncap, 3) crack normal of a free tip
-    segof: np.ndarray  #: (Ncap,) per point: last live segment at it
-    pcid: np.ndarray  #: (Ncap,) per point: crack it belongs to, else -1
-    pdir: np.ndarray  #: (Ncap, 3) per point: smoothed crack direction
-    mate: np.ndarray  #: (Ncap,) per point: nearest node of a touching shell, else -1
-    hk: np.ndarray  #: (Hcap,) heap keys
-    hnode: np.ndarray  #: (Hcap,) heap nodes
-    hv: np.ndarray  #: (Hcap,) heap versions
-    segp: np.ndarray  #: (Scap, 2) segment points
-    seg_alive: np.ndarray  #: (Scap,)
-    seg_info: np.ndarray  #: (Scap, 3) asset face, step, released v+/h
-    clen: np.ndarray  #: (Ccap,) length per crack
-    corig: np.ndarray  #: (Ccap, 5) origin per crack: x, y, z, step, on an edge
-    G: np.ndarray  #: (nx, ny, nz, 6) shadow grid (or (1, 1, 1, 6) without)
-    gp: np.ndarray  #: (5,) shadow grid origin (3), cell size, kernel radius
-    cnt: np.ndarray  #: (N_COUNTERS,) int64 counters, slots above
+    X: F2  #: (Ncap, 3) node positions
+    F: I2  #: (Mcap, 3) faces
+    S: F3  #: (Mcap, 3, 3) world in-plane stress per face (tension positive)
+    AF: I1  #: (Mcap,) asset face
+    GR: F3  #: (Mcap, 3, 3) growth per step, or (1, 3, 3) zeros without growth
+    area: F1  #: (Mcap,)
+    nrm: F2  #: (Mcap, 3) unit normals
+    grad: F3  #: (Mcap, 3, 3) barycentric gradients
+    pr: F2  #: (Mcap, 8) principal split of the effective stress: l1, l2, d1, d2
+    fst: I1  #: (Mcap,) face stamp of the last event that touched it
+    NF: I2  #: (Ncap, W) incident faces per node
+    NFc: I1  #: (Ncap,) their count
+    rho: F3  #: (Ncap, 3, 3) persistent residual
+    val: F1  #: (Ncap,) largest separation eigenvalue
+    vec: F2  #: (Ncap, 3) its eigenvector (crack normal)
+    taun: F1  #: (Ncap,) toughness in separation units
+    hn: F1  #: (Ncap,) mean edge length at the node
+    pid: I1  #: (Ncap,) point of the node
+    onb: B1  #: (Ncap,) on the mesh boundary
+    crack_of: I1  #: (Ncap,) crack whose free tip the node is, else -1
+    nver: I1  #: (Ncap,) heap version
+    dead: B1  #: (Ncap,) never cut again
+    nonuc: B1  #: (Ncap,) no crack may start here (beside an existing one)
+    nst: I1  #: (Ncap,) node stamp of the last event that touched it
+    nevl: I1  #: (Ncap,) shadow deposit count when last evaluated (lazy heap)
+    lchk: I1  #: (Ncap,) event count + 1 when last checked for a ligament at rest
+    tipn: F2  #: (Ncap, 3) crack normal of a free tip
+    segof: I1  #: (Ncap,) per point: last live segment at it
+    pcid: I1  #: (Ncap,) per point: crack it belongs to, else -1
+    pdir: F2  #: (Ncap, 3) per point: smoothed crack direction
+    mate: I1  #: (Ncap,) per point: nearest node of a touching shell, else -1
+    hk: F1  #: (Hcap,) heap keys
+    hnode: I1  #: (Hcap,) heap nodes
+    hv: I1  #: (Hcap,) heap versions
+    segp: I2  #: (Scap, 2) segment points
+    seg_alive: B1  #: (Scap,)
+    seg_info: F2  #: (Scap, 3) asset face, step, released v+/h
+    clen: F1  #: (Ccap,) length per crack
+    corig: F2  #: (Ccap, 5) origin per crack: x, y, z, step, on an edge
+    G: F4  #: (nx, ny, nz, 6) shadow grid (or (1, 1, 1, 6) without)
+    gp: F1  #: (5,) shadow grid origin (3), cell size, kernel radius; + impacts (shadow.py)
+    period: float  #: tile period in x and y (plate [0, period)²), 0: not periodic
+    cnt: I1  #: (N_COUNTERS,) int64 counters, slots above
 
 
 class LoopParams(NamedTuple):
@@ -109,32 +129,32 @@ class LoopParams(NamedTuple):
 class Work(NamedTuple):
     """Scratch of one loop call; sized so that nothing can overflow (see :func:`work`)."""
 
-    regf: np.ndarray  #: (Mcap,) faces of the event's region
-    regn: np.ndarray  #: (Ncap,) nodes of the event's region
-    disp: np.ndarray  #: (Ncap, 3) relaxation displacements (zero between events)
-    buf: np.ndarray  #: (W,) nodes made by a node split
-    par: np.ndarray  #: (W,) union-find
-    comp: np.ndarray  #: (W,) components
-    fbuf: np.ndarray  #: (W,) faces
-    centers: np.ndarray  #: (3 W + 3,) nodes whose 1-ring changed
-    sc: np.ndarray  #: (14,) tip principal split
-    acc: np.ndarray  #: (2, 3, 3) tensor accumulators
-    ev: np.ndarray  #: (3, 3) eigenvectors
-    fr: np.ndarray  #: (2, 3) face frame
-    r6: np.ndarray  #: (6,) shadow sample
-    geo: np.ndarray  #: (3, 3) the cut: centre, crack normal, direction along the crack
-    sa: np.ndarray  #: (2,) per side: crossed edge start, else -1
-    sb: np.ndarray  #: (2,) crossed edge end
-    st: np.ndarray  #: (2,) crossing parameter on the edge
-    sd: np.ndarray  #: (2,) crossing distance from the centre
-    tip: np.ndarray  #: (2,) per side: tip node, else -1
-    split: np.ndarray  #: (2,) the tip is a new node on the crossed edge
-    free_tip: np.ndarray  #: (2,) the tip is free (did not meet a crack or the boundary)
-    near_end: np.ndarray  #: (2,) the near-crack rule ends the tip
-    segl: np.ndarray  #: (2,) segment length
-    vst: np.ndarray  #: (Ncap,) visit stamps of the breadth-first searches
-    vstamp: np.ndarray  #: (1,) current visit stamp
-    queue: np.ndarray  #: (Ncap,) breadth-first queue
+    regf: I1  #: (Mcap,) faces of the event's region
+    regn: I1  #: (Ncap,) nodes of the event's region
+    disp: F2  #: (Ncap, 3) relaxation displacements (zero between events)
+    buf: I1  #: (W,) nodes made by a node split
+    par: I1  #: (W,) union-find
+    comp: I1  #: (W,) components
+    fbuf: I1  #: (W,) faces
+    centers: I1  #: (3 W + 3,) nodes whose 1-ring changed
+    sc: F1  #: (14,) tip principal split
+    acc: F3  #: (2, 3, 3) tensor accumulators
+    ev: F2  #: (3, 3) eigenvectors
+    fr: F2  #: (2, 3) face frame
+    r6: F1  #: (6,) shadow sample
+    geo: F2  #: (3, 3) the cut: centre, crack normal, direction along the crack
+    sa: I1  #: (2,) per side: crossed edge start, else -1
+    sb: I1  #: (2,) crossed edge end
+    st: F1  #: (2,) crossing parameter on the edge
+    sd: F1  #: (2,) crossing distance from the centre
+    tip: I1  #: (2,) per side: tip node, else -1
+    split: B1  #: (2,) the tip is a new node on the crossed edge
+    free_tip: B1  #: (2,) the tip is free (did not meet a crack or the boundary)
+    near_end: B1  #: (2,) the near-crack rule ends the tip
+    segl: F1  #: (2,) segment length
+    vst: I1  #: (Ncap,) visit stamps of the breadth-first searches
+    vstamp: I1  #: (1,) current visit stamp
+    queue: I1  #: (Ncap,) breadth-first queue
 
 
 def grown(a: np.ndarray, size: int) -> np.ndarray:

@@ -14,35 +14,36 @@ from crackbake.simulate.solver.iben.constants import TIP_PRIORITY, UPDATE_CHUNK
 from crackbake.simulate.solver.iben.element import face_update
 from crackbake.simulate.solver.iben.heap import heap_push
 from crackbake.simulate.solver.iben.separation import node_update
-from crackbake.simulate.solver.iben.state import DEPOSITS, HEAP, NODES
+from crackbake.simulate.solver.iben.state import DEPOSITS, HEAP, NODES, State
 from crackbake.simulate.solver.iben.structs import state_ref
 
 
 @njit(cache=True, nogil=True)
-def update_faces(lo, hi, X, F, S, area, nrm, grad, pr, G, gp):
-    """Recompute faces ``lo:hi`` with stress ``S`` (each writes only its own entries)."""
+def update_faces(lo, hi, s):
+    """Recompute faces ``lo:hi`` of ``s`` (a State; each face writes only its own entries)."""
+    r = state_ref(s)
     fr, r6 = np.empty((2, 3)), np.empty(6)
     for f in range(lo, hi):
-        face_update(f, X, F, S, area, nrm, grad, pr, G, gp, fr, r6)
+        face_update(r, f, fr, r6)
 
 
 @njit(cache=True, nogil=True)
-def update_nodes(lo, hi, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of, G, gp,
-                 grain, seed, tipn):
-    """Recompute nodes ``lo:hi`` (each writes only its own entries)."""
+def update_nodes(lo, hi, s, grain, seed):
+    """Recompute nodes ``lo:hi`` of ``s`` (a State; each node writes only its own entries)."""
+    r = state_ref(s)
+    crack_of = r.crack_of
     sc, acc, ev = np.empty(14), np.empty((2, 3, 3)), np.empty((3, 3))
     for n in range(lo, hi):
-        node_update(n, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of[n] >= 0,
-                    grain, seed, sc, acc, ev, G, gp, tipn)
+        node_update(r, n, crack_of[n] >= 0, grain, seed, sc, acc, ev)
 
 
 def _chunks(count: int) -> list[tuple[int, int]]:
     return [(lo, min(count, lo + UPDATE_CHUNK)) for lo in range(0, count, UPDATE_CHUNK)]
 
 
-def update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, crack_of, G, gp,
-               grain, seed, tipn) -> None:
-    """Recompute the first ``nf`` faces (stress ``S``) and ``nn`` nodes (setup, drying, end).
+def update_all(s: State, nn: int, nf: int, grain: float, seed: int) -> None:
+    """Recompute the first ``nf`` faces and ``nn`` nodes of ``s`` (setup, drying, end; for
+    another stress, pass ``s._replace(S=stress)``: the same arrays but that stress).
 
     Each face and each node writes only its own entries, so chunks run on ``get_num_threads()``
     threads (the kernels release the GIL) and the result does not depend on the thread count.
@@ -52,16 +53,12 @@ def update_all(nn, nf, X, F, S, area, nrm, grad, pr, NF, NFc, rho, val, vec, cra
     """
     threads = min(get_num_threads(), max(1, nf // UPDATE_CHUNK))
     if threads <= 1:
-        update_faces(0, nf, X, F, S, area, nrm, grad, pr, G, gp)
-        update_nodes(0, nn, X, F, S, NF, NFc, area, nrm, grad, pr, rho, val, vec, crack_of, G,
-                     gp, grain, seed, tipn)
+        update_faces(0, nf, s)
+        update_nodes(0, nn, s, grain, seed)
         return
     with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(lambda r: update_faces(r[0], r[1], X, F, S, area, nrm, grad, pr, G, gp),
-                      _chunks(nf)))
-        list(pool.map(lambda r: update_nodes(r[0], r[1], X, F, S, NF, NFc, area, nrm, grad, pr,
-                                             rho, val, vec, crack_of, G, gp, grain, seed, tipn),
-                      _chunks(nn)))
+        list(pool.map(lambda r: update_faces(r[0], r[1], s), _chunks(nf)))
+        list(pool.map(lambda r: update_nodes(r[0], r[1], s, grain, seed), _chunks(nn)))
 
 
 @njit(cache=True)
