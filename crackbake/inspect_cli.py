@@ -49,8 +49,8 @@ def _inspect(exr: Path, png_dir: Path | None):
     if png_dir is None:
         return info, []
     from crackbake import __version__
-    from crackbake.exchange.interrupt import run_staged
-    from crackbake.exchange.output import OutputStage
+    from crackbake.transaction.interrupt import run_staged
+    from crackbake.transaction.stage import OutputStage
 
     def body() -> list[Path]:
         written = write_pictures(info, channels, stage.staging_dir)

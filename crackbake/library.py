@@ -54,7 +54,7 @@ class LibraryParams:
     Attributes
     ----------
     out : Path
-        Output folder (replaced as a whole, see :class:`crackbake.exchange.output.OutputStage`).
+        Output folder (replaced as a whole, see :class:`crackbake.transaction.stage.OutputStage`).
     preset : str
         Material preset (``glass`` gets one jittered impact per variant, the others none).
     n : int
@@ -227,8 +227,8 @@ def build_library(params: LibraryParams) -> dict:
     CrackbakeError
         Bad parameters or an unusable output folder (left unchanged).
     """
-    from crackbake.exchange.interrupt import run_staged
-    from crackbake.exchange.output import OutputStage
+    from crackbake.transaction.interrupt import run_staged
+    from crackbake.transaction.stage import OutputStage
 
     params = params.validate()
     stage = OutputStage(params.out)

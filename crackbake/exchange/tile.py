@@ -103,7 +103,7 @@ def cracks_doc(pieces: list, period: float) -> dict:
 
 def write_tile(stage, params, maps, pieces: list, stats: dict, timings: dict, t0: float) -> dict:
     """Write the PNG set, ``tile_cracks.exr``, ``tile_3x3.png``, ``cracks.json`` and
-    ``manifest.json`` into the open :class:`~crackbake.exchange.output.OutputStage`."""
+    ``manifest.json`` into the open :class:`~crackbake.transaction.stage.OutputStage`."""
     t = time.perf_counter()
     base = base_color(maps.mask, occlusion=maps.occlusion, look=getattr(maps, "look", None))
     depth_scale = max(float(np.max(maps.depth)), 1e-12)
