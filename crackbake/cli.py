@@ -94,8 +94,8 @@ class _Command(click.Command):
             name = f"{prog_name or 'crackbake'} inspect"
             return inspect.main(argv[1:], name, complete_var, standalone_mode, **extra)
         if argv[:1] == ["decals"] and self.name != "decals":
-            # `crackbake decals ...`: a decal library (crackbake/library_cli.py).
-            from crackbake.library_cli import decals
+            # `crackbake decals ...`: a decal library (crackbake/decals/command.py).
+            from crackbake.decals.command import decals
 
             name = f"{prog_name or 'crackbake'} decals"
             return decals.main(argv[1:], name, complete_var, standalone_mode, **extra)

@@ -249,8 +249,8 @@ def _decals(ctx, uvmesh, network, maps, params: RunParams, stage, timings) -> No
     """One projected decal per impact (``--decal``) and ``decals.json``, timed as ``decals``."""
     if params.decal is None:
         return
-    from crackbake.bake.decal import bake_decals
-    from crackbake.exchange.decals import write_decal_set
+    from crackbake.decals.files import write_decal_set
+    from crackbake.decals.projector import bake_decals
     from crackbake.exchange.targets import normal_convention
 
     logger.info("baking %d decal(s)", len(params.impacts))

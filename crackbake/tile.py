@@ -353,8 +353,8 @@ def _build(params: TileParams, stage) -> dict:
     from crackbake.bake.context import create_context
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
+    from crackbake.decals.library import PLATE_CELLS, plate_mesh
     from crackbake.exchange.tile import bake_tile, write_tile
-    from crackbake.library import PLATE_CELLS, plate_mesh
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {}

@@ -219,8 +219,8 @@ def test_bake_is_shift_invariant(mud_tile, gl_ctx):
     rolled by half the texture: the tile's border is no different from its middle."""
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
+    from crackbake.decals.library import plate_mesh
     from crackbake.exchange.tile import bake_tile
-    from crackbake.library import plate_mesh
 
     res = 256
     doc = json.loads((mud_tile / "cracks.json").read_text())

@@ -60,7 +60,7 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 def decals(quiet: bool, as_json: bool, **options) -> None:
     """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
 
-    from crackbake.library import LibraryParams, build_library
+    from crackbake.decals.library import LibraryParams, build_library
 
     params = reported(lambda: LibraryParams(**options).validate(), quiet)
     doc = reported(lambda: build_library(params), quiet)

@@ -6,7 +6,7 @@ Each variant is a square plate of side ``size`` (mesh units) in z = 0 with UVs `
 (:func:`crackbake.pipeline.solve`, :func:`crackbake.bake.uv.prepare_uvs`,
 :func:`crackbake.bake.tangents.with_tangents`, :func:`crackbake.bake.raster.bake_cracks`) with
 their own seed and, for presets that need one (glass), an impact jittered about the centre;
-:mod:`crackbake.exchange.library` packs them into atlases and writes ``decals.json``.
+:mod:`crackbake.decals.atlas` packs them into atlases and writes ``decals.json``.
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ class LibraryParams:
             raise CrackbakeError(f"--depth {self.depth} must be a number above 0 (mesh units)")
         check_sim_faces(self.sim_faces)
         check_seed(self.seed)
-        from crackbake.exchange.library import atlas_layout
+        from crackbake.decals.atlas import atlas_layout
 
         atlas_layout(self.n, self.res)  # refuses an atlas too big to write
         return self
@@ -240,7 +240,7 @@ def _build(params: LibraryParams, stage) -> dict:
     from crackbake.bake.context import create_context
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
-    from crackbake.exchange.library import write_library
+    from crackbake.decals.atlas import write_library
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {"solve": 0.0, "bake": 0.0}
