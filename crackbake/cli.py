@@ -100,8 +100,8 @@ class _Command(click.Command):
             name = f"{prog_name or 'crackbake'} decals"
             return decals.main(argv[1:], name, complete_var, standalone_mode, **extra)
         if argv[:1] == ["tile"] and self.name != "tile":
-            # `crackbake tile ...`: a seamlessly tiling texture set (crackbake/tile_cli.py).
-            from crackbake.tile_cli import tile
+            # `crackbake tile ...`: a seamlessly tiling texture set (crackbake/tile/command.py).
+            from crackbake.tile.command import tile
 
             name = f"{prog_name or 'crackbake'} tile"
             return tile.main(argv[1:], name, complete_var, standalone_mode, **extra)

@@ -9,7 +9,7 @@ vector between two nodes to its nearest image (``period`` on the sim mesh, docs/
 whose wave vectors fit the period, and impacts (``--impacts N``, glass) are placed at random
 with their distance measured to the nearest image.  :func:`split_at_border` cuts the
 solver's unwrapped polylines at the tile border into pieces inside the tile; the bake
-(:mod:`crackbake.exchange.tile`) sees every piece also shifted by one period each way.
+(:mod:`crackbake.tile.files`) sees every piece also shifted by one period each way.
 """
 
 from __future__ import annotations
@@ -354,7 +354,7 @@ def _build(params: TileParams, stage) -> dict:
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
     from crackbake.decals.library import PLATE_CELLS, plate_mesh
-    from crackbake.exchange.tile import bake_tile, write_tile
+    from crackbake.tile.files import bake_tile, write_tile
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {}

@@ -44,7 +44,7 @@ pieces and the period), manifest.json.
 def tile(quiet: bool, **options) -> None:
     """Grow cracks on a periodic plate and bake a texture set that tiles with no seam."""
 
-    from crackbake.tile import TileParams, build_tile
+    from crackbake.tile.periodic import TileParams, build_tile
 
     params = reported(lambda: TileParams(**options).validate(), quiet)
     manifest = reported(lambda: build_tile(params), quiet)
