@@ -20,18 +20,30 @@ from crackbake.display import Display, display_mode
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.looks import parse_look
 from crackbake.params import (
+    CRACK_WIDTH_REL_DEFAULT,
     DECAL_RES_DEFAULT,
+    DEFAULT_MAX_DISTANCE_FRACTION,
     FORMATS,
     METHODS,
     MIN_PX_DEFAULT,
     NORMAL_Y,
+    PADDING_MIN,
+    PADDING_RES_PER_TEXEL,
+    PROFILE_DEFAULT,
+    RES_DEFAULT,
     RES_MAX,
     RES_MIN,
+    SEED_DEFAULT,
     SIM_FACES_DEFAULT,
+    SIM_PROXY_DEFAULT,
     SIM_PROXY_MODES,
+    SPACING_DEFAULT,
     STRESS_RES_DEFAULT,
+    TARGET_DEFAULT,
     TARGETS,
+    UNWRAP_TIMEOUT_DEFAULT,
     UP_AXES,
+    UV_DEFAULT,
     UV_MODES,
     RunParams,
     load_preset,
@@ -130,6 +142,13 @@ def _preset_help() -> str:
     return "; ".join(f"{n}: {load_preset(n).get('description', '')}" for n in preset_names())
 
 
+def _spacing_defaults() -> str:
+    """``--spacing``'s default and the presets' own: ``0.1; crackle 0.025``."""
+    own = [f"{n} {load_preset(n)['spacing']}" for n in preset_names()
+           if "spacing" in load_preset(n)]
+    return "; ".join([f"{SPACING_DEFAULT}", *own])
+
+
 def _parse_curvature(text: str | None) -> tuple[float | None, float | None]:
     if text is None:
         return None, None
@@ -186,7 +205,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--sim-proxy",
     type=click.Choice(SIM_PROXY_MODES),
-    default="auto",
+    default=SIM_PROXY_DEFAULT,
     show_default=True,
     help="Simulate on a decimated stand-in of the asset: auto when the asset has over twice "
     "--sim-faces (and over 200k faces); always; never (refine the asset's own faces).",
@@ -216,12 +235,12 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option("--invert-weights", is_flag=True, help="Use 1 - weight.")
 @click.option("--noise", type=float, help="Seeded random perturbation of the field (0.1 = 10%).")
-@click.option("--hoop", type=float, help="Impact hoop/radial tension ratio [1.25].")
+@click.option("--hoop", type=float, help=f"Impact hoop/radial tension ratio [{D['hoop']}].")
 @click.option(
     "--spacing",
     type=float,
     help="Crack spacing: each crack's stress-shadow radius as a fraction of the bounding-box "
-    "diagonal; smaller gives smaller cells [0.1; crackle 0.025].",
+    f"diagonal; smaller gives smaller cells [{_spacing_defaults()}].",
 )
 @click.option(
     "--toughness", type=float, help=f"Failure threshold relative to the field [{D['toughness']}]."
@@ -244,13 +263,15 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option("--max-crack-length", type=float, help="Longest single crack, mesh units.")
 @click.option(
-    "--crack-width", type=float, help="Widest crack opening, mesh units [0.1% of diagonal]."
+    "--crack-width",
+    type=float,
+    help=f"Widest crack opening, mesh units [{CRACK_WIDTH_REL_DEFAULT:.1%} of diagonal].",
 )
 @click.option("--depth-ratio", type=float, help=f"Crack depth / width [{D['depth_ratio']}].")
 @click.option(
     "--res",
     type=int,
-    default=2048,
+    default=RES_DEFAULT,
     show_default=True,
     help=f"Texture size in texels ({RES_MIN}..{RES_MAX}).",
 )
@@ -260,14 +281,15 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--uv",
     type=click.Choice(UV_MODES),
-    default="auto",
+    default=UV_DEFAULT,
     show_default=True,
     help="auto: keep usable UVs, else unwrap with xatlas.",
 )
 @click.option(
     "--padding",
     type=int,
-    help="xatlas chart gutter in texels [about res/256, at least 2].",
+    help=f"xatlas chart gutter in texels [about res/{PADDING_RES_PER_TEXEL}, at least "
+    f"{PADDING_MIN}].",
 )
 @click.option(
     "--dilate",
@@ -277,12 +299,13 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--max-distance",
     type=float,
-    help="Clamp of crack.distance in mesh units [2% of the bounding-box diagonal].",
+    help=f"Clamp of crack.distance in mesh units [{DEFAULT_MAX_DISTANCE_FRACTION:.0%} of the "
+    "bounding-box diagonal].",
 )
 @click.option(
     "--profile",
     type=float,
-    default=1.0,
+    default=PROFILE_DEFAULT,
     show_default=True,
     help="Crack depth profile exponent: 1 = V, 0.5 = rounded U, 2 = sharp slot.",
 )
@@ -303,7 +326,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     "mode=darken|lighten|multiply, roughness, normal_strength, width_variation, chipping, curl "
     "(docs/maps.md, Crack looks).",
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--seed", type=int, default=SEED_DEFAULT, show_default=True, help="Random seed.")
 @click.option(
     "--formats",
     default=",".join(FORMATS),
@@ -336,7 +359,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--target",
     type=click.Choice(TARGETS),
-    default="gltf",
+    default=TARGET_DEFAULT,
     show_default=True,
     help="Engine profile: PNG names, packed maps, normal convention, bit depths.",
 )
@@ -361,7 +384,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--unwrap-timeout",
     type=float,
-    default=300.0,
+    default=UNWRAP_TIMEOUT_DEFAULT,
     show_default=True,
     help="Seconds xatlas may run before giving up.",
 )

@@ -27,11 +27,7 @@ from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
-from crackbake.params import MIN_PX_DEFAULT, TILE_DEFAULT
-
-#: Default clamp of the distance channel, as a fraction of the bounding-box diagonal.
-DEFAULT_MAX_DISTANCE_FRACTION = 0.02
-
+from crackbake.params import DEFAULT_MAX_DISTANCE_FRACTION, MIN_PX_DEFAULT, TILE_DEFAULT
 
 
 @dataclass(eq=False)

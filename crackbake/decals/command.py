@@ -8,7 +8,8 @@ from pathlib import Path
 import click
 
 from crackbake.cli import _Command, _err, reported
-from crackbake.params import preset_names
+from crackbake.params import DECALS_DEFAULTS as DD
+from crackbake.params import NORMAL_Y, preset_names
 
 EPILOG = """\b
 Examples:
@@ -30,29 +31,33 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 )
 @click.option(
     "--preset",
-    default="glass",
+    default=DD["preset"],
     show_default=True,
     help=f"Material preset ({', '.join(preset_names())}); glass gets one impact per variant.",
 )
-@click.option("-n", "n", type=int, default=16, show_default=True, help="Number of variants.")
+@click.option("-n", "n", type=int, default=DD["n"], show_default=True, help="Number of variants.")
 @click.option(
-    "--size", type=float, default=0.5, show_default=True, help="Decal width/height, mesh units."
+    "--size",
+    type=float,
+    default=DD["size"],
+    show_default=True,
+    help="Decal width/height, mesh units.",
 )
 @click.option(
-    "--res", type=int, default=1024, show_default=True, help="Texels per side of one variant."
+    "--res", type=int, default=DD["res"], show_default=True, help="Texels per side of one variant."
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Library seed.")
+@click.option("--seed", type=int, default=DD["seed"], show_default=True, help="Library seed.")
 @click.option(
     "--normal-y",
-    type=click.Choice(("gl", "dx")),
-    default="gl",
+    type=click.Choice(NORMAL_Y),
+    default=DD["normal_y"],
     show_default=True,
     help="Normal-map Y: gl (+Y, OpenGL: Unity, Godot, glTF) or dx (-Y, DirectX: Unreal).",
 )
 @click.option("--depth", type=float, help="Projector depth, mesh units [size / 4].")
 @click.option("--sim-faces", type=int, help="Simulation mesh size per variant, in faces.")
 @click.option(
-    "-o", "--out", type=click.Path(path_type=Path), default=Path("decals"), show_default=True,
+    "-o", "--out", type=click.Path(path_type=Path), default=Path(DD["out"]), show_default=True,
     help="Output folder (replaced as a whole).",
 )  # fmt: skip
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")

@@ -22,6 +22,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError
 from crackbake.params import (
+    DECALS_DEFAULTS,
     IMPACT_RADIUS_REL_DEFAULT,
     LENGTH_MAX,
     NORMAL_Y,
@@ -76,12 +77,12 @@ class LibraryParams:
     """
 
     out: Path
-    preset: str = "glass"
-    n: int = 16
-    size: float = 0.5
-    res: int = 1024
-    seed: int = 0
-    normal_y: str = "gl"
+    preset: str = DECALS_DEFAULTS["preset"]
+    n: int = DECALS_DEFAULTS["n"]
+    size: float = DECALS_DEFAULTS["size"]
+    res: int = DECALS_DEFAULTS["res"]
+    seed: int = DECALS_DEFAULTS["seed"]
+    normal_y: str = DECALS_DEFAULTS["normal_y"]
     depth: float | None = None
     sim_faces: int | None = None
     extra: dict = field(default_factory=dict)
@@ -263,11 +264,11 @@ def _build(params: LibraryParams, stage) -> dict:
 
 
 __all__ = [
+    "Baked",
     "LibraryParams",
     "Variant",
-    "Baked",
-    "variants",
-    "plate_mesh",
     "bake_variant",
     "build_library",
+    "plate_mesh",
+    "variants",
 ]

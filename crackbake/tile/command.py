@@ -7,7 +7,8 @@ from pathlib import Path
 import click
 
 from crackbake.cli import _Command, _err, reported
-from crackbake.params import preset_names
+from crackbake.params import METHODS, preset_names
+from crackbake.params import TILE_DEFAULTS as TD
 
 EPILOG = """\b
 Examples:
@@ -28,17 +29,17 @@ pieces and the period), manifest.json.
     epilog=EPILOG,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )
-@click.option("--preset", default="mud", show_default=True,
+@click.option("--preset", default=TD["preset"], show_default=True,
               help=f"Material preset ({', '.join(preset_names())}).")
-@click.option("--size", type=float, default=2.0, show_default=True,
+@click.option("--size", type=float, default=TD["size"], show_default=True,
               help="Tile width/height (the period), mesh units.")
-@click.option("--res", type=int, default=2048, show_default=True, help="Texels per side.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
-@click.option("--impacts", type=int, help="Random impacts on the tile (glass) [3].")
-@click.option("--sim-faces", type=int, help="Simulation mesh size, in faces [60000].")
-@click.option("--method", type=click.Choice(("iben", "thesis")),
+@click.option("--res", type=int, default=TD["res"], show_default=True, help="Texels per side.")
+@click.option("--seed", type=int, default=TD["seed"], show_default=True, help="Random seed.")
+@click.option("--impacts", type=int, help=f"Random impacts on the tile (glass) [{TD['impacts']}].")
+@click.option("--sim-faces", type=int, help=f"Simulation mesh size, in faces [{TD['sim_faces']}].")
+@click.option("--method", type=click.Choice(METHODS),
               help="Crack method (only iben runs on a periodic tile).")
-@click.option("-o", "--out", type=click.Path(path_type=Path), default=Path("tile"),
+@click.option("-o", "--out", type=click.Path(path_type=Path), default=Path(TD["out"]),
               show_default=True, help="Output folder (replaced as a whole).")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 def tile(quiet: bool, **options) -> None:

@@ -71,7 +71,8 @@ def bake_tile(pieces: list, uvmesh, period: float, res: int, profile: float, ctx
     in world space, which does not repeat with the tile's period: it would show a seam)."""
     from dataclasses import replace
 
-    from crackbake.bake.raster import DEFAULT_MAX_DISTANCE_FRACTION, bake_cracks
+    from crackbake.bake.raster import bake_cracks
+    from crackbake.params import DEFAULT_MAX_DISTANCE_FRACTION
 
     reach = DEFAULT_MAX_DISTANCE_FRACTION * period * np.sqrt(2.0)
     segs = tile_segments(pieces, period, reach)

@@ -27,6 +27,7 @@ from crackbake.errors import CrackbakeError
 from crackbake.params import (
     LENGTH_MAX,
     RES_MIN,
+    TILE_DEFAULTS,
     RunParams,
     check_seed,
     check_sim_faces,
@@ -39,7 +40,7 @@ logger = logging.getLogger(__name__)
 #: Largest tile texture, texels per side.
 TILE_RES_MAX = 8192
 #: Simulation faces of a tile when ``--sim-faces`` is not given.
-TILE_SIM_FACES = 60_000
+TILE_SIM_FACES = TILE_DEFAULTS["sim_faces"]
 #: Most impacts on one glass tile.
 IMPACTS_MAX = 64
 #: Node jitter of the periodic grid, fraction of the cell (keeps every triangle positive).
@@ -70,10 +71,10 @@ class TileParams:
     """
 
     out: Path
-    preset: str = "mud"
-    size: float = 2.0
-    res: int = 2048
-    seed: int = 0
+    preset: str = TILE_DEFAULTS["preset"]
+    size: float = TILE_DEFAULTS["size"]
+    res: int = TILE_DEFAULTS["res"]
+    seed: int = TILE_DEFAULTS["seed"]
     impacts: int | None = None
     sim_faces: int | None = None
     method: str | None = None
@@ -166,7 +167,7 @@ def tile_impacts(params: TileParams, radius_rel: float) -> list[tuple[float, flo
     """``(x, y, radius)`` of the tile's random impacts (none for presets without impacts)."""
     if not load_preset(params.preset).get("needs_impact", False):
         return []
-    n = 3 if params.impacts is None else int(params.impacts)
+    n = TILE_DEFAULTS["impacts"] if params.impacts is None else int(params.impacts)
     rng = np.random.default_rng(np.random.SeedSequence([int(params.seed), 0x1A9AC7]))
     # Latin hypercube: one impact per row and per column of an n x n grid, so that impacts
     # spread over the tile instead of clumping (their fields would merge into one blob).
@@ -373,5 +374,13 @@ def _build(params: TileParams, stage) -> dict:
     return write_tile(stage, params, maps, solved.pieces, stats, timings, t0)
 
 
-__all__ = ["build_tile", "TileParams", "periodic_simmesh", "lifted", "tile_field",
-           "split_at_border", "solve_tile", "TILE_SIM_FACES"]
+__all__ = [
+    "TILE_SIM_FACES",
+    "TileParams",
+    "build_tile",
+    "lifted",
+    "periodic_simmesh",
+    "solve_tile",
+    "split_at_border",
+    "tile_field",
+]
