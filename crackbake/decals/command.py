@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err, reported
+from crackbake.cli.common import CONTEXT, Command, err, reported
 from crackbake.params import DECALS_DEFAULTS as DD
 from crackbake.params import NORMAL_Y, preset_names
 
@@ -25,9 +25,9 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 
 
 @click.command(
-    cls=_Command,
+    cls=Command,
     epilog=EPILOG,
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    context_settings=CONTEXT,
 )
 @click.option(
     "--preset",
@@ -74,7 +74,7 @@ def decals(quiet: bool, as_json: bool, **options) -> None:
     if not quiet:
         a = doc["atlas"]
         t = doc["timings_s"]
-        _err(
+        err(
             f"{len(doc['decals'])} {doc['preset']} decals in a {a['width']}x{a['height']} atlas "
             f"({t['total']:.1f} s) -> {params.out}/"
         )

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err, reported
+from crackbake.cli.common import CONTEXT, Command, err, reported
 from crackbake.params import METHODS, preset_names
 from crackbake.params import TILE_DEFAULTS as TD
 
@@ -25,9 +25,9 @@ pieces and the period), manifest.json.
 
 
 @click.command(
-    cls=_Command,
+    cls=Command,
     epilog=EPILOG,
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    context_settings=CONTEXT,
 )
 @click.option("--preset", default=TD["preset"], show_default=True,
               help=f"Material preset ({', '.join(preset_names())}).")
@@ -51,5 +51,5 @@ def tile(quiet: bool, **options) -> None:
     manifest = reported(lambda: build_tile(params), quiet)
     if not quiet:
         s = manifest["solver"]
-        _err(f"{params.preset} tile {params.size:g} x {params.size:g}, {s.get('cracks', 0)} "
+        err(f"{params.preset} tile {params.size:g} x {params.size:g}, {s.get('cracks', 0)} "
              f"cracks, {params.res}² ({manifest['timings_s']['total']:.1f} s) -> {params.out}/")
