@@ -30,7 +30,7 @@ def main() -> None:
     ap.add_argument("--keep", type=Path, help="Write the timed library here (kept).")
     args = ap.parse_args()
 
-    from crackbake.library import LibraryParams, build_library
+    from crackbake.decals.library import LibraryParams, build_library
 
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()

@@ -41,11 +41,11 @@ NO_STRESS = ["--formats", "exr,png,glb,preview"]
 # The wrapper: run the CLI in this process, then report the kernel's high-water marks.
 _CHILD = """
 import dataclasses, json, os, sys
-import crackbake.cli as cli
+import crackbake.cli.bake as bake
 from crackbake.cli import main
 if os.environ.get("BENCH_TILE"):  # RunParams.tile has no command-line option
-    _params = cli._run_params
-    cli._run_params = lambda m, o: dataclasses.replace(_params(m, o),
+    _params = bake.run_params
+    bake.run_params = lambda m, o: dataclasses.replace(_params(m, o),
                                                        tile=int(os.environ["BENCH_TILE"]))
 code = 0
 try:

@@ -100,8 +100,8 @@ def prepared(res: int):
 def main() -> None:
     from crackbake.bake.context import create_context
     from crackbake.exchange.bundle import write_outputs
-    from crackbake.exchange.output import OutputStage
     from crackbake.params import RunParams
+    from crackbake.transaction.stage import OutputStage
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, nargs="+", default=[4096])

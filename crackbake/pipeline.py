@@ -22,9 +22,7 @@ from crackbake.bake.uv import UVMesh, prepare_uvs
 from crackbake.bake.uv.uvmesh import bake_arrays
 from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.bundle import write_outputs
-from crackbake.exchange.interrupt import run_staged
 from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
-from crackbake.exchange.output import OutputStage
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.looks import WIDTH_NOISE_SCALE, vary_widths
@@ -39,6 +37,8 @@ from crackbake.simulate.setup import (
     with_spacing,
 )
 from crackbake.simulate.timing import grow_from_impacts
+from crackbake.transaction.interrupt import run_staged
+from crackbake.transaction.stage import OutputStage
 
 logger = logging.getLogger(__name__)
 
@@ -249,8 +249,8 @@ def _decals(ctx, uvmesh, network, maps, params: RunParams, stage, timings) -> No
     """One projected decal per impact (``--decal``) and ``decals.json``, timed as ``decals``."""
     if params.decal is None:
         return
-    from crackbake.bake.decal import bake_decals
-    from crackbake.exchange.decals import write_decal_set
+    from crackbake.decals.files import write_decal_set
+    from crackbake.decals.projector import bake_decals
     from crackbake.exchange.targets import normal_convention
 
     logger.info("baking %d decal(s)", len(params.impacts))

@@ -3,7 +3,7 @@
 Usage: python examples/decal_picture.py MESH OUT_DIR PICTURE.png [DECAL_INDEX]
 
 Left: the decal's alpha applied back onto the mesh's UV layout through its written matrix
-(crackbake.bake.decal_apply, what an engine's decal projector does), dark red over the tinted
+(crackbake.decals.apply, what an engine's decal projector does), dark red over the tinted
 footprint.  Right: the run's UV bake (``<stem>_mask.png``, the gltf target's mask) in blue, from
 the same camera, looking down the projector's axis from a three-quarter angle.
 """
@@ -18,8 +18,8 @@ import numpy as np
 from PIL import Image
 
 from crackbake.bake.context import create_context
-from crackbake.bake.decal_apply import apply_decal, uv_surface
 from crackbake.bake.preview import render_preview
+from crackbake.decals.apply import apply_decal, uv_surface
 from crackbake.io.mesh import load_mesh
 
 

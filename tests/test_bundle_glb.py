@@ -20,9 +20,9 @@ from test_glb import _accessor, _image, _parse_glb
 from crackbake.exchange.bundle import write_outputs
 from crackbake.exchange.glb import write_glb
 from crackbake.exchange.materials import CRACK_RGB, SURFACE_RGB
-from crackbake.exchange.output import OutputStage
 from crackbake.io.texture import base_color_texture
 from crackbake.params import RunParams
+from crackbake.transaction.stage import OutputStage
 
 
 def _run(tmp_path, mesh, uvm, maps, target="gltf", formats=("glb",), name="out"):

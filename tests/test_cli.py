@@ -161,3 +161,37 @@ def test_ctrl_c_after_the_commit_is_ignored(plate, tmp_path):
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+@pytest.mark.parametrize("name", ["tile", "inspect", "decals"])
+def test_a_mesh_named_like_a_command_bakes_given_as_a_path(plate, tmp_path, name):
+    """``crackbake ./tile`` bakes the file ``tile``; ``crackbake tile`` runs the tile command
+    even with a file ``tile`` in the working folder (the command name wins, docs/cli.md)."""
+    mesh = tmp_path / name
+    mesh.write_text(plate.read_text())
+    # The bake's own check, naming the file: the path went to the bake, not to the command.
+    for arg in (f"./{name}", str(mesh)):
+        r = run_on_pipes([arg], tmp_path)
+        assert (r.returncode, r.stderr.strip()) == (
+            2, f"error: {Path(arg)}: unsupported format '(none)'; use one of OBJ, PLY, STL, OFF, "
+               "GLB, GLTF"), r.stderr
+    # A folder of that name is only a path: its mesh bakes (QUICK: a small real run).
+    folder = tmp_path / f"{name}_dir"
+    (tmp_path / name).unlink()
+    (tmp_path / name).mkdir()
+    (tmp_path / name / "plate.obj").write_text(plate.read_text())
+    r = run_on_pipes([f"{name}/plate.obj", *QUICK, "--preset", "mud", "-q", "-o", str(folder)],
+                     tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (folder / "manifest.json").is_file() and (folder / "plate_cracks.exr").is_file()
+
+
+def test_a_command_name_wins_over_a_file_of_that_name(plate, tmp_path):
+    (tmp_path / "tile").write_text(plate.read_text())
+    r = run_on_pipes(["tile", "--res", "3"], tmp_path)
+    # the tile command's range (64..8192 texels per side), not the bake's (64..16384)
+    assert (r.returncode, r.stderr.strip()) == (
+        2, "error: --res 3 is out of range; use 64 to 8192 texels"), r.stderr
+    r = run_on_pipes(["inspect"], tmp_path)
+    assert (r.returncode, r.stderr.strip()) == (
+        2, "error: missing argument 'EXR'; run crackbake --help"), r.stderr

@@ -1,4 +1,4 @@
-"""Decals from an impact (crackbake.bake.decal, crackbake.exchange.decals): real EGL bakes, real
+"""Decals from an impact (crackbake.decals.projector, crackbake.decals.files): real EGL bakes, real
 PNG and JSON files, the decal applied back onto the mesh through its written transform, and each
 engine's documented projection applied to the block written for it."""
 
@@ -15,11 +15,11 @@ import pytest
 from PIL import Image
 from scipy import ndimage
 
-from crackbake.bake.decal import bake_decal, make_projector
-from crackbake.bake.decal_apply import apply_decal, bilinear, uv_surface
 from crackbake.bake.raster import bake_cracks
+from crackbake.decals.apply import apply_decal, bilinear, uv_surface
+from crackbake.decals.files import engine_blocks, write_decal_set
+from crackbake.decals.projector import bake_decal, make_projector
 from crackbake.errors import CrackbakeError
-from crackbake.exchange.decals import engine_blocks, write_decal_set
 from crackbake.network import Crack, CrackNetwork, segments
 from crackbake.params import Impact, RunParams
 
@@ -368,7 +368,7 @@ def _tilted_plane(angle_deg: float):
 
 
 def test_decals_fade_with_the_angle_to_the_projector(gl_ctx):
-    from crackbake.bake.decal import ANGLE_FADE_DEG, Projector, angle_fade_image
+    from crackbake.decals.projector import ANGLE_FADE_DEG, Projector, angle_fade_image
 
     lo, hi = (np.cos(np.radians(a)) for a in ANGLE_FADE_DEG[::-1])
     peak = {}

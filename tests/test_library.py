@@ -20,9 +20,8 @@ import pytest
 from conftest import wait_for_staging
 from PIL import Image
 
-from crackbake.errors import CrackbakeError
-from crackbake.exchange.library import atlas_layout, contact_sheet, mip_chain
-from crackbake.library import (
+from crackbake.decals.atlas import atlas_layout, contact_sheet, mip_chain
+from crackbake.decals.library import (
     LibraryParams,
     Variant,
     bake_variant,
@@ -30,6 +29,7 @@ from crackbake.library import (
     plate_mesh,
     variants,
 )
+from crackbake.errors import CrackbakeError
 from crackbake.params import Impact
 
 REPO = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""File hashes and the atomic output folder (crackbake.exchange.output)."""
+"""File hashes and the atomic output folder (crackbake.transaction.stage)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,8 @@ import os
 import pytest
 
 from crackbake.errors import CrackbakeError
-from crackbake.exchange import (
-    OutputStage,
-    sha256_file,
-)
-from crackbake.exchange.outdir import swap_in
+from crackbake.transaction import OutputStage, sha256_file
+from crackbake.transaction.outdir import swap_in
 
 
 def test_sha256_file(tmp_path):
@@ -206,7 +203,7 @@ def test_a_signal_whose_exception_was_lost_still_stops_the_commit(tmp_path):
     ImportError from an extension's import); the stage must still refuse to commit."""
     import signal
 
-    from crackbake.exchange.interrupt import Interrupt, interruptible, received
+    from crackbake.transaction.interrupt import Interrupt, interruptible, received
 
     out = tmp_path / "rock_cracks"
     _previous_set(out)

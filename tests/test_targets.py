@@ -10,10 +10,10 @@ from maps_factory import plate_uvmesh, synthetic_maps
 
 from crackbake.errors import CrackbakeError
 from crackbake.exchange.bundle import write_outputs
-from crackbake.exchange.output import OutputStage
 from crackbake.exchange.targets import TARGETS, describe
 from crackbake.params import TARGETS as TARGET_NAMES
 from crackbake.params import RunParams
+from crackbake.transaction.stage import OutputStage
 
 
 def _read(path) -> np.ndarray:

@@ -23,7 +23,7 @@ from PIL import Image
 
 from crackbake.exchange.exr import read_exr
 from crackbake.geometry import edges
-from crackbake.tile import _periodic_noise, lifted, periodic_simmesh, split_at_border
+from crackbake.tile.periodic import _periodic_noise, lifted, periodic_simmesh, split_at_border
 
 ROOT = Path(__file__).resolve().parents[1]
 SIZE = 2.0
@@ -220,8 +220,8 @@ def test_bake_is_shift_invariant(mud_tile, gl_ctx):
     rolled by half the texture: the tile's border is no different from its middle."""
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
-    from crackbake.exchange.tile import bake_tile
-    from crackbake.library import plate_mesh
+    from crackbake.decals.library import plate_mesh
+    from crackbake.tile.files import bake_tile
 
     res = 256
     doc = json.loads((mud_tile / "cracks.json").read_text())

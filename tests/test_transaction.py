@@ -25,7 +25,7 @@ from click.testing import CliRunner
 from conftest import torus_mesh
 
 from crackbake.cli import main
-from crackbake.exchange.interrupt import Interrupt, deferred, interruptible
+from crackbake.transaction.interrupt import Interrupt, deferred, interruptible
 
 ROOT = Path(__file__).resolve().parents[1]
 SPOT = ROOT / "examples" / "spot.obj"

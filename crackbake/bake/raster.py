@@ -27,11 +27,7 @@ from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
-from crackbake.params import MIN_PX_DEFAULT, TILE_DEFAULT
-
-#: Default clamp of the distance channel, as a fraction of the bounding-box diagonal.
-DEFAULT_MAX_DISTANCE_FRACTION = 0.02
-
+from crackbake.params import DEFAULT_MAX_DISTANCE_FRACTION, MIN_PX_DEFAULT, TILE_DEFAULT
 
 
 @dataclass(eq=False)
@@ -197,7 +193,7 @@ def bake_cracks(
         Placement of the faces in the image: ``None`` draws them at their UVs (the texture
         bake); a mesh -> clip matrix (column vectors, x right, y up, z -1 near .. 1 far) draws
         them through that camera, depth-tested (``shaders/decal_project.vert``: the decal bake
-        of :mod:`crackbake.bake.decal`).  ``uv`` must then hold the same placement in [0, 1]
+        of :mod:`crackbake.decals.projector`).  ``uv`` must then hold the same placement in [0, 1]
         (``0.5 + 0.5 * clip.xy``), which the candidate bins use for the texel footprint.
     min_px : float
         Least drawn width in texels, >= 0: the mask, depth, normal and occlusion draw each crack

@@ -1,5 +1,5 @@
-"""Files for other tools: one module per format (EXR, PNG, GLB), the atomic output folder, the
-run's set of files and its manifest."""
+"""Files for other tools: one module per format (EXR, PNG, GLB), the run's set of files and its
+manifest.  The output folder they are written into is :mod:`crackbake.transaction`."""
 
 from crackbake.exchange.bundle import write_outputs
 from crackbake.exchange.exr import (
@@ -11,7 +11,6 @@ from crackbake.exchange.exr import (
 from crackbake.exchange.glb import write_glb
 from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 from crackbake.exchange.materials import CRACK_RGB, GLB_TEXTURE_MAX, SURFACE_RGB, base_color
-from crackbake.exchange.output import OutputStage, sha256_file
 from crackbake.exchange.pngenc import png_bytes
 from crackbake.exchange.targets import TARGETS, describe, pack
 
@@ -22,7 +21,6 @@ __all__ = [
     "LOSSY_COMPRESSIONS",
     "SURFACE_RGB",
     "TARGETS",
-    "OutputStage",
     "base_color",
     "build_manifest",
     "describe",
@@ -30,7 +28,6 @@ __all__ = [
     "pack",
     "png_bytes",
     "read_exr",
-    "sha256_file",
     "write_exr",
     "write_glb",
     "write_manifest",

@@ -36,7 +36,6 @@ from crackbake.exchange.materials import (
     base_color_table,
     downsample,
 )
-from crackbake.exchange.output import OutputStage
 from crackbake.exchange.pngenc import png_bytes, png_rows, write_bytes
 from crackbake.exchange.targets import TARGETS, data16_filtered, normal_convention, pack
 from crackbake.io.mesh import Mesh
@@ -45,6 +44,7 @@ from crackbake.io.sidecar import write_sidecar
 from crackbake.io.texture import base_color_texture
 from crackbake.network import CrackNetwork
 from crackbake.params import RunParams
+from crackbake.transaction.stage import OutputStage
 
 #: Largest edge of the textures the preview samples (its picture is 1024 pixels wide).
 PREVIEW_TEXTURE_MAX = 2048

@@ -1,7 +1,7 @@
 """``manifest.json``: what a run read, the parameters it used, what it wrote and how long it took.
 
 Written into the staging folder last; the set appears as a whole, so a manifest present means
-the files it lists are complete (see :class:`crackbake.exchange.output.OutputStage`).
+the files it lists are complete (see :class:`crackbake.transaction.stage.OutputStage`).
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from crackbake.bake.raster import CrackMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.errors import CrackbakeError
 from crackbake.exchange.layers import CRACK_LAYERS
-from crackbake.exchange.output import sha256_file
 from crackbake.exchange.targets import describe
 from crackbake.io.mesh import Mesh
 from crackbake.network import CrackNetwork
 from crackbake.params import RunParams
+from crackbake.transaction.stage import sha256_file
 
 
 def effective_params(

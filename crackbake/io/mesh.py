@@ -21,7 +21,7 @@ from crackbake.geometry import face_cross, welded_vertex_normals
 from crackbake.io import obj_checks, ply_strips
 from crackbake.io.safe_open import check_regular, open_regular, read_bytes
 
-__all__ = ["Mesh", "SUPPORTED_SUFFIXES", "VERTEX_COLOURS", "load_mesh"]
+__all__ = ["SUPPORTED_SUFFIXES", "VERTEX_COLOURS", "Mesh", "load_mesh"]
 
 SUPPORTED_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 # Key of the vertex colours in :attr:`Mesh.attributes` (also how error messages list them).

@@ -9,7 +9,12 @@ from __future__ import annotations
 from crackbake.errors import CrackbakeError
 from crackbake.io.mesh import Mesh
 from crackbake.io.sidecar import jsonable
-from crackbake.params import IMPACT_RADIUS_REL_DEFAULT, RunParams, preset_names
+from crackbake.params import (
+    CRACK_WIDTH_REL_DEFAULT,
+    IMPACT_RADIUS_REL_DEFAULT,
+    RunParams,
+    preset_names,
+)
 from crackbake.simulate.solver import SolverParams
 
 __all__ = ["check_scale", "sidecar_params", "solver_params", "stress_sources"]
@@ -89,7 +94,7 @@ def solver_params(params: RunParams, mesh: Mesh, relative: dict) -> SolverParams
     """:class:`SolverParams` from a resolved parameter set (relative widths made absolute)."""
     width = params.crack_width
     if width is None:
-        width = relative.get("crack_width_rel", 0.001) * mesh.diagonal
+        width = relative.get("crack_width_rel", CRACK_WIDTH_REL_DEFAULT) * mesh.diagonal
     return SolverParams(
         method=params.method or "iben",
         toughness=params.toughness,

@@ -30,7 +30,7 @@ from numba import njit
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from crackbake.metrics.growth import NetworkGraph, impact_sources, network_graph
+from crackbake.graph import NetworkGraph, impact_sources, network_graph
 from crackbake.network import Crack, CrackNetwork
 
 __all__ = ["arrival_times", "front_speed", "grow_from_impacts"]

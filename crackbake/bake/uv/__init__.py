@@ -10,7 +10,8 @@ from crackbake.bake.uv.check import UVCheck, check_uvs
 from crackbake.bake.uv.overlap import uv_overlap_fraction
 from crackbake.bake.uv.prepare import prepare_uvs
 from crackbake.bake.uv.unwrap import unwrap
-from crackbake.bake.uv.uvmesh import UVMesh, default_padding
+from crackbake.bake.uv.uvmesh import UVMesh
+from crackbake.params import default_padding
 
 __all__ = [
     "UVCheck",

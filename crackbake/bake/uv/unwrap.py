@@ -25,13 +25,13 @@ from crackbake.bake.uv.check import OVERLAP_RES
 from crackbake.bake.uv.overlap import uv_overlap_fraction
 from crackbake.bake.uv.uvmesh import (
     UVMesh,
-    default_padding,
     mesh_label,
     unwrapped_uvmesh,
     uv_area_coverage,
 )
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh
+from crackbake.params import default_padding
 
 # Tells the worker our pid (crackbake.bake.xatlas_worker.PARENT_ENV; not imported from there so
 # this process never loads xatlas).

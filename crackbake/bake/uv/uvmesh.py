@@ -103,15 +103,6 @@ def bake_arrays(uvmesh: UVMesh) -> dict[str, np.ndarray | None]:
     return out
 
 
-def default_padding(res: int) -> int:
-    """Chart gutter for a page of ``res`` texels: about ``res / 256``, at least 2 texels.
-
-    Mip-mapping halves the gutter per level; res/256 keeps islands apart down to the 1/128-size
-    mip and 2 texels keeps bilinear filtering clean at small sizes.
-    """
-    return max(2, int(round(res / 256)))
-
-
 def uv_area_coverage(uv: np.ndarray, faces: np.ndarray) -> float:
     """Share of the [0, 1] page inside UV triangles, from their areas: (F, 3) faces into (V, 2).
 

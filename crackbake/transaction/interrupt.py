@@ -109,7 +109,7 @@ def received() -> int | None:
 def run_staged(stage, body: Callable[[], T]) -> T:
     """Run ``body()`` in ``with interruptible(), stage:``; an interrupt -> :class:`RunInterrupted`.
 
-    ``stage`` is the run's :class:`~crackbake.exchange.output.OutputStage`; its
+    ``stage`` is the run's :class:`~crackbake.transaction.stage.OutputStage`; its
     ``interrupted_message()`` says what the output folder holds after the interrupt.
     """
     try:

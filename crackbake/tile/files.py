@@ -71,7 +71,8 @@ def bake_tile(pieces: list, uvmesh, period: float, res: int, profile: float, ctx
     in world space, which does not repeat with the tile's period: it would show a seam)."""
     from dataclasses import replace
 
-    from crackbake.bake.raster import DEFAULT_MAX_DISTANCE_FRACTION, bake_cracks
+    from crackbake.bake.raster import bake_cracks
+    from crackbake.params import DEFAULT_MAX_DISTANCE_FRACTION
 
     reach = DEFAULT_MAX_DISTANCE_FRACTION * period * np.sqrt(2.0)
     segs = tile_segments(pieces, period, reach)
@@ -103,7 +104,7 @@ def cracks_doc(pieces: list, period: float) -> dict:
 
 def write_tile(stage, params, maps, pieces: list, stats: dict, timings: dict, t0: float) -> dict:
     """Write the PNG set, ``tile_cracks.exr``, ``tile_3x3.png``, ``cracks.json`` and
-    ``manifest.json`` into the open :class:`~crackbake.exchange.output.OutputStage`."""
+    ``manifest.json`` into the open :class:`~crackbake.transaction.stage.OutputStage`."""
     t = time.perf_counter()
     base = base_color(maps.mask, occlusion=maps.occlusion, look=getattr(maps, "look", None))
     depth_scale = max(float(np.max(maps.depth)), 1e-12)

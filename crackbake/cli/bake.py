@@ -1,37 +1,49 @@
-"""The ``crackbake`` command: parses options, builds :class:`RunParams`, calls the pipeline."""
+"""``crackbake MESH``, the bake: parses options, builds :class:`RunParams`, calls the pipeline.
+
+The default command of the ``crackbake`` group (:mod:`crackbake.cli.group`)."""
 
 from __future__ import annotations
 
 import json
-import os
 import signal
 import sys
 import threading
 import time
 import warnings
-from collections.abc import Callable
 from pathlib import Path
-from typing import TypeVar
 
 import click
 
 from crackbake import __version__
+from crackbake.cli.common import CONTEXT, Command, err, silence
 from crackbake.display import Display, display_mode
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.looks import parse_look
 from crackbake.params import (
+    CRACK_WIDTH_REL_DEFAULT,
     DECAL_RES_DEFAULT,
+    DEFAULT_MAX_DISTANCE_FRACTION,
     FORMATS,
     METHODS,
     MIN_PX_DEFAULT,
     NORMAL_Y,
+    PADDING_MIN,
+    PADDING_RES_PER_TEXEL,
+    PROFILE_DEFAULT,
+    RES_DEFAULT,
     RES_MAX,
     RES_MIN,
+    SEED_DEFAULT,
     SIM_FACES_DEFAULT,
+    SIM_PROXY_DEFAULT,
     SIM_PROXY_MODES,
+    SPACING_DEFAULT,
     STRESS_RES_DEFAULT,
+    TARGET_DEFAULT,
     TARGETS,
+    UNWRAP_TIMEOUT_DEFAULT,
     UP_AXES,
+    UV_DEFAULT,
     UV_MODES,
     RunParams,
     load_preset,
@@ -78,56 +90,11 @@ cracks.json, cracks.obj, manifest.json.  Full reference: README.md.
 """
 
 
-class _Command(click.Command):
-    """A click command whose usage errors are one line in crackbake's own style.
-
-    click prints three (usage, hint, ``Error: ...``); scripts and people both read one line
-    better: ``error: <what is wrong>; run crackbake --help``, exit code 2.
-    """
-
-    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
-        argv = sys.argv[1:] if args is None else list(args)
-        if argv[:1] == ["inspect"] and self.name != "inspect":
-            # `crackbake inspect FILE.exr`: the one subcommand; `crackbake MESH ...` is unchanged.
-            from crackbake.inspect_cli import inspect
-
-            name = f"{prog_name or 'crackbake'} inspect"
-            return inspect.main(argv[1:], name, complete_var, standalone_mode, **extra)
-        if argv[:1] == ["decals"] and self.name != "decals":
-            # `crackbake decals ...`: a decal library (crackbake/library_cli.py).
-            from crackbake.library_cli import decals
-
-            name = f"{prog_name or 'crackbake'} decals"
-            return decals.main(argv[1:], name, complete_var, standalone_mode, **extra)
-        if argv[:1] == ["tile"] and self.name != "tile":
-            # `crackbake tile ...`: a seamlessly tiling texture set (crackbake/tile_cli.py).
-            from crackbake.tile_cli import tile
-
-            name = f"{prog_name or 'crackbake'} tile"
-            return tile.main(argv[1:], name, complete_var, standalone_mode, **extra)
-        if not standalone_mode:
-            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
-        try:
-            rv = super().main(args, prog_name, complete_var, False, **extra)
-        except click.ClickException as exc:
-            _err(f"error: {_usage_line(exc)}; run crackbake --help")
-            sys.exit(exc.exit_code)
-        except click.exceptions.Abort:
-            _err("interrupted")
-            sys.exit(130)
-        sys.exit(rv if isinstance(rv, int) else 0)
-
-
-def _usage_line(exc: click.ClickException) -> str:
-    """click's message on one line, lower-case start and no closing full stop."""
-    text = " ".join(exc.format_message().split()).replace(". (", " (").rstrip(".")
-    if len(text) > 1 and text[0].isupper() and text[1].islower():
-        text = text[0].lower() + text[1:]
-    return text
-
-
-def _preset_help() -> str:
-    return "; ".join(f"{n}: {load_preset(n).get('description', '')}" for n in preset_names())
+def _spacing_defaults() -> str:
+    """``--spacing``'s default and the presets' own: ``0.1; crackle 0.025``."""
+    own = [f"{n} {load_preset(n)['spacing']}" for n in preset_names()
+           if "spacing" in load_preset(n)]
+    return "; ".join([f"{SPACING_DEFAULT}", *own])
 
 
 def _parse_curvature(text: str | None) -> tuple[float | None, float | None]:
@@ -151,9 +118,10 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 
 
 @click.command(
-    cls=_Command,
+    "bake",
+    cls=Command,
     epilog=EPILOG,
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    context_settings=CONTEXT,
 )
 @click.argument("mesh", type=click.Path(path_type=Path))
 @click.option(
@@ -186,7 +154,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--sim-proxy",
     type=click.Choice(SIM_PROXY_MODES),
-    default="auto",
+    default=SIM_PROXY_DEFAULT,
     show_default=True,
     help="Simulate on a decimated stand-in of the asset: auto when the asset has over twice "
     "--sim-faces (and over 200k faces); always; never (refine the asset's own faces).",
@@ -216,12 +184,12 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option("--invert-weights", is_flag=True, help="Use 1 - weight.")
 @click.option("--noise", type=float, help="Seeded random perturbation of the field (0.1 = 10%).")
-@click.option("--hoop", type=float, help="Impact hoop/radial tension ratio [1.25].")
+@click.option("--hoop", type=float, help=f"Impact hoop/radial tension ratio [{D['hoop']}].")
 @click.option(
     "--spacing",
     type=float,
     help="Crack spacing: each crack's stress-shadow radius as a fraction of the bounding-box "
-    "diagonal; smaller gives smaller cells [0.1; crackle 0.025].",
+    f"diagonal; smaller gives smaller cells [{_spacing_defaults()}].",
 )
 @click.option(
     "--toughness", type=float, help=f"Failure threshold relative to the field [{D['toughness']}]."
@@ -244,13 +212,15 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option("--max-crack-length", type=float, help="Longest single crack, mesh units.")
 @click.option(
-    "--crack-width", type=float, help="Widest crack opening, mesh units [0.1% of diagonal]."
+    "--crack-width",
+    type=float,
+    help=f"Widest crack opening, mesh units [{CRACK_WIDTH_REL_DEFAULT:.1%} of diagonal].",
 )
 @click.option("--depth-ratio", type=float, help=f"Crack depth / width [{D['depth_ratio']}].")
 @click.option(
     "--res",
     type=int,
-    default=2048,
+    default=RES_DEFAULT,
     show_default=True,
     help=f"Texture size in texels ({RES_MIN}..{RES_MAX}).",
 )
@@ -260,14 +230,15 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--uv",
     type=click.Choice(UV_MODES),
-    default="auto",
+    default=UV_DEFAULT,
     show_default=True,
     help="auto: keep usable UVs, else unwrap with xatlas.",
 )
 @click.option(
     "--padding",
     type=int,
-    help="xatlas chart gutter in texels [about res/256, at least 2].",
+    help=f"xatlas chart gutter in texels [about res/{PADDING_RES_PER_TEXEL}, at least "
+    f"{PADDING_MIN}].",
 )
 @click.option(
     "--dilate",
@@ -277,12 +248,13 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--max-distance",
     type=float,
-    help="Clamp of crack.distance in mesh units [2% of the bounding-box diagonal].",
+    help=f"Clamp of crack.distance in mesh units [{DEFAULT_MAX_DISTANCE_FRACTION:.0%} of the "
+    "bounding-box diagonal].",
 )
 @click.option(
     "--profile",
     type=float,
-    default=1.0,
+    default=PROFILE_DEFAULT,
     show_default=True,
     help="Crack depth profile exponent: 1 = V, 0.5 = rounded U, 2 = sharp slot.",
 )
@@ -303,7 +275,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     "mode=darken|lighten|multiply, roughness, normal_strength, width_variation, chipping, curl "
     "(docs/maps.md, Crack looks).",
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--seed", type=int, default=SEED_DEFAULT, show_default=True, help="Random seed.")
 @click.option(
     "--formats",
     default=",".join(FORMATS),
@@ -336,7 +308,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--target",
     type=click.Choice(TARGETS),
-    default="gltf",
+    default=TARGET_DEFAULT,
     show_default=True,
     help="Engine profile: PNG names, packed maps, normal convention, bit depths.",
 )
@@ -361,7 +333,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--unwrap-timeout",
     type=float,
-    default=300.0,
+    default=UNWRAP_TIMEOUT_DEFAULT,
     show_default=True,
     help="Seconds xatlas may run before giving up.",
 )
@@ -377,7 +349,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("-v", "--verbose", is_flag=True, help="Print stage timings and details.")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
 @click.version_option(__version__, "-V", "--version", prog_name="crackbake")
-def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> None:
+def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> None:
     """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
     t0 = time.perf_counter()
     recorded: list[str] = []
@@ -390,7 +362,7 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
 
     try:
         # Checked before the pipeline's heavy imports (GL, numba): a typo fails in 0.2 s.
-        params = _run_params(mesh, options).validate()
+        params = run_params(mesh, options).validate()
         from crackbake.pipeline import run
 
         with warnings.catch_warnings(), display:
@@ -398,20 +370,20 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
             warnings.showwarning = show
             result = run(params)
     except CrackbakeError as exc:
-        _err(f"error: {exc}")
+        err(f"error: {exc}")
         sys.exit(exc.exit_code)
     except KeyboardInterrupt:
-        _err("interrupted; no outputs were written")
+        err("interrupted; no outputs were written")
         sys.exit(130)
     except MemoryError:  # past the estimate (--max-memory above the real limit, a busy machine)
-        _err("error: ran out of memory; no outputs were written. Lower --res, --stress-res or "
+        err("error: ran out of memory; no outputs were written. Lower --res, --stress-res or "
              "--sim-faces, or free memory (crackbake.memory estimates a run's peak)")
         sys.exit(2)
     except Exception as exc:  # a bug: say so, keep the traceback behind --verbose
         if verbose:
             raise
         text = " ".join(str(exc).split())[:200]
-        _err(f"internal error: {type(exc).__name__}: {text} (rerun with --verbose for details)")
+        err(f"internal error: {type(exc).__name__}: {text} (rerun with --verbose for details)")
         sys.exit(1)
 
     result.warnings = recorded
@@ -426,53 +398,16 @@ def main(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
         if not quiet:
             _report(result, verbose)
     except OSError as exc:  # a full disk or closed pipe behind stdout/stderr
-        _silence(sys.stdout)
+        silence(sys.stdout)
         what = "--json summary to stdout" if as_json else "summary"
-        _err(f"error: cannot write the {what} ({exc.strerror or exc}); the outputs are "
+        err(f"error: cannot write the {what} ({exc.strerror or exc}); the outputs are "
              f"complete in {result.out_dir}/")
         sys.exit(2)
 
 
-def _silence(stream) -> None:
-    """Point ``stream``'s file descriptor at /dev/null, so the interpreter's final flush of
-    what could not be written raises nothing more (the Python docs' recipe for SIGPIPE)."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, stream.fileno())
-        os.close(devnull)
-    except (OSError, ValueError, AttributeError):  # not a real file (tests capture streams)
-        pass
-
-
-def _err(msg: str) -> None:
-    try:
-        click.echo(msg, err=True)
-    except OSError:  # stderr itself is full or closed: the exit code still says it
-        _silence(sys.stderr)
-
-
-T = TypeVar("T")
-
-def reported(run: Callable[[], T], quiet: bool) -> T:
-    """``run()`` as the subcommands report it: each CrackbakeWarning one ``warning:`` line
-    (none with ``quiet``), a CrackbakeError one ``error:`` line and its exit code."""
-
-    def show(message, *_args, **_kwargs) -> None:
-        if not quiet:
-            _err(f"warning: {message}")
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("always", CrackbakeWarning)
-            warnings.showwarning = show
-            return run()
-    except CrackbakeError as exc:
-        _err(f"error: {exc}")
-        sys.exit(exc.exit_code)
-
-
-def _run_params(mesh: Path, o: dict) -> RunParams:
-    """:class:`RunParams` from the parsed options (``o`` holds main's keyword arguments)."""
+def run_params(mesh: Path, o: dict) -> RunParams:
+    """:class:`RunParams` from the parsed options (``o`` holds :func:`bake`'s keyword
+    arguments)."""
     bias, density = _parse_curvature(o.pop("curvature"))
     impacts = tuple(parse_impact(t) for t in o.pop("impacts"))
     directions = tuple(parse_direction(d) for d in o.pop("directions"))
@@ -496,7 +431,7 @@ def _report(result, verbose: bool) -> None:
     lo, hi = m["mesh"]["bbox_min"], m["mesh"]["bbox_max"]
     bbox = " x ".join(f"{b - a:.4g}" for a, b in zip(lo, hi, strict=True))
     uv_found = "found" if m["mesh"]["has_uv"] else "none in the file"
-    _err(
+    err(
         f"mesh: {m['mesh']['vertices']} vertices, {m['mesh']['faces']} faces, "
         f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}, "
         f"{m['uv']['coverage']:.0%} of the texture used; "
@@ -504,14 +439,11 @@ def _report(result, verbose: bool) -> None:
     )
     if verbose:
         for stage, secs in m["timings_s"].items():
-            _err(f"  {stage:<8} {secs:8.3f} s")
-    _err(f"wrote {len(result.files) + 1} files to {result.out_dir}/")
+            err(f"  {stage:<8} {secs:8.3f} s")
+    err(f"wrote {len(result.files) + 1} files to {result.out_dir}/")
     for f in result.files:
-        _err(f"  {f['name']:<28} {f['bytes'] / 1e6:8.2f} MB")
+        err(f"  {f['name']:<28} {f['bytes'] / 1e6:8.2f} MB")
     manifest = Path(result.out_dir) / "manifest.json"
     if manifest.is_file():
-        _err(f"  {'manifest.json':<28} {manifest.stat().st_size / 1e6:8.2f} MB")
+        err(f"  {'manifest.json':<28} {manifest.stat().st_size / 1e6:8.2f} MB")
 
-
-if __name__ == "__main__":
-    main()

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err, reported
+from crackbake.cli.common import Command, err, reported
 from crackbake.errors import CrackbakeError
 
 
-@click.command(cls=_Command, context_settings={"help_option_names": ["-h", "--help"]})
+@click.command(cls=Command, context_settings={"help_option_names": ["-h", "--help"]})
 @click.argument("exr", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(
     "--png",
@@ -27,7 +27,7 @@ def inspect(exr: Path, png_dir: Path | None, as_json: bool) -> None:
         info, files = reported(lambda: _inspect(exr, png_dir), quiet=False)
     except Exception as exc:  # a bug: one line, like the bake command
         text = " ".join(str(exc).split())[:200]
-        _err(f"internal error: {type(exc).__name__}: {text}")
+        err(f"internal error: {type(exc).__name__}: {text}")
         sys.exit(1)
     from crackbake.exchange.inspect import format_table
 
@@ -49,8 +49,8 @@ def _inspect(exr: Path, png_dir: Path | None):
     if png_dir is None:
         return info, []
     from crackbake import __version__
-    from crackbake.exchange.interrupt import run_staged
-    from crackbake.exchange.output import OutputStage
+    from crackbake.transaction.interrupt import run_staged
+    from crackbake.transaction.stage import OutputStage
 
     def body() -> list[Path]:
         written = write_pictures(info, channels, stage.staging_dir)

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err, reported
-from crackbake.params import preset_names
+from crackbake.cli.common import CONTEXT, Command, err, reported
+from crackbake.params import DECALS_DEFAULTS as DD
+from crackbake.params import NORMAL_Y, preset_names
 
 EPILOG = """\b
 Examples:
@@ -24,35 +25,39 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 
 
 @click.command(
-    cls=_Command,
+    cls=Command,
     epilog=EPILOG,
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    context_settings=CONTEXT,
 )
 @click.option(
     "--preset",
-    default="glass",
+    default=DD["preset"],
     show_default=True,
     help=f"Material preset ({', '.join(preset_names())}); glass gets one impact per variant.",
 )
-@click.option("-n", "n", type=int, default=16, show_default=True, help="Number of variants.")
+@click.option("-n", "n", type=int, default=DD["n"], show_default=True, help="Number of variants.")
 @click.option(
-    "--size", type=float, default=0.5, show_default=True, help="Decal width/height, mesh units."
+    "--size",
+    type=float,
+    default=DD["size"],
+    show_default=True,
+    help="Decal width/height, mesh units.",
 )
 @click.option(
-    "--res", type=int, default=1024, show_default=True, help="Texels per side of one variant."
+    "--res", type=int, default=DD["res"], show_default=True, help="Texels per side of one variant."
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Library seed.")
+@click.option("--seed", type=int, default=DD["seed"], show_default=True, help="Library seed.")
 @click.option(
     "--normal-y",
-    type=click.Choice(("gl", "dx")),
-    default="gl",
+    type=click.Choice(NORMAL_Y),
+    default=DD["normal_y"],
     show_default=True,
     help="Normal-map Y: gl (+Y, OpenGL: Unity, Godot, glTF) or dx (-Y, DirectX: Unreal).",
 )
 @click.option("--depth", type=float, help="Projector depth, mesh units [size / 4].")
 @click.option("--sim-faces", type=int, help="Simulation mesh size per variant, in faces.")
 @click.option(
-    "-o", "--out", type=click.Path(path_type=Path), default=Path("decals"), show_default=True,
+    "-o", "--out", type=click.Path(path_type=Path), default=Path(DD["out"]), show_default=True,
     help="Output folder (replaced as a whole).",
 )  # fmt: skip
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
@@ -60,7 +65,7 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
 def decals(quiet: bool, as_json: bool, **options) -> None:
     """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
 
-    from crackbake.library import LibraryParams, build_library
+    from crackbake.decals.library import LibraryParams, build_library
 
     params = reported(lambda: LibraryParams(**options).validate(), quiet)
     doc = reported(lambda: build_library(params), quiet)
@@ -69,7 +74,7 @@ def decals(quiet: bool, as_json: bool, **options) -> None:
     if not quiet:
         a = doc["atlas"]
         t = doc["timings_s"]
-        _err(
+        err(
             f"{len(doc['decals'])} {doc['preset']} decals in a {a['width']}x{a['height']} atlas "
             f"({t['total']:.1f} s) -> {params.out}/"
         )

@@ -9,7 +9,7 @@ vector between two nodes to its nearest image (``period`` on the sim mesh, docs/
 whose wave vectors fit the period, and impacts (``--impacts N``, glass) are placed at random
 with their distance measured to the nearest image.  :func:`split_at_border` cuts the
 solver's unwrapped polylines at the tile border into pieces inside the tile; the bake
-(:mod:`crackbake.exchange.tile`) sees every piece also shifted by one period each way.
+(:mod:`crackbake.tile.files`) sees every piece also shifted by one period each way.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from crackbake.errors import CrackbakeError
 from crackbake.params import (
     LENGTH_MAX,
     RES_MIN,
+    TILE_DEFAULTS,
     RunParams,
     check_seed,
     check_sim_faces,
@@ -39,7 +40,7 @@ logger = logging.getLogger(__name__)
 #: Largest tile texture, texels per side.
 TILE_RES_MAX = 8192
 #: Simulation faces of a tile when ``--sim-faces`` is not given.
-TILE_SIM_FACES = 60_000
+TILE_SIM_FACES = TILE_DEFAULTS["sim_faces"]
 #: Most impacts on one glass tile.
 IMPACTS_MAX = 64
 #: Node jitter of the periodic grid, fraction of the cell (keeps every triangle positive).
@@ -70,10 +71,10 @@ class TileParams:
     """
 
     out: Path
-    preset: str = "mud"
-    size: float = 2.0
-    res: int = 2048
-    seed: int = 0
+    preset: str = TILE_DEFAULTS["preset"]
+    size: float = TILE_DEFAULTS["size"]
+    res: int = TILE_DEFAULTS["res"]
+    seed: int = TILE_DEFAULTS["seed"]
     impacts: int | None = None
     sim_faces: int | None = None
     method: str | None = None
@@ -166,7 +167,7 @@ def tile_impacts(params: TileParams, radius_rel: float) -> list[tuple[float, flo
     """``(x, y, radius)`` of the tile's random impacts (none for presets without impacts)."""
     if not load_preset(params.preset).get("needs_impact", False):
         return []
-    n = 3 if params.impacts is None else int(params.impacts)
+    n = TILE_DEFAULTS["impacts"] if params.impacts is None else int(params.impacts)
     rng = np.random.default_rng(np.random.SeedSequence([int(params.seed), 0x1A9AC7]))
     # Latin hypercube: one impact per row and per column of an n x n grid, so that impacts
     # spread over the tile instead of clumping (their fields would merge into one blob).
@@ -334,8 +335,8 @@ def build_tile(params: TileParams) -> dict:
     CrackbakeError
         Bad parameters or an unusable output folder (left unchanged).
     """
-    from crackbake.exchange.interrupt import run_staged
-    from crackbake.exchange.output import OutputStage
+    from crackbake.transaction.interrupt import run_staged
+    from crackbake.transaction.stage import OutputStage
 
     params = params.validate()
     stage = OutputStage(params.out)
@@ -353,8 +354,8 @@ def _build(params: TileParams, stage) -> dict:
     from crackbake.bake.context import create_context
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
-    from crackbake.exchange.tile import bake_tile, write_tile
-    from crackbake.library import PLATE_CELLS, plate_mesh
+    from crackbake.decals.library import PLATE_CELLS, plate_mesh
+    from crackbake.tile.files import bake_tile, write_tile
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -373,5 +374,13 @@ def _build(params: TileParams, stage) -> dict:
     return write_tile(stage, params, maps, solved.pieces, stats, timings, t0)
 
 
-__all__ = ["build_tile", "TileParams", "periodic_simmesh", "lifted", "tile_field",
-           "split_at_border", "solve_tile", "TILE_SIM_FACES"]
+__all__ = [
+    "TILE_SIM_FACES",
+    "TileParams",
+    "build_tile",
+    "lifted",
+    "periodic_simmesh",
+    "solve_tile",
+    "split_at_border",
+    "tile_field",
+]

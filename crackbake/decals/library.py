@@ -6,7 +6,7 @@ Each variant is a square plate of side ``size`` (mesh units) in z = 0 with UVs `
 (:func:`crackbake.pipeline.solve`, :func:`crackbake.bake.uv.prepare_uvs`,
 :func:`crackbake.bake.tangents.with_tangents`, :func:`crackbake.bake.raster.bake_cracks`) with
 their own seed and, for presets that need one (glass), an impact jittered about the centre;
-:mod:`crackbake.exchange.library` packs them into atlases and writes ``decals.json``.
+:mod:`crackbake.decals.atlas` packs them into atlases and writes ``decals.json``.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError
 from crackbake.params import (
+    DECALS_DEFAULTS,
     IMPACT_RADIUS_REL_DEFAULT,
     LENGTH_MAX,
     NORMAL_Y,
@@ -54,7 +55,7 @@ class LibraryParams:
     Attributes
     ----------
     out : Path
-        Output folder (replaced as a whole, see :class:`crackbake.exchange.output.OutputStage`).
+        Output folder (replaced as a whole, see :class:`crackbake.transaction.stage.OutputStage`).
     preset : str
         Material preset (``glass`` gets one jittered impact per variant, the others none).
     n : int
@@ -76,12 +77,12 @@ class LibraryParams:
     """
 
     out: Path
-    preset: str = "glass"
-    n: int = 16
-    size: float = 0.5
-    res: int = 1024
-    seed: int = 0
-    normal_y: str = "gl"
+    preset: str = DECALS_DEFAULTS["preset"]
+    n: int = DECALS_DEFAULTS["n"]
+    size: float = DECALS_DEFAULTS["size"]
+    res: int = DECALS_DEFAULTS["res"]
+    seed: int = DECALS_DEFAULTS["seed"]
+    normal_y: str = DECALS_DEFAULTS["normal_y"]
     depth: float | None = None
     sim_faces: int | None = None
     extra: dict = field(default_factory=dict)
@@ -109,7 +110,7 @@ class LibraryParams:
             raise CrackbakeError(f"--depth {self.depth} must be a number above 0 (mesh units)")
         check_sim_faces(self.sim_faces)
         check_seed(self.seed)
-        from crackbake.exchange.library import atlas_layout
+        from crackbake.decals.atlas import atlas_layout
 
         atlas_layout(self.n, self.res)  # refuses an atlas too big to write
         return self
@@ -227,8 +228,8 @@ def build_library(params: LibraryParams) -> dict:
     CrackbakeError
         Bad parameters or an unusable output folder (left unchanged).
     """
-    from crackbake.exchange.interrupt import run_staged
-    from crackbake.exchange.output import OutputStage
+    from crackbake.transaction.interrupt import run_staged
+    from crackbake.transaction.stage import OutputStage
 
     params = params.validate()
     stage = OutputStage(params.out)
@@ -240,7 +241,7 @@ def _build(params: LibraryParams, stage) -> dict:
     from crackbake.bake.context import create_context
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
-    from crackbake.exchange.library import write_library
+    from crackbake.decals.atlas import write_library
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {"solve": 0.0, "bake": 0.0}
@@ -263,11 +264,11 @@ def _build(params: LibraryParams, stage) -> dict:
 
 
 __all__ = [
+    "Baked",
     "LibraryParams",
     "Variant",
-    "Baked",
-    "variants",
-    "plate_mesh",
     "bake_variant",
     "build_library",
+    "plate_mesh",
+    "variants",
 ]

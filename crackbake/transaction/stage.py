@@ -11,8 +11,9 @@ import warnings
 from pathlib import Path
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.exchange.interrupt import deferred, raise_if_received
-from crackbake.exchange.outdir import (
+from crackbake.io.safe_open import open_regular
+from crackbake.transaction.interrupt import deferred, raise_if_received
+from crackbake.transaction.outdir import (
     MARKER,
     FolderLock,
     check_replaceable,
@@ -23,7 +24,6 @@ from crackbake.exchange.outdir import (
     target_dir,
     warn_left,
 )
-from crackbake.io.safe_open import open_regular
 
 PathLike = str | os.PathLike
 
@@ -47,11 +47,11 @@ class OutputStage:
             stage.commit()
 
     Entering checks that ``out_dir`` is missing, empty or a crackbake output folder (see
-    :func:`~crackbake.exchange.outdir.check_replaceable`), locks it against other runs, removes
+    :func:`~crackbake.transaction.outdir.check_replaceable`), locks it against other runs, removes
     what killed runs left beside it and creates a hidden staging folder next to it (same
     parent, so same file system).  :meth:`commit` swaps the staging folder in with one rename
     and then deletes the previous set: the folder holds exactly this run's files, and SIGINT or
-    SIGTERM (under :func:`~crackbake.exchange.interrupt.interruptible`) wait for the swap to
+    SIGTERM (under :func:`~crackbake.transaction.interrupt.interruptible`) wait for the swap to
     end.  Leaving the block without commit (an exception or interrupt included) removes the
     staging folder, the lock file and any parent folder entering created; ``out_dir`` is
     untouched.

@@ -286,7 +286,7 @@ def document(params, layout: Layout, baked: list, depth_scale: float) -> dict:
 
 def write_library(stage, params, baked: list, timings: dict, t0: float) -> dict:
     """Write atlases, ``contact_sheet.png``, ``decals.json`` and ``manifest.json`` into the open
-    :class:`~crackbake.exchange.output.OutputStage`; return the decals.json document."""
+    :class:`~crackbake.transaction.stage.OutputStage`; return the decals.json document."""
     import time
 
     t = time.perf_counter()

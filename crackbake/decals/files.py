@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from crackbake.bake.decal import ANGLE_FADE_DEG, Projector
 from crackbake.bake.raster import CrackMaps
+from crackbake.decals.projector import ANGLE_FADE_DEG, Projector
 from crackbake.exchange.pngenc import png_bytes, write_bytes
 from crackbake.exchange.targets import data_scales, pack, quantise
 
@@ -157,7 +157,7 @@ def write_decal_set(
     path : callable
         Output file name -> path to write (``OutputStage.path``, or a folder's ``__truediv__``).
     decals : list of (Projector, CrackMaps, dict)
-        Each decal's projector, its bake (:func:`crackbake.bake.decal.bake_decal`) and the
+        Each decal's projector, its bake (:func:`crackbake.decals.projector.bake_decal`) and the
         impact it came from (``{"point", "radius", "strength"}``).
     normal_y : {"gl", "dx"}
         Normal map Y convention of the files.

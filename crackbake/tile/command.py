@@ -6,8 +6,9 @@ from pathlib import Path
 
 import click
 
-from crackbake.cli import _Command, _err, reported
-from crackbake.params import preset_names
+from crackbake.cli.common import CONTEXT, Command, err, reported
+from crackbake.params import METHODS, preset_names
+from crackbake.params import TILE_DEFAULTS as TD
 
 EPILOG = """\b
 Examples:
@@ -24,31 +25,31 @@ pieces and the period), manifest.json.
 
 
 @click.command(
-    cls=_Command,
+    cls=Command,
     epilog=EPILOG,
-    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+    context_settings=CONTEXT,
 )
-@click.option("--preset", default="mud", show_default=True,
+@click.option("--preset", default=TD["preset"], show_default=True,
               help=f"Material preset ({', '.join(preset_names())}).")
-@click.option("--size", type=float, default=2.0, show_default=True,
+@click.option("--size", type=float, default=TD["size"], show_default=True,
               help="Tile width/height (the period), mesh units.")
-@click.option("--res", type=int, default=2048, show_default=True, help="Texels per side.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
-@click.option("--impacts", type=int, help="Random impacts on the tile (glass) [3].")
-@click.option("--sim-faces", type=int, help="Simulation mesh size, in faces [60000].")
-@click.option("--method", type=click.Choice(("iben", "thesis")),
+@click.option("--res", type=int, default=TD["res"], show_default=True, help="Texels per side.")
+@click.option("--seed", type=int, default=TD["seed"], show_default=True, help="Random seed.")
+@click.option("--impacts", type=int, help=f"Random impacts on the tile (glass) [{TD['impacts']}].")
+@click.option("--sim-faces", type=int, help=f"Simulation mesh size, in faces [{TD['sim_faces']}].")
+@click.option("--method", type=click.Choice(METHODS),
               help="Crack method (only iben runs on a periodic tile).")
-@click.option("-o", "--out", type=click.Path(path_type=Path), default=Path("tile"),
+@click.option("-o", "--out", type=click.Path(path_type=Path), default=Path(TD["out"]),
               show_default=True, help="Output folder (replaced as a whole).")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 def tile(quiet: bool, **options) -> None:
     """Grow cracks on a periodic plate and bake a texture set that tiles with no seam."""
 
-    from crackbake.tile import TileParams, build_tile
+    from crackbake.tile.periodic import TileParams, build_tile
 
     params = reported(lambda: TileParams(**options).validate(), quiet)
     manifest = reported(lambda: build_tile(params), quiet)
     if not quiet:
         s = manifest["solver"]
-        _err(f"{params.preset} tile {params.size:g} x {params.size:g}, {s.get('cracks', 0)} "
+        err(f"{params.preset} tile {params.size:g} x {params.size:g}, {s.get('cracks', 0)} "
              f"cracks, {params.res}² ({manifest['timings_s']['total']:.1f} s) -> {params.out}/")

@@ -1,0 +1,61 @@
+"""``crackbake``: a command group whose default command is the bake.
+
+``crackbake MESH [OPTIONS]`` bakes (:mod:`crackbake.cli.bake`); a first argument that is a
+command's name runs that command instead: ``crackbake inspect FILE.exr``, ``crackbake decals``,
+``crackbake tile``.  The name wins over a file of the same name in the working folder: a mesh
+file named ``tile`` (or ``inspect``, ``decals``) is baked when given as a path,
+``crackbake ./tile``.  ``crackbake --help`` and ``--version`` are the bake's.
+
+The commands are imported when they run, so ``crackbake MESH`` loads none of them (and a bad
+option fails before any heavy import).
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import click
+
+from crackbake.cli.bake import bake
+
+#: Command name -> ``module:attribute`` of its click command.
+COMMANDS = {
+    "inspect": "crackbake.cli.inspect:inspect",
+    "decals": "crackbake.decals.command:decals",
+    "tile": "crackbake.tile.command:tile",
+}
+
+
+class DefaultGroup(click.Group):
+    """A click group that runs ``default`` unless the first argument names one of ``commands``
+    (``name -> "module:attribute"``, imported on first use).
+
+    Each command parses its own arguments and prints its own help and one-line errors; the
+    group only routes, so ``crackbake MESH ...`` behaves exactly as the bake command alone.
+    """
+
+    def __init__(self, name: str, default: click.Command, commands: dict[str, str], **attrs):
+        super().__init__(name, **attrs)
+        self.default = default
+        self.lazy = dict(commands)
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(self.lazy)
+
+    def get_command(self, ctx: click.Context | None, cmd_name: str) -> click.Command | None:
+        if cmd_name not in self.lazy:
+            return None
+        module, attr = self.lazy[cmd_name].split(":")
+        return getattr(importlib.import_module(module), attr)
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        argv = sys.argv[1:] if args is None else list(args)
+        command = self.get_command(None, argv[0]) if argv else None
+        if command is not None:
+            name = f"{prog_name or 'crackbake'} {argv[0]}"
+            return command.main(argv[1:], name, complete_var, standalone_mode, **extra)
+        return self.default.main(args, prog_name, complete_var, standalone_mode, **extra)
+
+
+main = DefaultGroup("crackbake", default=bake, commands=COMMANDS)

@@ -1,0 +1,67 @@
+"""The package's layering, checked in a fresh interpreter: what a module pulls in on import."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+# Imports every module under crackbake.simulate and prints the crackbake.metrics modules loaded.
+_SIMULATE = """
+import importlib, pkgutil, sys
+import crackbake.simulate as sim
+names = [m.name for m in pkgutil.walk_packages(sim.__path__, "crackbake.simulate.")]
+for name in names:
+    importlib.import_module(name)
+print(len(names))
+print(" ".join(sorted(m for m in sys.modules if m.startswith("crackbake.metrics"))))
+"""
+
+
+def test_simulate_does_not_import_metrics():
+    """The simulation depends on no measure of its results (metrics/ reads networks)."""
+    r = subprocess.run([sys.executable, "-c", _SIMULATE], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    count, loaded = (r.stdout.splitlines() + ["", ""])[:2]
+    assert int(count) > 20  # the walk really reached the solver's modules
+    assert loaded == "", f"crackbake.simulate imports {loaded}"
+
+
+_CLI = """
+import sys
+import crackbake.cli
+print(" ".join(sorted(m for m in sys.modules if m.startswith("crackbake."))))
+"""
+
+
+def test_the_command_group_loads_no_command_module_and_no_pipeline():
+    """``crackbake MESH`` parses its options with only the bake command loaded: the other
+    commands are imported when named, the pipeline (GL, numba) once the options are valid."""
+    r = subprocess.run([sys.executable, "-c", _CLI], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    loaded = set(r.stdout.split())
+    assert "crackbake.cli.bake" in loaded
+    for heavy in ("crackbake.cli.inspect", "crackbake.decals", "crackbake.tile",
+                  "crackbake.pipeline", "crackbake.bake", "crackbake.simulate"):
+        assert heavy not in loaded, heavy
+
+
+def test_no_private_names_cross_into_or_out_of_the_commands():
+    """The commands share public helpers (crackbake.cli.common): no module imports a ``_name``
+    from crackbake.cli, and no command module imports one from elsewhere."""
+    root = Path(__file__).resolve().parents[1] / "crackbake"
+    commands = {root / "decals" / "command.py", root / "tile" / "command.py",
+                *(root / "cli").glob("*.py")}
+    found = []
+    for path in root.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom) or not (node.module or "").startswith(
+                    "crackbake"):
+                continue
+            private = [a.name for a in node.names
+                       if a.name.startswith("_") and not a.name.startswith("__")]
+            if private and (node.module.startswith("crackbake.cli") or path in commands):
+                found.append(f"{path.relative_to(root)}: {node.module} {private}")
+    assert not found, found
