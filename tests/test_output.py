@@ -222,3 +222,24 @@ def test_a_signal_whose_exception_was_lost_still_stops_the_commit(tmp_path):
                 stage.commit()
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert _beside(out) == []
+
+
+def test_a_signal_of_an_earlier_run_does_not_stop_a_later_commit(tmp_path):
+    """The lost-signal guard is the run's own: once ``interruptible()`` has ended, a later
+    stage committed outside it (a library caller's, the next test's) commits."""
+    import signal
+
+    from crackbake.transaction.interrupt import Interrupt, interruptible
+
+    with interruptible():
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(1000):  # the handler runs between bytecodes
+                pass
+        except Interrupt:
+            pass
+    out = tmp_path / "later"
+    with OutputStage(out) as stage:
+        stage.path("mask.png").write_bytes(b"mask")
+        stage.commit()
+    assert (out / "mask.png").read_bytes() == b"mask"

@@ -47,6 +47,7 @@ class _State(threading.local):
     # The last signal of this run, kept even when its exception was lost: raised inside a C
     # extension's import or a callback, it can come back as another error or not at all.
     received: int | None = None
+    active: bool = False  # inside interruptible()
 
 
 _state = _State()
@@ -72,6 +73,7 @@ def interruptible() -> Iterator[None]:
         yield
         return
     _state.received = None
+    _state.active = True
     previous = {}
     for sig in SIGNALS:
         old = signal.getsignal(sig)
@@ -81,6 +83,7 @@ def interruptible() -> Iterator[None]:
     try:
         yield
     finally:
+        _state.active = False
         for sig, old in previous.items():
             signal.signal(sig, old if old is not None else signal.SIG_DFL)
 
@@ -129,6 +132,9 @@ def run_staged(stage, body: Callable[[], T]) -> T:
 
 def raise_if_received() -> None:
     """Raise :class:`Interrupt` if a signal arrived whose exception did not reach the run (a
-    C extension swallowed or converted it), so a run that was asked to stop never commits."""
-    if _state.received is not None:
+    C extension swallowed or converted it), so a run that was asked to stop never commits.
+
+    Only inside :func:`interruptible`: a signal an earlier run in this process received (a
+    library caller's, a test's) must not stop a later commit made outside it."""
+    if _state.active and _state.received is not None:
         raise Interrupt(_state.received)
