@@ -81,8 +81,9 @@ def groove_contrast(python: str, glb: Path, where: tuple[str, ...], out: Path) -
     return result
 
 
-#: Widths before the looks, relative to now (mud's crack_width_rel was 0.003, now 0.015).
-WIDTH_BEFORE = {"mud": 0.2}
+#: Widths before the looks, relative to now (mud's crack_width_rel was 0.003, now 0.015;
+#: concrete's 0.0015, now 0.0035).
+WIDTH_BEFORE = {"mud": 0.003 / 0.015, "concrete": 0.0015 / 0.0035}
 
 
 def before(out: Path, mesh: Path, preset: str, raw: list, args, folder: Path) -> Path:

@@ -76,10 +76,11 @@ void main() {
 #endif
 #ifdef CRACK_NORMALS
     int deepest_seg = -1;  // the segment whose depth term wins (the normal's profile)
+#endif
 #ifdef CRACK_CURL
     int rim_seg = -1;      // with no depth here: the segment whose curled rim the texel is on
-    float rim_u = CURL_REACH + 1.0;
-#endif
+    float rim_u = CURL_REACH;   // its distance beyond the edge, in half widths
+    float rim_depth = 0.0;      // its depth there (the rim is u_curl times that high)
 #endif
     for (uint k = bin_start[bin]; k < bin_start[bin + 1u]; ++k) {
         // Segments come nearest-bound first: the rest cannot be nearer or add coverage.
@@ -132,10 +133,13 @@ void main() {
         coverage = max(coverage, c);
 #ifdef CRACK_NORMALS
         if (dd > depth) deepest_seg = int(si);
-#ifdef CRACK_CURL
-        float ur = (d - hw) / max(hw, 1e-30);
-        if (ur >= 0.0 && ur < rim_u) { rim_u = ur; rim_seg = int(si); }
 #endif
+#ifdef CRACK_CURL
+        // Only cracks drawn at full width have walls, hence rims (as crack_normal.glsl).
+        float ur = (d - hw) / max(hw, 1e-30);
+        if ((w_draw >= fw || w > fw) && ur >= 0.0 && ur < rim_u) {
+            rim_u = ur; rim_seg = int(si); rim_depth = depth_here;
+        }
 #endif
         depth = max(depth, dd);
         // Ties go to the lowest index, so the result does not depend on the list order.
@@ -150,6 +154,14 @@ void main() {
     o_mask = coverage;
     o_width = best_w;
     o_time = best_time;
+#ifdef CRACK_CURL
+    // Off every crack, on a curled rim: raised by u_curl D (1 - x)^2, x = rim_u / CURL_REACH,
+    // the height field whose slope crack_normal.glsl writes (a negative depth: above the surface).
+    if (depth <= 0.0 && rim_seg >= 0) {
+        float x = rim_u / CURL_REACH;
+        depth = -u_curl * rim_depth * (1.0 - x) * (1.0 - x);
+    }
+#endif
     o_depth = depth;
     o_distance = best_d;
     o_id = best_id;

@@ -7,7 +7,8 @@
 // (feature size u_chip_scale): a function of the point only, so both passes agree on it, it is
 // continuous across UV seams and the same seed gives the same pixels.
 // CRACK_CURL: curled cell edges.  Beside each crack a raised rim of height u_curl * D falls off
-// quadratically over CURL_REACH half widths (the normal map only; crack.depth stays >= 0).
+// quadratically over CURL_REACH half widths: a negative depth in the depth channel
+// (crack_bake.frag) and its slope in the normal map (crack_normal.glsl), the same height field.
 
 const float CURL_REACH = 1.5;
 

@@ -183,9 +183,29 @@ def test_chipping_ragged_edges_seeded_width_channel_physical():
 def test_curl_raises_the_rims_and_normal_strength_steepens_the_walls():
     plain, curled = _bake(Look()), _bake(Look(curl=0.4))
     np.testing.assert_array_equal(plain.mask, curled.mask)
-    np.testing.assert_array_equal(plain.depth, curled.depth)  # crack.depth stays >= 0 as before
+    inside = plain.depth > 0
+    np.testing.assert_array_equal(plain.depth[inside], curled.depth[inside])
     rim = (curled.mask == 0) & (curled.normal[..., 2] < 0.999)
     assert rim.sum() > 0 and (plain.normal[..., 2][rim] == 1).all()
+    # The depth map holds the same rim as the normal map: raised (negative depth) off the
+    # crack only, wherever the normal leans there, at most curl x D high (D = 0.015 here).
+    raised = curled.depth < 0
+    off = plain.depth == 0
+    assert (plain.depth >= 0).all() and off[raised].all()
+    assert raised[off & (curled.normal[..., 2] < 0.999)].all()
+    assert (curled.normal[..., 2][curled.depth < -1e-5] < 0.9999).all()
+    assert -curled.depth.min() <= 0.4 * 0.015 * (1 + 1e-6)
+    assert -curled.depth.min() > 0.8 * 0.4 * 0.015
+    # ... and its slope: in the middle of the crack (columns 96..160), down the rows, the
+    # central difference of the height -depth is the normal's slope ny / nz (texel 1/256; image
+    # row 0 is v = 1, so a row down is -y).
+    h = -curled.depth[:, 96:160].astype(np.float64)
+    n = curled.normal[:, 96:160].astype(np.float64)
+    dh_dy = (h[:-2] - h[2:]) / (2.0 / 256)
+    both = rim[:-2, 96:160] & rim[1:-1, 96:160] & rim[2:, 96:160]  # the smooth part of the rim
+    assert both.sum() > 64
+    np.testing.assert_allclose(dh_dy[both], -(n[1:-1, :, 1] / n[1:-1, :, 2])[both],
+                               rtol=0.02, atol=1e-3)
     # A raised rim leans away from the crack (the crack runs along y = 0.5, row res / 2).
     rows = np.nonzero(rim)[0]
     ny = curled.normal[..., 1][rim]
@@ -264,9 +284,14 @@ def test_mud_opens_gaps_of_its_cell_size(tmp_path, plate, kind):
     if kind == "plate":  # every texel of the plate has the same area: the mask's mean is a share
         mask = np.asarray(Image.open(out / "plate_mask.png"), np.float64) / 255
         assert 0.04 <= mask.mean() <= 0.09, mask.mean()
-        # Dark interiors: the crack centres are darker than the look's colour on the walls.
+        # Dark interiors: the deepest quarter of the gaps (the occlusion darkens them) is less
+        # than half as bright as the open surface, while the walls keep the clay's colour.
         base = np.asarray(Image.open(out / "plate_basecolor.png"), np.float64).mean(axis=2)
-        assert base[mask > 0.99].mean() < 0.5 * base[mask == 0].mean()
+        depth = np.asarray(Image.open(out / "plate_depth.png"), np.float64)
+        on = mask > 0.99
+        deep = on & (depth >= np.percentile(depth[on], 75))
+        assert base[deep].mean() < 0.5 * base[mask == 0].mean()
+        assert base[on].mean() < 0.8 * base[mask == 0].mean()
 
 
 @pytest.mark.parametrize("impact", [False, True])

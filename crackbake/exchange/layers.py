@@ -93,8 +93,8 @@ CRACK_LAYERS: dict[str, Layer] = {
             "when the nearest crack point formed (grow cracks with mask * (time < t))",
         ),
         _value(
-            "depth", "crack.depth", False, "mesh units", ">= 0",
-            "depth of the crack profile at the texel",
+            "depth", "crack.depth", False, "mesh units", ">= 0 (< 0 on curled rims)",
+            "depth of the crack profile at the texel (negative: raised, a curled cell edge)",
         ),
         _value(
             "distance", "crack.distance", False, "mesh units", "0..max distance",
