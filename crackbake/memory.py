@@ -7,6 +7,7 @@ time varies)::
     peak = BASE + PER_FACE * faces + PER_SIM_FACE * sim_faces
            + PER_TEXEL * res**2 + PER_GL_TEXEL * min(res, tile)**2
            + PER_STRESS_TEXEL * stress_res**2 + PER_DECAL_TEXEL * decal_res**2
+           + PER_FRAME_TEXEL * res**2 (with --frames)
 
 The crack-map terms are split because the bake draws in bands of at most ``tile**2`` texels: the
 GL targets (about 70 bytes a texel) stop growing at the tile while the maps in numpy keep
@@ -47,6 +48,9 @@ PER_STRESS_TEXEL = 85.0
 #: --decal: one projector bake at a time, after the asset's maps (which stay in memory): spot,
 #: --res 1024, --decal-res 4096 peaked 1.84 GB above the same run without a decal (110 B/texel).
 PER_DECAL_TEXEL = 115.0
+#: --frames: the frames are thresholded from the maps already baked and written a few at a time
+#: (whatever N): spot glass at --res 2048 with --frames 16 peaked 73 MB higher (17 B/texel).
+PER_FRAME_TEXEL = 20.0
 #: Address space beyond the resident set (shared libraries, LLVM, thread stacks, GL driver
 #: reservations): ``VmPeak - VmHWM`` was 1.07..1.33 GiB over the measured runs.  ``RLIMIT_AS``
 #: limits address space, so a cap is compared with ``rss + ADDRESS_OVERHEAD``.
@@ -66,7 +70,8 @@ class MemoryEstimate:
     rss : int
         Peak resident memory (what a cgroup limit or the physical memory must hold).
     parts : dict of str to int
-        The terms of the model: ``base``, ``mesh``, ``sim``, ``bake``, ``stress``, ``decal``.
+        The terms of the model: ``base``, ``mesh``, ``sim``, ``bake``, ``stress``, ``decal``,
+        ``frames``.
     """
 
     rss: int
@@ -84,7 +89,8 @@ class MemoryEstimate:
 
 
 def estimate_peak(faces: int, sim_faces: int, res: int, stress_res: int | None = None,
-                  tile: int = TILE_DEFAULT, decal_res: int | None = None) -> MemoryEstimate:
+                  tile: int = TILE_DEFAULT, decal_res: int | None = None,
+                  frames: int = 0) -> MemoryEstimate:
     """Estimated peak memory of a run from its sizes.
 
     Parameters
@@ -102,6 +108,8 @@ def estimate_peak(faces: int, sim_faces: int, res: int, stress_res: int | None =
         Largest framebuffer edge of a bake pass (``--tile``).
     decal_res : int or None
         Texels per side of the projected decals (``--decal``); None when none is baked.
+    frames : int
+        ``--frames N``: the growth frames (their cost does not grow with N).
 
     Returns
     -------
@@ -115,6 +123,7 @@ def estimate_peak(faces: int, sim_faces: int, res: int, stress_res: int | None =
         "bake": PER_TEXEL * res * res + PER_GL_TEXEL * gl,
         "stress": PER_STRESS_TEXEL * stress_res**2 if stress_res else 0.0,
         "decal": PER_DECAL_TEXEL * decal_res**2 if decal_res else 0.0,
+        "frames": PER_FRAME_TEXEL * res * res if frames else 0.0,
     }
     parts = {k: int(v) for k, v in parts.items()}
     return MemoryEstimate(rss=sum(parts.values()), parts=parts)
@@ -157,7 +166,7 @@ def run_sizes(params, mesh=None, faces: int | None = None) -> dict:
     if params.decal is not None:
         decal = params.decal_res or min(params.res, DECAL_RES_DEFAULT)
     return {"faces": faces, "sim_faces": sim, "res": params.res, "stress_res": stress,
-            "tile": params.tile, "decal_res": decal}
+            "tile": params.tile, "decal_res": decal, "frames": int(params.frames or 0)}
 
 
 def _read_int(path: str) -> int | None:
@@ -243,6 +252,7 @@ _LOWER = {
     "bake": "--res",
     "stress": "--stress-res (or drop stress from --formats)",
     "decal": "--decal-res",
+    "frames": "--res (the frames are --res wide)",
     "sim": "--sim-faces (or a larger --detail)",
     "mesh": "the mesh's face count (decimate it)",
 }

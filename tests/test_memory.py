@@ -67,7 +67,7 @@ def test_run_sizes_follow_the_options(tmp_path):
     p = RunParams(mesh=Path("m.obj"), res=4096, sim_faces=300_000)
     sizes = run_sizes(p, faces=5000)
     assert sizes == {"faces": 5000, "sim_faces": 300_000, "res": 4096, "stress_res": 1024,
-                     "tile": 4096, "decal_res": None}
+                     "tile": 4096, "decal_res": None, "frames": 0}
     # An asset finer than wanted is its own sim mesh; far finer gets a proxy of the wanted size.
     assert run_sizes(p, faces=500_000)["sim_faces"] == 500_000
     assert run_sizes(p, faces=5_000_000)["sim_faces"] == 300_000
@@ -138,3 +138,12 @@ def test_a_decal_adds_its_texels_and_names_its_option():
     assert run_sizes(p, faces=10)["decal_res"] == min(2048, DECAL_RES_DEFAULT)
     with pytest.raises(CrackbakeError, match="--decal-res"):
         check_memory(decal, max_memory=4.0)
+
+
+def test_frames_add_one_term_whatever_their_count():
+    plain = estimate_peak(faces=5856, sim_faces=100_000, res=4096)
+    eight = estimate_peak(faces=5856, sim_faces=100_000, res=4096, frames=8)
+    many = estimate_peak(faces=5856, sim_faces=100_000, res=4096, frames=500)
+    assert eight.rss > plain.rss and many.rss == eight.rss
+    p = RunParams(mesh=Path("m.obj"), frames=12, res=2048)
+    assert run_sizes(p, faces=10)["frames"] == 12
