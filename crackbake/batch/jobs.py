@@ -174,7 +174,8 @@ def _key_of(message: str, keys: dict[str, str], where: str, defaults: dict[str, 
         if flag in keys:
             return f"{where}: key '{keys[flag]}'"
         if flag in defaults:
-            return f"[defaults] key '{defaults[flag]}' (in {where})"
+            file, _, job = where.partition(": ")
+            return f"{file}: [defaults] key '{defaults[flag]}' (in {job})"
     return where
 
 
@@ -209,9 +210,9 @@ def _check_name(name: str) -> None:
         raise ValueError(f"'{name}' is the batch's own summary file; choose another name")
 
 
-def _expand(entry: dict, index: int, base: Path) -> list[tuple[str, Path, dict]]:
-    """``(name, mesh, extra options)`` of each run a ``[[job]]`` entry stands for."""
-    where = f"[[job]] {index}"
+def _expand(entry: dict, where: str, base: Path) -> list[tuple[str, Path, dict]]:
+    """``(name, mesh, extra options)`` of each run a ``[[job]]`` entry stands for (``where``
+    names the entry in messages)."""
     if "mesh" not in entry:
         raise BatchFileError(f"{where}: no 'mesh' key; give the mesh file (or a glob) to crack")
     pattern = entry["mesh"]
@@ -228,7 +229,7 @@ def _expand(entry: dict, index: int, base: Path) -> list[tuple[str, Path, dict]]
         if not full.is_file():
             what = "is a folder" if full.is_dir() else "not found"
             raise BatchFileError(f"{where}: key 'mesh': {pattern}: {what} "
-                                 f"(paths are relative to the batch file's folder {base}/)")
+                                 f"(relative to {base}/)")
         meshes = [full]
     sweeps = {}
     for key, option, kind in (("seeds", "seed", int), ("presets", "preset", str)):
@@ -309,7 +310,7 @@ def load_jobs(path: str | os.PathLike, out: str | os.PathLike) -> list[Job]:
     for index, entry in enumerate(entries, 1):
         if not isinstance(entry, dict):
             raise BatchFileError(f"{shown}: [[job]] {index} is not a table")
-        for name, mesh, extra in _expand(entry, index, base):
+        for name, mesh, extra in _expand(entry, f"{shown}: [[job]] {index}", base):
             where = f"{shown}: [[job]] {index} '{name}'"
             options = {k: v for k, v in entry.items() if k not in JOB_KEYS}
             options.update(extra)

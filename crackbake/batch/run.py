@@ -87,6 +87,8 @@ def _start_ray(plan: Plan):
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # an embedded engine reports nothing
     import ray
 
+    if ray.is_initialized():  # a script (or a test session) already connected: use that Ray
+        return ray, False
     quiet = {"include_dashboard": False, "log_to_driver": False,
              "logging_level": logging.ERROR}
     if plan.address is not None:
@@ -129,9 +131,9 @@ def run_batch(jobs: list[Job], plan: Plan, echo: Callable[[str], None] = print) 
     Each record holds ``name``, ``status`` (``ok``, ``failed``, ``skipped``, ``cancelled``),
     ``error`` (one line) where it failed, ``node``, ``host``, ``pid``, timings, the peak
     resident memory and the memory estimate, the files written.  ``echo`` gets one line per
-    finished job.  A local Ray started here is shut down before returning, Ctrl-C included
-    (then the jobs not finished are ``cancelled`` and KeyboardInterrupt is raised again after
-    the records are complete, as ``plan.ray_info["interrupted"]``).
+    finished job.  A local Ray started here is shut down before returning (a Ray this process
+    already connected to is used and left running).  On Ctrl-C the jobs not finished are
+    ``cancelled`` and ``plan.ray_info["interrupted"]`` is set.
     """
     from crackbake.memory import estimate_peak, run_sizes
 
@@ -184,6 +186,11 @@ def _drive(ray, todo, records, plan: Plan, echo) -> None:
     per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers else 1)
     window = plan.workers or max(1, int(cores // per_job)) * 2
     queue = list(todo)
+    env = {"NUMBA_NUM_THREADS": str(per_job)}
+    if plan.address is None:  # local workers import this crackbake, installed or not
+        here = str(Path(__file__).resolve().parents[2])
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH"))
+                                            if p)
     pending: dict = {}
     done = 0
     total = len(todo)
@@ -216,7 +223,7 @@ def _drive(ray, todo, records, plan: Plan, echo) -> None:
                 ref = task.options(
                     num_cpus=per_job, memory=int(need), max_retries=plan.retries,
                     retry_exceptions=False, name=f"crackbake:{job.name}",
-                    runtime_env={"env_vars": {"NUMBA_NUM_THREADS": str(per_job)}},
+                    runtime_env={"env_vars": env},
                 ).remote(job.params, extra)
                 pending[ref] = (i, time.perf_counter())
             ready, _ = ray.wait(list(pending), num_returns=1)
