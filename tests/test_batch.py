@@ -123,10 +123,10 @@ def test_batch_failed_job_recorded_and_resume(tmp_path, local_ray):
     res = _run(batch, [tmp_path / "jobs.toml", "-o", out, "--resume", "--dry-run"])
     assert res.exit_code == 0
     from crackbake.batch.jobs import load_jobs
-    from crackbake.batch.run import _skip
+    from crackbake.batch.run import resume_record
 
     jobs = load_jobs(tmp_path / "jobs.toml", out)
-    assert [_skip(j, j.job_hash()) is not None for j in jobs] == [False, True, True, True]
+    assert [resume_record(j, j.job_hash()) is not None for j in jobs] == [False, True, True, True]
 
 
 @pytest.mark.parametrize(

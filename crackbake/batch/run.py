@@ -109,7 +109,7 @@ def _largest_memory(ray) -> float:
                default=0.0)
 
 
-def _skip(job: Job, job_hash: str) -> dict | None:
+def resume_record(job: Job, job_hash: str) -> dict | None:
     """The record of a job ``--resume`` keeps: its folder's manifest has the same job hash."""
     import json
 
@@ -152,7 +152,7 @@ def run_batch(jobs: list[Job], plan: Plan, echo: Callable[[str], None] = print) 
         record = {"name": job.name, "index": job.index, "mesh": str(job.params.mesh),
                   "folder": str(job.params.out_dir), "hash": h,
                   "memory_estimate_mb": round(estimate.rss / 2**20, 1)}
-        skipped = _skip(job, h) if plan.resume else None
+        skipped = resume_record(job, h) if plan.resume else None
         if skipped is not None:
             record.update(skipped)
         else:
