@@ -207,3 +207,44 @@ def test_killed_worker_is_retried(tmp_path, local_ray):
     assert sorted(p.name for p in (out / "spot").iterdir()) == sorted(
         [f["name"] for f in manifest["files"]] + ["manifest.json"])
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+
+
+def _ray_processes() -> set[int]:
+    """Pids of Ray's own daemons on this machine (raylet, gcs_server)."""
+    pids = set()
+    for d in Path("/proc").iterdir():
+        try:
+            name = (d / "comm").read_text().strip()
+        except OSError:
+            continue
+        if name in ("raylet", "gcs_server"):
+            pids.add(int(d.name))
+    return pids
+
+
+@pytest.mark.slow
+def test_embedded_ray_on_a_pipe_leaves_nothing_running(tmp_path):
+    """No --address: the command starts its own Ray, prints one line per finished job on a pipe
+    and shuts Ray down (no raylet or gcs_server of its own left)."""
+    import subprocess
+    import sys
+
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n[[job]]\nmesh = \"spot.obj\"\npreset = \"glass\"\n"
+        "impact = \"0.334,0.044,0.287\"\nseeds = [4, 5]\n")
+    before = _ray_processes()
+    env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
+    r = subprocess.run([sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out",
+                        "--workers", "2"], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert sorted(line.split()[2] for line in lines if line.startswith("[")) == [
+        "spot_s4", "spot_s5"]
+    assert lines[-1].startswith("2 jobs: 2 ok")
+    assert _ray_processes() <= before
+    doc = json.loads((tmp_path / "out" / "batch.json").read_text())
+    assert doc["ray"]["cpus"] >= 1 and doc["ray"]["start_s"] > 0
+    assert {j["numba_threads"] for j in doc["jobs"]} == {str(max(1, len(os.sched_getaffinity(0))
+                                                                 // 2))}
