@@ -28,6 +28,10 @@ SMALL = 'res = 256\nsim-faces = 1500\nformats = "png,exr,preview"\n'
 def local_ray():
     """One local Ray for the module (2 CPUs, no dashboard), shut down after it."""
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    # The workers import crackbake from this tree, installed or not (as the command's own
+    # local Ray does).
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(SPOT.parents[1]), os.environ.get("PYTHONPATH")) if p)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
              object_store_memory=80 * 2**20, logging_level="ERROR")
     yield ray
@@ -71,7 +75,8 @@ def test_batch_failed_job_recorded_and_resume(tmp_path, local_ray):
     assert res.exit_code == 1, res.output
     doc = json.loads((out / "batch.json").read_text())
     status = {j["name"]: j["status"] for j in doc["jobs"]}
-    assert status == {"mud": "ok", "spot_s1": "ok", "spot_s2": "ok", "broken": "failed"}
+    assert status == {"mud": "ok", "spot_glass_s1": "ok", "spot_glass_s2": "ok",
+                      "broken": "failed"}
     broken = doc["jobs"][3]
     assert "\n" not in broken["error"] and "broken.obj" in broken["error"]
     assert broken["error"].startswith("error: ")
@@ -85,8 +90,8 @@ def test_batch_failed_job_recorded_and_resume(tmp_path, local_ray):
     # The plain command into another folder: every file equal, the manifest but its timings.
     plain = {
         "mud": ["--preset", "mud"],
-        "spot_s1": ["--preset", "glass", "--impact", "0.334,0.044,0.287", "--seed", "1"],
-        "spot_s2": ["--preset", "glass", "--impact", "0.334,0.044,0.287", "--seed", "2"],
+        "spot_glass_s1": ["--preset", "glass", "--impact", "0.334,0.044,0.287", "--seed", "1"],
+        "spot_glass_s2": ["--preset", "glass", "--impact", "0.334,0.044,0.287", "--seed", "2"],
     }
     for name, extra in plain.items():
         ref = tmp_path / f"plain_{name}"
@@ -241,7 +246,7 @@ def test_embedded_ray_on_a_pipe_leaves_nothing_running(tmp_path):
     assert r.returncode == 0, r.stderr
     lines = r.stderr.splitlines()
     assert sorted(line.split()[2] for line in lines if line.startswith("[")) == [
-        "spot_s4", "spot_s5"]
+        "spot_glass_s4", "spot_glass_s5"]
     assert lines[-1].startswith("2 jobs: 2 ok")
     assert _ray_processes() <= before
     doc = json.loads((tmp_path / "out" / "batch.json").read_text())

@@ -17,7 +17,7 @@ work.
     mesh = "rocks/*.ply"
     presets = ["mud", "crackle"]
     seeds = [1, 2, 3]
-    name = "{stem}_{preset}_{seed}"   # [{stem}, then _{preset} and _s{seed} when swept]
+    name = "{stem}_{preset}_{seed}"   # [{stem}_{preset}_s{seed}: what the sweep varies]
 
 Every job's options go through the bake command's own click options and then
 :meth:`RunParams.validate`, so a value the command refuses is refused here with the same words
@@ -246,7 +246,9 @@ def _expand(entry: dict, where: str, base: Path) -> list[tuple[str, Path, dict]]
     swept = len(meshes) > 1 or bool(sweeps)
     template = entry.get("name")
     if template is None:
-        template = "{stem}" + ("_{preset}" if "preset" in sweeps else "") + (
+        # A swept job's folders tell its variants apart: the preset (swept or not) and the seed.
+        preset = "preset" in sweeps or (swept and "preset" in entry)
+        template = "{stem}" + ("_{preset}" if preset else "") + (
             "_s{seed}" if "seed" in sweeps else "")
     elif not isinstance(template, str):
         raise BatchFileError(f"{where}: key 'name': expected a folder name, got {template!r}")

@@ -52,6 +52,9 @@ def _run_job(params, extra: dict) -> dict:
     from crackbake.errors import CrackbakeError, CrackbakeWarning
 
     t0 = time.perf_counter()
+    # Before numba is imported (a fresh worker has not): its thread pool follows the task's CPUs.
+    os.environ["NUMBA_NUM_THREADS"] = str(max(1, int(ray.get_runtime_context()
+                                                     .get_assigned_resources().get("CPU", 1))))
     record = {"node": ray.get_runtime_context().get_node_id(), "host": socket.gethostname(),
               "pid": os.getpid(), "numba_threads": os.environ.get("NUMBA_NUM_THREADS")}
     try:
@@ -98,6 +101,11 @@ def _start_ray(plan: Plan):
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = min(plan.workers or cores, cores)
     per_job = plan.cpus_per_job or max(1, cores // workers)
+    # The local workers (children of the raylet started here) import this crackbake, installed
+    # or not; no runtime_env, so Ray keeps its pool of prestarted workers.
+    here = str(Path(__file__).resolve().parents[2])
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        p for p in (here, os.environ.get("PYTHONPATH")) if p)
     ray.init(num_cpus=max(cores, workers * per_job), object_store_memory=OBJECT_STORE_BYTES,
              **quiet)
     return ray, True
@@ -186,11 +194,6 @@ def _drive(ray, todo, records, plan: Plan, echo) -> None:
     per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers else 1)
     window = plan.workers or max(1, int(cores // per_job)) * 2
     queue = list(todo)
-    env = {"NUMBA_NUM_THREADS": str(per_job)}
-    if plan.address is None:  # local workers import this crackbake, installed or not
-        here = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH"))
-                                            if p)
     pending: dict = {}
     done = 0
     total = len(todo)
@@ -223,7 +226,6 @@ def _drive(ray, todo, records, plan: Plan, echo) -> None:
                 ref = task.options(
                     num_cpus=per_job, memory=int(need), max_retries=plan.retries,
                     retry_exceptions=False, name=f"crackbake:{job.name}",
-                    runtime_env={"env_vars": env},
                 ).remote(job.params, extra)
                 pending[ref] = (i, time.perf_counter())
             ready, _ = ray.wait(list(pending), num_returns=1)
