@@ -98,7 +98,7 @@ class RunResult:
         }
 
 
-def run(params: RunParams) -> RunResult:
+def run(params: RunParams, *, manifest_extra: dict | None = None) -> RunResult:
     """Run crackbake end to end and write the output folder.
 
     The output folder is checked and locked before anything else (see :class:`OutputStage`),
@@ -110,6 +110,9 @@ def run(params: RunParams) -> RunResult:
     ----------
     params : RunParams
         Validated here.
+    manifest_extra : dict, optional
+        Top-level keys added to ``manifest.json`` (a batch records its job there); the other
+        files are unchanged.
 
     Returns
     -------
@@ -125,10 +128,10 @@ def run(params: RunParams) -> RunResult:
     """
     params.validate()
     stage = OutputStage(params.out_dir)
-    return run_staged(stage, lambda: _run(params, stage))
+    return run_staged(stage, lambda: _run(params, stage, manifest_extra or {}))
 
 
-def _run(params: RunParams, stage: OutputStage) -> RunResult:
+def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResult:
     """The stages in order, cheap checks first, writing into the open ``stage``."""
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
@@ -180,6 +183,7 @@ def _run(params: RunParams, stage: OutputStage) -> RunResult:
         manifest = build_manifest(
             params, effective, mesh, uvmesh, network, maps, renderer_info(ctx), files, timings
         )
+        manifest.update(manifest_extra)
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:

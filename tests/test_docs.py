@@ -59,7 +59,7 @@ def documented() -> list[tuple[str, str]]:
             key = tuple(small(args)) if args else ()
             if key in seen:
                 continue
-            if len(args) == 1 and args[0] in ("inspect", "decals", "tile"):
+            if len(args) == 1 and args[0] in ("inspect", "decals", "tile", "batch"):
                 continue  # the command's name in a sentence
             seen.add(key)
             found.append((page.name, cmd))
@@ -81,8 +81,8 @@ def small(args: list[str]) -> list[str]:
     args = list(args)
     if any(a in ("--help", "-h", "--version", "-V") for a in args):
         return args
-    kind = args[0] if args[0] in ("inspect", "decals", "tile") else "bake"
-    if kind == "inspect":
+    kind = args[0] if args[0] in ("inspect", "decals", "tile", "batch") else "bake"
+    if kind in ("inspect", "batch"):  # a batch's sizes are in its file (examples/batch.toml)
         return args
     args = _set(args, "--res", str(SMALL[kind]), only_lower=True)
     if kind == "decals":

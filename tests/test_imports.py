@@ -43,7 +43,7 @@ def test_the_command_group_loads_no_command_module_and_no_pipeline():
     assert r.returncode == 0, r.stderr
     loaded = set(r.stdout.split())
     assert "crackbake.cli.bake" in loaded
-    for heavy in ("crackbake.cli.inspect", "crackbake.decals", "crackbake.tile",
+    for heavy in ("crackbake.cli.inspect", "crackbake.decals", "crackbake.tile", "crackbake.batch",
                   "crackbake.pipeline", "crackbake.bake", "crackbake.simulate"):
         assert heavy not in loaded, heavy
 
@@ -53,6 +53,7 @@ def test_no_private_names_cross_into_or_out_of_the_commands():
     from crackbake.cli, and no command module imports one from elsewhere."""
     root = Path(__file__).resolve().parents[1] / "crackbake"
     commands = {root / "decals" / "command.py", root / "tile" / "command.py",
+                root / "batch" / "command.py",
                 *(root / "cli").glob("*.py")}
     found = []
     for path in root.rglob("*.py"):

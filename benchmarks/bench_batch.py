@@ -1,0 +1,114 @@
+"""Batch benchmark (issue 21's floors): ``crackbake batch`` against the same jobs run one after
+another as plain ``crackbake`` processes, whole-process wall times.
+
+Jobs: spot with 4 presets x 3 seeds (12 jobs, ``--res 1024`` by default; glass gets an
+impact).  Measured, each in a fresh process:
+
+- ``plain``: the 12 ``crackbake MESH ...`` runs one after another (the sum is the reference);
+- ``batch --workers 1``: the engine's cost (floor: <= 1.05 x the sum);
+- ``batch --workers 2``: two jobs at once (floor on this 2-core machine: <= 0.75 x the sum);
+- Ray's start-up time and the per-job engine overhead (the batch's wall minus its jobs' run
+  times, per job, for ``--workers 1``; floor: <= 1 s).
+
+Times on a shared machine are noisy: run it on a quiet one.
+
+Usage::
+
+    python benchmarks/bench_batch.py [--res 1024] [--seeds 3] [--presets mud crackle glaze glass]
+                                     [--skip-plain] [--markdown]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SPOT = ROOT / "examples" / "spot.obj"
+IMPACT = "0.334,0.044,0.287"
+ENV = {**os.environ, "PYTHONPATH": str(ROOT), "RAY_USAGE_STATS_ENABLED": "0"}
+
+
+def job_options(preset: str, seed: int) -> list[str]:
+    extra = ["--impact", IMPACT] if preset == "glass" else []
+    return ["--preset", preset, "--seed", str(seed), *extra]
+
+
+def batch_file(folder: Path, res: int, presets: list[str], seeds: int) -> Path:
+    lines = [f"[defaults]\nres = {res}\n"]
+    for preset in presets:
+        impact = f'impact = "{IMPACT}"\n' if preset == "glass" else ""
+        lines.append(f'[[job]]\nmesh = "{SPOT}"\npreset = "{preset}"\n{impact}'
+                     f"seeds = {list(range(1, seeds + 1))}\n")
+    path = folder / "bench.toml"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def timed(args: list[str], cwd: Path) -> float:
+    t = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "crackbake", *args], cwd=cwd, env=ENV,
+                       capture_output=True, text=True)
+    if r.returncode != 0:
+        raise SystemExit(f"crackbake {' '.join(args)} failed:\n{r.stderr[-2000:]}")
+    return time.perf_counter() - t
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--res", type=int, default=1024)
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--presets", nargs="+", default=["mud", "crackle", "glaze", "glass"])
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--skip-plain", action="store_true", help="only the batch runs")
+    ap.add_argument("--markdown", action="store_true")
+    a = ap.parse_args()
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:
+        tmp = Path(tmp)
+        jobs = batch_file(tmp, a.res, a.presets, a.seeds)
+        n = len(a.presets) * a.seeds
+        plain = None
+        if not a.skip_plain:
+            plain = 0.0
+            for preset in a.presets:
+                for seed in range(1, a.seeds + 1):
+                    plain += timed([str(SPOT), "--res", str(a.res), "-q",
+                                    "-o", f"plain_{preset}_{seed}",
+                                    *job_options(preset, seed)], tmp)
+            rows.append(("plain, one after another", plain, None, None))
+        for w in a.workers:
+            out = tmp / f"batch_w{w}"
+            wall = timed(["batch", str(jobs), "-o", str(out), "--workers", str(w), "-q"], tmp)
+            doc = json.loads((out / "batch.json").read_text())
+            start = doc["ray"]["start_s"]
+            run = sum(j["run_s"] for j in doc["jobs"])
+            overhead = (wall - start - run / w) / n
+            rows.append((f"batch --workers {w}", wall, start, overhead))
+
+    head = f"{n} jobs, spot, --res {a.res}"
+    if a.markdown:
+        print(f"| {head} | wall s | x plain sum | Ray start s | engine s/job |")
+        print("|---|---|---|---|---|")
+    else:
+        print(head)
+    for name, wall, start, overhead in rows:
+        ratio = f"{wall / plain:.2f}" if plain else "-"
+        s = f"{start:.1f}" if start is not None else "-"
+        o = f"{overhead:.2f}" if overhead is not None else "-"
+        if a.markdown:
+            print(f"| {name} | {wall:.1f} | {ratio} | {s} | {o} |")
+        else:
+            print(f"  {name:<28} {wall:8.1f} s  x{ratio:<5} start {s:>5} s  "
+                  f"engine {o:>5} s/job")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,255 @@
+"""The batch driver on Ray: one task per job, each in a fresh worker process.
+
+A job runs :func:`crackbake.pipeline.run` exactly as the bake command does, into its own
+folder through the output transaction.  Its task declares ``num_cpus`` (and the worker's
+``NUMBA_NUM_THREADS`` follows it) and ``memory``, the run's estimated peak
+(:func:`crackbake.memory.estimate_peak`), so Ray never packs more big jobs on a node than its
+memory holds.  ``max_calls=1``: the worker process exits after its job, so no GL context, numba
+state or leaked memory passes from one asset to the next.
+
+Faults: a worker that dies (SIGKILL, the OOM killer, a lost node) is a system failure Ray
+retries (``max_retries``); the staging folder it left is removed by the retry's output
+transaction.  A job failing on its input (a :class:`CrackbakeError`) returns its one-line error
+and is not retried: the same input would fail the same way.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import resource
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from crackbake.batch.jobs import Job, face_count
+
+#: Least object store Ray accepts; the tasks return small dicts, so more only takes /dev/shm.
+OBJECT_STORE_BYTES = 80 * 2**20
+
+
+@dataclass
+class Plan:
+    """How a batch runs: Ray's address (None: a local Ray started here), the most jobs at once,
+    CPUs per job, retries of a dead worker, whether finished folders are kept."""
+
+    address: str | None = None
+    workers: int | None = None
+    cpus_per_job: int | None = None
+    retries: int = 2
+    resume: bool = False
+    ray_info: dict = field(default_factory=dict)
+
+
+def _run_job(params, extra: dict) -> dict:
+    """The task body (in a fresh worker): one pipeline run, its outcome as a record."""
+    import warnings
+
+    import ray
+
+    from crackbake.errors import CrackbakeError, CrackbakeWarning
+
+    t0 = time.perf_counter()
+    # Before numba is imported (a fresh worker has not): its thread pool follows the task's CPUs.
+    os.environ["NUMBA_NUM_THREADS"] = str(max(1, int(ray.get_runtime_context()
+                                                     .get_assigned_resources().get("CPU", 1))))
+    record = {"node": ray.get_runtime_context().get_node_id(), "host": socket.gethostname(),
+              "pid": os.getpid(), "numba_threads": os.environ.get("NUMBA_NUM_THREADS")}
+    try:
+        from crackbake.pipeline import run
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", CrackbakeWarning)
+            result = run(params, manifest_extra=extra)
+        record.update(
+            status="ok",
+            files=[f["name"] for f in result.files] + ["manifest.json"],
+            pipeline_s=result.manifest["timings_s"],
+            warnings=[str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)],
+        )
+    except CrackbakeError as exc:
+        record.update(status="failed", error=f"error: {exc}", exit_code=exc.exit_code)
+    except MemoryError:
+        record.update(status="failed", exit_code=2,
+                      error="error: ran out of memory; lower --res, --stress-res or --sim-faces")
+    except Exception as exc:  # a bug: one line, as the bake command says it
+        text = " ".join(str(exc).split())[:200]
+        record.update(status="failed", exit_code=1,
+                      error=f"internal error: {type(exc).__name__}: {text}")
+    record["run_s"] = round(time.perf_counter() - t0, 3)
+    # A fresh process per job: its peak is the job's (plus the Ray worker's own ~100 MB).
+    record["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+    return record
+
+
+def _start_ray(plan: Plan):
+    """Connect to ``plan.address`` or start a local Ray sized to this machine; returns ray and
+    whether this process owns the instance (and must shut it down)."""
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # an embedded engine reports nothing
+    import ray
+
+    if ray.is_initialized():  # a script (or a test session) already connected: use that Ray
+        return ray, False
+    quiet = {"include_dashboard": False, "log_to_driver": False,
+             "logging_level": logging.ERROR}
+    if plan.address is not None:
+        ray.init(address=plan.address, **{k: v for k, v in quiet.items()
+                                          if k != "include_dashboard"})
+        return ray, False
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    workers = min(plan.workers or cores, cores)
+    per_job = plan.cpus_per_job or max(1, cores // workers)
+    # The local workers (children of the raylet started here) import this crackbake, installed
+    # or not; no runtime_env, so Ray keeps its pool of prestarted workers.
+    here = str(Path(__file__).resolve().parents[2])
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        p for p in (here, os.environ.get("PYTHONPATH")) if p)
+    ray.init(num_cpus=max(cores, workers * per_job), object_store_memory=OBJECT_STORE_BYTES,
+             **quiet)
+    return ray, True
+
+
+def _largest_memory(ray) -> float:
+    """Bytes of the ``memory`` resource on the largest live node."""
+    return max((n["Resources"].get("memory", 0.0) for n in ray.nodes() if n.get("Alive")),
+               default=0.0)
+
+
+def resume_record(job: Job, job_hash: str) -> dict | None:
+    """The record of a job ``--resume`` keeps: its folder's manifest has the same job hash."""
+    import json
+
+    manifest = Path(job.params.out_dir) / "manifest.json"
+    try:
+        doc = json.loads(manifest.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(doc, dict) or doc.get("batch", {}).get("hash") != job_hash:
+        return None
+    files = [f["name"] for f in doc.get("files", []) if isinstance(f, dict)]
+    return {"status": "skipped", "files": files + ["manifest.json"],
+            "pipeline_s": doc.get("timings_s", {})}
+
+
+def run_batch(jobs: list[Job], plan: Plan, echo: Callable[[str], None] = print) -> list[dict]:
+    """Run ``jobs`` on Ray; one record per job, in the batch file's order.
+
+    Each record holds ``name``, ``status`` (``ok``, ``failed``, ``skipped``, ``cancelled``),
+    ``error`` (one line) where it failed, ``node``, ``host``, ``pid``, timings, the peak
+    resident memory and the memory estimate, the files written.  ``echo`` gets one line per
+    finished job.  A local Ray started here is shut down before returning (a Ray this process
+    already connected to is used and left running).  On Ctrl-C the jobs not finished are
+    ``cancelled`` and ``plan.ray_info["interrupted"]`` is set.
+    """
+    from crackbake.memory import estimate_peak, run_sizes
+
+    records: list[dict] = []
+    todo: list[tuple[int, Job, dict]] = []
+    hashes: dict[Path, dict] = {}
+    faces: dict[Path, int] = {}
+    for i, job in enumerate(jobs):
+        key = Path(job.params.mesh)
+        if key not in hashes or job.params.weight_map or job.params.cracks:
+            hashes[key] = job.input_hashes()
+        h = job.job_hash(hashes[key])
+        if key not in faces:
+            faces[key] = face_count(key)
+        estimate = estimate_peak(**run_sizes(job.params.resolved()[0], faces=faces[key]))
+        record = {"name": job.name, "index": job.index, "mesh": str(job.params.mesh),
+                  "folder": str(job.params.out_dir), "hash": h,
+                  "memory_estimate_mb": round(estimate.rss / 2**20, 1)}
+        skipped = resume_record(job, h) if plan.resume else None
+        if skipped is not None:
+            record.update(skipped)
+        else:
+            todo.append((i, job, {"batch": {"job": job.name, "hash": h}}))
+        records.append(record)
+    for r in records:
+        if r.get("status") == "skipped":
+            echo(f"skipped {r['name']} (finished, same job hash)")
+    if not todo:
+        return records
+
+    t_start = time.perf_counter()
+    ray, owned = _start_ray(plan)
+    try:
+        plan.ray_info.update(start_s=round(time.perf_counter() - t_start, 3),
+                             nodes=len([n for n in ray.nodes() if n.get("Alive")]),
+                             cpus=ray.cluster_resources().get("CPU", 0),
+                             gpus=ray.cluster_resources().get("GPU", 0))
+        _drive(ray, todo, records, plan, echo)
+    finally:
+        if owned:
+            ray.shutdown()
+    return records
+
+
+def _drive(ray, todo, records, plan: Plan, echo) -> None:
+    """Submit the jobs (at most ``plan.workers`` at once when set), gather each as it ends."""
+    task = ray.remote(max_calls=1)(_run_job)
+    largest = _largest_memory(ray)
+    cores = ray.cluster_resources().get("CPU", 1)
+    per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers else 1)
+    window = plan.workers or max(1, int(cores // per_job)) * 2
+    queue = list(todo)
+    pending: dict = {}
+    done = 0
+    total = len(todo)
+
+    def finish(i: int, outcome: dict) -> None:
+        nonlocal done
+        done += 1
+        r = records[i]
+        r.update(outcome)
+        line = f"[{done}/{total}] {r['status']:<6} {r['name']}"
+        if r["status"] == "ok":
+            line += f"  {r.get('run_s', 0):.1f} s, {r.get('peak_rss_mb', 0):.0f} MB peak"
+            if r.get("node"):
+                line += f", node {r['node'][:8]}"
+        elif r.get("error"):
+            line += f"  {r['error']}"
+        echo(line)
+
+    try:
+        while queue or pending:
+            while queue and len(pending) < window:
+                i, job, extra = queue.pop(0)
+                need = records[i]["memory_estimate_mb"] * 2**20
+                if largest and need > largest:
+                    finish(i, {"status": "failed", "exit_code": 2, "error": (
+                        f"error: needs an estimated {need / 2**30:.1f} GiB, more than any node "
+                        f"offers ({largest / 2**30:.1f} GiB); lower --res, --stress-res or "
+                        "--sim-faces")})
+                    continue
+                ref = task.options(
+                    num_cpus=per_job, memory=int(need), max_retries=plan.retries,
+                    retry_exceptions=False, name=f"crackbake:{job.name}",
+                ).remote(job.params, extra)
+                pending[ref] = (i, time.perf_counter())
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            for ref in ready:
+                i, t_sub = pending.pop(ref)
+                try:
+                    outcome = ray.get(ref)
+                except ray.exceptions.OutOfMemoryError:
+                    outcome = {"status": "failed", "exit_code": 1, "error": (
+                        "error: the node ran out of memory running it (after "
+                        f"{plan.retries} retries); lower --res or run fewer jobs per node")}
+                except (ray.exceptions.WorkerCrashedError, ray.exceptions.RayError) as exc:
+                    text = " ".join(str(exc).split())[:200]
+                    outcome = {"status": "failed", "exit_code": 1, "error": (
+                        f"error: its worker died {plan.retries + 1} times ({type(exc).__name__}"
+                        f": {text})")}
+                outcome["wall_s"] = round(time.perf_counter() - t_sub, 3)
+                finish(i, outcome)
+    except KeyboardInterrupt:
+        for ref, (i, _) in pending.items():
+            ray.cancel(ref)
+            records[i].update(status="cancelled", error="cancelled (Ctrl-C)")
+        for i, _, _ in queue:
+            records[i].update(status="cancelled", error="cancelled (Ctrl-C) before it started")
+        if pending:  # let the running jobs unwind their staging folders
+            ray.wait(list(pending), num_returns=len(pending), timeout=30)
+        plan.ray_info["interrupted"] = True

@@ -1,0 +1,255 @@
+"""``crackbake batch`` (crackbake/batch/) on a real local Ray: each job's folder equals what the
+plain bake command writes, failures are recorded, ``--resume`` reruns only what changed, a
+killed worker is retried, and a bad batch file is refused before any work."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+ray = pytest.importorskip("ray")
+
+from crackbake.batch.command import batch  # noqa: E402
+from crackbake.cli.bake import bake  # noqa: E402
+
+SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
+SMALL = 'res = 256\nsim-faces = 1500\nformats = "png,exr,preview"\n'
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """One local Ray for the module (2 CPUs, no dashboard), shut down after it."""
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    # The workers import crackbake from this tree, installed or not (as the command's own
+    # local Ray does).
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(SPOT.parents[1]), os.environ.get("PYTHONPATH")) if p)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+             object_store_memory=80 * 2**20, logging_level="ERROR")
+    yield ray
+    ray.shutdown()
+
+
+def _run(cmd, args):
+    return CliRunner().invoke(cmd, [str(a) for a in args], catch_exceptions=False)
+
+
+def _folder(path: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(path.iterdir())}
+
+
+def _manifest_core(data: bytes) -> dict:
+    """A manifest without what differs between two equal runs (stage and solver timings, the
+    output folder) and the batch's own key."""
+    doc = json.loads(data)
+    doc.pop("timings_s")
+    doc.pop("batch", None)
+    doc["params"].pop("out")
+    for key in ("seconds", "loop_seconds"):
+        doc["params"].get("solver", {}).pop(key, None)
+    return doc
+
+
+def test_batch_failed_job_recorded_and_resume(tmp_path, local_ray):
+    """4 jobs, one broken mesh: 3 ok, each equal to the plain command's folder, the broken one
+    failed with its one-line error; --resume after the fix runs only that job."""
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "broken.obj").write_text("v 0 0 0\nf 1 2 3\n")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n"
+        '[[job]]\nmesh = "spot.obj"\npreset = "mud"\nname = "mud"\n\n'
+        '[[job]]\nmesh = "spot.obj"\npreset = "glass"\nimpact = ["0.334,0.044,0.287"]\n'
+        "seeds = [1, 2]\n\n"
+        '[[job]]\nmesh = "broken.obj"\npreset = "crackle"\n'
+    )
+    out = tmp_path / "out"
+    res = _run(batch, [tmp_path / "jobs.toml", "-o", out])
+    assert res.exit_code == 1, res.output
+    doc = json.loads((out / "batch.json").read_text())
+    status = {j["name"]: j["status"] for j in doc["jobs"]}
+    assert status == {"mud": "ok", "spot_glass_s1": "ok", "spot_glass_s2": "ok",
+                      "broken": "failed"}
+    broken = doc["jobs"][3]
+    assert "\n" not in broken["error"] and "broken.obj" in broken["error"]
+    assert broken["error"].startswith("error: ")
+    assert not (out / "broken").exists()
+    assert {j["node"] for j in doc["jobs"]} == {ray.get_runtime_context().get_node_id()}
+    assert all(j["peak_rss_mb"] > 50 and j["files"] for j in doc["jobs"][:3])
+    assert len({j["pid"] for j in doc["jobs"]}) == 4  # a fresh worker process per job
+    assert "failed: broken: error: " in res.stderr
+    assert (out / "batch.csv").read_text().count("\n") == 5
+
+    # The plain command into another folder: every file equal, the manifest but its timings.
+    plain = {
+        "mud": ["--preset", "mud"],
+        "spot_glass_s1": ["--preset", "glass", "--impact", "0.334,0.044,0.287", "--seed", "1"],
+        "spot_glass_s2": ["--preset", "glass", "--impact", "0.334,0.044,0.287", "--seed", "2"],
+    }
+    for name, extra in plain.items():
+        ref = tmp_path / f"plain_{name}"
+        r = _run(bake, [tmp_path / "spot.obj", "--res", 256, "--sim-faces", 1500,
+                        "--formats", "png,exr,preview", "-q", "-o", ref, *extra])
+        assert r.exit_code == 0, r.output
+        got, want = _folder(out / name), _folder(ref)
+        assert sorted(got) == sorted(want)
+        for f in want:
+            if f == "manifest.json":
+                assert _manifest_core(got[f]) == _manifest_core(want[f])
+            else:
+                assert got[f] == want[f], f"{name}/{f} differs from the plain command's"
+        assert json.loads(got["manifest.json"])["batch"]["job"] == name
+
+    # The sheet: one labelled tile per job.
+    from PIL import Image
+
+    with Image.open(out / "batch_sheet.png") as sheet:
+        assert sheet.size == (2 * 256, 2 * (256 + 40))
+
+    # Fixed mesh, --resume: only the broken job runs; the others' files are untouched.
+    before = {n: (out / n / "manifest.json").stat().st_mtime_ns for n in plain}
+    shutil.copy(SPOT, tmp_path / "broken.obj")
+    res = _run(batch, [tmp_path / "jobs.toml", "-o", out, "--resume"])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "batch.json").read_text())
+    assert [j["status"] for j in doc["jobs"]] == ["skipped", "skipped", "skipped", "ok"]
+    assert before == {n: (out / n / "manifest.json").stat().st_mtime_ns for n in plain}
+    assert (out / "broken" / "preview.png").is_file()
+    # A changed option is a new job hash: that job runs again.
+    text = (tmp_path / "jobs.toml").read_text().replace('name = "mud"', 'name = "mud"\nseed = 3')
+    (tmp_path / "jobs.toml").write_text(text)
+    res = _run(batch, [tmp_path / "jobs.toml", "-o", out, "--resume", "--dry-run"])
+    assert res.exit_code == 0
+    from crackbake.batch.jobs import load_jobs
+    from crackbake.batch.run import resume_record
+
+    jobs = load_jobs(tmp_path / "jobs.toml", out)
+    assert [resume_record(j, j.job_hash()) is not None for j in jobs] == [False, True, True, True]
+
+
+@pytest.mark.parametrize(
+    "body, words",
+    [
+        ('[[job]]\nmesh = "spot.obj"\nress = 256\n', ["[[job]] 1 'spot'", "unknown key 'ress'"]),
+        ('[[job]]\nmesh = "nope.obj"\n', ["[[job]] 1", "key 'mesh'", "nope.obj", "not found"]),
+        ('[[job]]\nmesh = "spot.obj"\nres = 99999\n', ["key 'res'", "--res 99999 is out of"]),
+        ('[defaults]\nres = 8\n[[job]]\nmesh = "spot.obj"\n', ["[defaults] key 'res'", "--res 8"]),
+        ('[[job]]\nmesh = "spot.obj"\npreset = "lava"\n', ["key 'preset'", "lava"]),
+        ('[[job]]\nmesh = "spot.obj"\n[[job]]\nmesh = "spot.obj"\nseed = 2\n',
+         ["[[job]] 2 'spot'", "same folder", "[[job]] 1 'spot'"]),
+        ('[[job]]\nmesh = "spot.obj"\nseeds = [1, 1]\n', ["[[job]] 1 'spot_s1'", "same folder"]),
+        ('[[job]]\nmesh = "*.ply"\n', ["key 'mesh'", "matches no file"]),
+        ('[[job]]\nmesh = "spot.obj"\nformats = "png,tiff"\n', ["key 'formats'", "subset"]),
+        ('[[job]]\nmesh = "spot.obj"\nout = "x"\n', ["unknown key 'out'"]),
+        ('[[job]]\nmesh = "spot.obj"\nname = "../up"\n', ["key 'name'", "not a folder name"]),
+        ('[[job]]\nmesh = "spot.obj"\nimpact = "1,2"\n', ["key 'impact'"]),
+        ("[[job]\n", ["not valid TOML"]),
+        ("[defaults]\nres = 256\n", ["no [[job]] entries"]),
+    ],
+)
+def test_bad_batch_files_refused(tmp_path, body, words):
+    """Each refusal: one line naming the job and key, exit 2, nothing written (no Ray)."""
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(body)
+    res = _run(batch, [tmp_path / "jobs.toml", "-o", tmp_path / "out"])
+    assert res.exit_code == 2, res.output
+    line = res.stderr.strip()
+    assert "\n" not in line and line.startswith("error: jobs.toml: "), line
+    for w in words:
+        assert w in line, line
+    assert not (tmp_path / "out").exists()
+
+
+def test_batch_agrees_with_the_bake_command(tmp_path):
+    """A value the bake command refuses is refused by batch with the same words."""
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text('[[job]]\nmesh = "spot.obj"\ntoughness = -1\n')
+    res = _run(batch, [tmp_path / "jobs.toml", "-o", tmp_path / "out"])
+    cli = _run(bake, [tmp_path / "spot.obj", "--toughness", "-1", "-o", tmp_path / "o2"])
+    assert res.exit_code == cli.exit_code == 2
+    assert cli.stderr.strip().removeprefix("error: ") in res.stderr
+
+
+@pytest.mark.slow
+def test_killed_worker_is_retried(tmp_path, local_ray):
+    """SIGKILL the worker mid-job (its pid is in the output folder's lock file): Ray retries the
+    job in a new process and the folder ends complete, no staging left."""
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n[[job]]\nmesh = \"spot.obj\"\npreset = \"mud\"\n")
+    out = tmp_path / "out"
+    lock = out / ".spot.crackbake-lock"
+    result = {}
+    runner = threading.Thread(target=lambda: result.update(
+        res=_run(batch, [tmp_path / "jobs.toml", "-o", out, "--retries", 1])))
+    runner.start()
+    killed = None
+    deadline = time.monotonic() + 120
+    while killed is None and time.monotonic() < deadline:
+        try:
+            text = lock.read_text().strip()
+        except OSError:
+            text = ""
+        if text.isdigit():
+            killed = int(text)
+            time.sleep(1.0)  # well into the job (loading, solving)
+            os.kill(killed, signal.SIGKILL)
+        time.sleep(0.05)
+    runner.join(300)
+    assert killed is not None
+    res = result["res"]
+    assert res.exit_code == 0, res.output
+    job = json.loads((out / "batch.json").read_text())["jobs"][0]
+    assert job["status"] == "ok" and job["pid"] != killed
+    manifest = json.loads((out / "spot" / "manifest.json").read_text())
+    assert sorted(p.name for p in (out / "spot").iterdir()) == sorted(
+        [f["name"] for f in manifest["files"]] + ["manifest.json"])
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+
+
+def _ray_processes() -> set[int]:
+    """Pids of Ray's own daemons on this machine (raylet, gcs_server)."""
+    pids = set()
+    for d in Path("/proc").iterdir():
+        try:
+            name = (d / "comm").read_text().strip()
+        except OSError:
+            continue
+        if name in ("raylet", "gcs_server"):
+            pids.add(int(d.name))
+    return pids
+
+
+@pytest.mark.slow
+def test_embedded_ray_on_a_pipe_leaves_nothing_running(tmp_path):
+    """No --address: the command starts its own Ray, prints one line per finished job on a pipe
+    and shuts Ray down (no raylet or gcs_server of its own left)."""
+    import subprocess
+    import sys
+
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n[[job]]\nmesh = \"spot.obj\"\npreset = \"glass\"\n"
+        "impact = \"0.334,0.044,0.287\"\nseeds = [4, 5]\n")
+    before = _ray_processes()
+    env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
+    r = subprocess.run([sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out",
+                        "--workers", "2"], cwd=tmp_path, env=env, capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert sorted(line.split()[2] for line in lines if line.startswith("[")) == [
+        "spot_glass_s4", "spot_glass_s5"]
+    assert lines[-1].startswith("2 jobs: 2 ok")
+    assert _ray_processes() <= before
+    doc = json.loads((tmp_path / "out" / "batch.json").read_text())
+    assert doc["ray"]["cpus"] >= 1 and doc["ray"]["start_s"] > 0
+    assert {j["numba_threads"] for j in doc["jobs"]} == {str(max(1, len(os.sched_getaffinity(0))
+                                                                 // 2))}
