@@ -429,7 +429,8 @@ def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
                "radius")
     else:
         why = (f"the surface there (a thin feature, a small lobe or piece) is likely narrower "
-               f"than the star: give a smaller radius (--impact X,Y,Z:{0.5 * radius:.3g}), a "
+               f"than the star, or the sim mesh too coarse ({spans:.1f} sim edges across the "
+               f"0.3-reach circle): give a smaller radius (--impact X,Y,Z:{0.5 * radius:.3g}), a "
                f"point on a broader area, or a finer --detail (sim edge now {edge:.3g})")
     warnings.warn(
         f"no star formed at {len(missing)} impact(s): radial arms crossing the circle at 0.3 of "

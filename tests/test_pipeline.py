@@ -377,10 +377,12 @@ def test_a_run_cut_short_by_max_steps_warns(plate, tmp_path):
     with pytest.warns(CrackbakeWarning, match="--max-steps 5 with cracks still growing"):
         short = run(RunParams(out=tmp_path / "short", max_steps=5, **base))
     assert short.solved.result.stats["stopped"] == "max steps"
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", CrackbakeWarning)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", CrackbakeWarning)
         full = run(RunParams(out=tmp_path / "full", **base))
     assert full.solved.result.stats["stopped"] in ("at rest", "max cracks", "saturated")
+    # (a 3000-face sim mesh may also say its star is thin: only the step limit is under test)
+    assert not [w for w in caught if "--max-steps" in str(w.message)]
 
 
 def test_warnings_of_a_rebuilt_sim_mesh_are_said_once():
