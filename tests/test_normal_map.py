@@ -450,3 +450,47 @@ def test_bad_tangents_are_refused_in_one_line(gl_ctx):
     with pytest.raises(CrackbakeError, match="normals have shape"):
         bake_cracks(v, f, uv, segs, 64, max_distance=0.1, normals=n[:-1], tangents=tan,
                     ctx=gl_ctx)
+
+
+def test_thin_groove_near_a_texel_row_shades_smoothly_along_the_crack(gl_ctx):
+    """A V groove 1.5 texels wide at 3 degrees to the texel rows (issue 18: dashes).  Point
+    sampled, a texel just off the axis takes a full wall's tilt and its neighbour none, so the
+    tilt flips in runs along the crack.  Box-averaged over a footprint, each texel's tilt moves
+    by a small step per column as the axis drifts 0.05 texel, and the tilt summed across the
+    crack (the height's rise from one side to the other: zero) stays zero along it."""
+    res = 128
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    tan = np.tile([1.0, 0, 0, 1], (4, 1))
+    w, depth = 1.5 / res, 0.5 / res
+    slope = depth / (w / 2)  # a wall's slope, point sampled
+    a, b = np.array([0.02, 0.47, 0]), np.array([0.98, 0.47 + 0.96 * np.tan(np.radians(3)), 0])
+    segs = make_segments([a], [b], width=w, depth=depth)
+    maps = bake_cracks(v, f, v[:, :2], segs, res, max_distance=0.05, tangents=tan, ctx=gl_ctx)
+    tilt = (maps.normal[..., 1] / maps.normal[..., 2]).astype(np.float64)  # d(depth)/dy
+    cols = np.arange(10, res - 10)
+    rows = slice(res // 2 - 12, res // 2 + 8)  # the crack's rows, and a few more either side
+    band = tilt[rows][:, cols]
+    assert np.abs(band).max() > 0.3 * slope  # the walls do lean
+    # Texel to texel along the crack: a V's box average changes by at most 2 slope x 0.05 texel
+    # per texel, i.e. 0.1 slope (point sampled: up to 2 slopes, as the axis crosses a centre).
+    step = np.abs(np.diff(band, axis=1))
+    assert step.max() < 0.2 * slope, step.max() / slope
+    # Summed across the crack, the slopes telescope to the height's rise, which is zero.
+    assert np.abs(band.sum(0)).max() < 0.05 * slope, np.abs(band.sum(0)).max() / slope
+    # Both are the V averaged over one texel across the crack (fw = 1 / res here), derived
+    # here by quadrature: depth A(s) = mean of V over [s - fw/2, s + fw/2] (s the signed
+    # distance to the axis), and the normal's slope A'(s) along the axis' normal.
+    theta = np.radians(3)
+    c, r = np.meshgrid(cols, np.arange(res)[rows])
+    px, py = (c + 0.5) / res, 1 - (r + 0.5) / res
+    sd = -(px - a[0]) * np.sin(theta) + (py - a[1]) * np.cos(theta)
+    u = np.linspace(-0.5, 0.5, 2001) / res
+
+    def mean_v(x):
+        return (depth * np.clip(1 - np.abs(x[..., None] + u) / (w / 2), 0, None)).mean(-1)
+
+    e = 1e-3 / res
+    np.testing.assert_allclose(maps.depth[rows][:, cols], mean_v(sd), rtol=0, atol=2e-3 * depth)
+    expect = (mean_v(sd + e) - mean_v(sd - e)) / (2 * e) * np.cos(theta)
+    np.testing.assert_allclose(band, expect, rtol=0, atol=0.01 * slope)
