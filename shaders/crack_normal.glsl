@@ -7,6 +7,7 @@
 // x the world distance to the crack axis, hw the half width, D the depth.
 
 const int VIS_SAMPLES = 8;  // profile samples per side for the horizon search (exact for a V)
+const int BOX_OCC_SAMPLES = 4;  // occlusion samples across a thin groove's box
 
 float profile_z(float x, float hw, float depth) {
     return -depth * pow(max(1.0 - abs(x) / hw, 0.0), u_shape);
@@ -118,7 +119,16 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
             float g1 = sign(x1) * ((1.0 - pow(r1, u_shape + 1.0)) / (u_shape + 1.0)
                                    - groove_q(x1, hw) * min(abs(x1) / hw, 1.0));
             float along = ddepth * mean + depth * (g1 - g0) / box * (0.5 * dw);
-            occ = groove_visibility(min(d, hw), hw, depth, normalize(vec2(across, 1.0)));
+            // The occlusion averaged over the box too: each point's wall (or flat ground
+            // beyond the rim) with its own normal, as the point-sampled groove shades it.
+            occ = 0.0;
+            for (int k = 0; k < BOX_OCC_SAMPLES; ++k) {
+                float x = abs(mix(x0, x1, (float(k) + 0.5) / float(BOX_OCC_SAMPLES)));
+                if (x >= hw) { occ += 1.0; continue; }
+                float wall = -depth * u_shape * pow(max(1.0 - x / hw, 1e-6), u_shape - 1.0) / hw;
+                occ += groove_visibility(x, hw, depth, normalize(vec2(wall, 1.0)));
+            }
+            occ /= float(BOX_OCC_SAMPLES);
             return across * gn + along * grad_t;
         }
         float q = max(1.0 - u, 1e-6);  // U profiles (shape < 1) have vertical walls at the rim

@@ -423,11 +423,13 @@ def test_normals_leave_the_other_channels_bit_identical_and_tile(gl_ctx, monkeyp
     for name, arr in plain.channels().items():
         assert np.array_equal(arr, full.channels()[name]), name
     # Bands (tile 128 -> 64-row bands) give the same normal map, up to float32 rounding of the
-    # interpolated positions (as for the mask: tie-breaks may move).
+    # interpolated positions (as for the mask: tie-breaks may move).  Grooves drawn under four
+    # texels wide are box-averaged, so their slope varies along the distance (a point-sampled V's
+    # is constant on each wall): a rounding of 1e-4 texel turns them by up to ~0.03 degree.
     tiled = bake_cracks(v, f, uv, segs, RES, max_distance=0.1, normals=n, tangents=tan,
                         tile=128, ctx=gl_ctx)  # fmt: skip
     diff = angle_deg(tiled.normal.astype(float), full.normal.astype(float))
-    assert float(np.percentile(diff, 99)) < 0.01 and float(diff.max()) < 0.5
+    assert float(np.percentile(diff, 99)) < 0.03 and float(diff.max()) < 0.5
     np.testing.assert_allclose(tiled.occlusion.astype(float), full.occlusion.astype(float),
                                atol=1e-3)  # fmt: skip
     # Compute dispatches split in parts (as beyond 65535 groups) give the same result.
