@@ -134,7 +134,8 @@ void main() {
             // width: at least u_min_px footprints).
             float frac = w / fw;
             c = clamp((0.5 * fw - d) / fw + 0.5, 0.0, 1.0) * frac;
-            dd = depth_here * c / (u_shape + 1.0);
+            // The depth: that tent averaged over one more footprint across (crack_look.glsl).
+            dd = depth_here * frac * tent_box(d, fw) / (u_shape + 1.0);
         }
         coverage = max(coverage, c);
 #ifdef CRACK_NORMALS

@@ -12,7 +12,7 @@
 
 const float CURL_REACH = 1.5;
 
-// Thin grooves (drawn fewer than GROOVE_BOX_FULL footprints wide): the depth is the groove's
+// Thin grooves (drawn fewer than GROOVE_BOX_FULL footprints wide, sub-texel ones included): the depth is the groove's
 // profile averaged over one footprint fb across the crack, and the normal its slope, the
 // difference of the profile over that footprint (the average's exact derivative), so a groove
 // one to three texels wide shades smoothly from texel to texel instead of flipping between
@@ -37,6 +37,19 @@ float groove_q(float x, float hw) {
 float groove_integral(float x, float hw) {
     float r = max(1.0 - abs(x) / hw, 0.0);
     return sign(x) * hw / (u_shape + 1.0) * (1.0 - pow(r, u_shape + 1.0));
+}
+
+// Sub-texel cracks' coverage ramp (1 - |x| / fw) averaged over the box [d - fw/2, d + fw/2],
+// and its slope: the same filter for the tent they are drawn as (crack_bake.frag).
+float tent_box(float d, float fw) {
+    float x0 = d - 0.5 * fw, x1 = d + 0.5 * fw;
+    float r0 = max(1.0 - abs(x0) / fw, 0.0), r1 = max(1.0 - abs(x1) / fw, 0.0);
+    return 0.5 * (sign(x1) * (1.0 - r1 * r1) - sign(x0) * (1.0 - r0 * r0));
+}
+
+float tent_box_slope(float d, float fw) {
+    float r0 = max(1.0 - abs(d - 0.5 * fw) / fw, 0.0), r1 = max(1.0 - abs(d + 0.5 * fw) / fw, 0.0);
+    return (r1 - r0) / fw;
 }
 
 #ifdef CRACK_CHIP

@@ -60,10 +60,12 @@ float groove_mean_visibility(float hw, float depth) {
 // occlusion there.  Full cracks (w >= fw): the point-sampled profile D(t) (1 - d / hw(t))^shape,
 // differentiated across (along the distance gradient g/d) and along the segment (D and w vary
 // linearly in t); drawn fewer than GROOVE_BOX_NONE footprints wide, that profile averaged over a
-// box about one footprint across (crack_look.glsl), differentiated the same way.  Sub-texel cracks (w < fw): the bake stores the area average over the texel,
-// a tent D w / ((shape + 1) fw) * (1 - d / fw) of one footprint's half width; its slope is the
-// slope of the texel-filtered height field (what a mip level of the full profile would show), and
-// the occlusion is the covered fraction times the groove's mean wall visibility.
+// box about one footprint across (crack_look.glsl), differentiated the same way.  Sub-texel
+// cracks (w < fw): the bake stores the area average over the texel, a tent
+// D w / ((shape + 1) fw) * (1 - d / fw) of one footprint's half width, averaged over one more
+// footprint across (tent_box: a point-sampled tent's slope flips sign at the axis: dashes); the
+// normal is that filtered height field's slope, and the occlusion the filtered covered fraction
+// times the groove's mean wall visibility.
 vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out float occ) {
     vec3 ab = s.b.xyz - s.a.xyz;
     float len2 = dot(ab, ab);
@@ -139,9 +141,10 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
         occ = groove_visibility(d, hw, depth, normalize(vec2(across, 1.0)));
         return across * gn + along * grad_t;
     }
-    float ramp = clamp(1.0 - d / fw, 0.0, 1.0);
+    // The tent averaged over a footprint across (crack_bake.frag), and its exact slope.
+    float ramp = tent_box(d, fw);
     float k = 1.0 / (fw * (u_shape + 1.0));
-    float across = ramp > 0.0 ? -depth * w * k / fw : 0.0;
+    float across = depth * w * k * tent_box_slope(d, fw);
     float along = (ddepth * w + depth * dw) * ramp * k;
     occ = 1.0 - ramp * (w / fw) * (1.0 - groove_mean_visibility(hw, depth));
     return across * gn + along * grad_t;
