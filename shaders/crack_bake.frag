@@ -120,15 +120,22 @@ void main() {
         // alias; wider floors draw the V.  With u_min_px = 0 this is the physical test w >= fw.
         if (w_draw >= fw || w > fw) {
             c = clamp((hw - d) / fw + 0.5, 0.0, 1.0);
-            float u = d / max(hw, 1e-30);
-            dd = u < 1.0 ? depth_here * pow(1.0 - u, u_shape) : 0.0;
+            float box = groove_box(w, fw);
+            if (box > 0.0) {  // thin: the profile averaged over the box (crack_look.glsl)
+                dd = depth_here * (groove_integral(d + 0.5 * box, hw)
+                                   - groove_integral(d - 0.5 * box, hw)) / box;
+            } else {
+                float u = d / max(hw, 1e-30);
+                dd = u < 1.0 ? depth_here * pow(1.0 - u, u_shape) : 0.0;
+            }
         } else {
             // Thinner than a texel: draw it one texel wide and weight by the covered fraction,
             // so the mask and the depth keep the crack's area-averaged value (of the drawn
             // width: at least u_min_px footprints).
             float frac = w / fw;
             c = clamp((0.5 * fw - d) / fw + 0.5, 0.0, 1.0) * frac;
-            dd = depth_here * c / (u_shape + 1.0);
+            // The depth: that tent averaged over one more footprint across (crack_look.glsl).
+            dd = depth_here * frac * tent_box(d, fw) / (u_shape + 1.0);
         }
         coverage = max(coverage, c);
 #ifdef CRACK_NORMALS

@@ -12,6 +12,46 @@
 
 const float CURL_REACH = 1.5;
 
+// Thin grooves (drawn fewer than GROOVE_BOX_FULL footprints wide, sub-texel ones included): the depth is the groove's
+// profile averaged over one footprint fb across the crack, and the normal its slope, the
+// difference of the profile over that footprint (the average's exact derivative), so a groove
+// one to three texels wide shades smoothly from texel to texel instead of flipping between
+// point-sampled walls (dashes along cracks near a texel row).  The box narrows to a point
+// sample at GROOVE_BOX_NONE footprints, where the point-sampled groove no longer aliases.
+const float GROOVE_BOX_FULL = 3.0;
+const float GROOVE_BOX_NONE = 4.0;
+
+// The box width, mesh units, for a groove drawn w wide at a footprint fw (0: point samples).
+float groove_box(float w, float fw) {
+    float b = fw * clamp(GROOVE_BOX_NONE - w / fw, 0.0, GROOVE_BOX_NONE - GROOVE_BOX_FULL);
+    return b > 0.01 * fw ? b : 0.0;  // narrower boxes are the point sample to float precision
+}
+
+// The profile q(x) = (1 - |x| / hw)^u_shape (0 beyond the rims), and its integral from 0 to x
+// (odd in x, constant beyond the rims).
+float groove_q(float x, float hw) {
+    float r = 1.0 - abs(x) / hw;
+    return r > 0.0 ? pow(r, u_shape) : 0.0;
+}
+
+float groove_integral(float x, float hw) {
+    float r = max(1.0 - abs(x) / hw, 0.0);
+    return sign(x) * hw / (u_shape + 1.0) * (1.0 - pow(r, u_shape + 1.0));
+}
+
+// Sub-texel cracks' coverage ramp (1 - |x| / fw) averaged over the box [d - fw/2, d + fw/2],
+// and its slope: the same filter for the tent they are drawn as (crack_bake.frag).
+float tent_box(float d, float fw) {
+    float x0 = d - 0.5 * fw, x1 = d + 0.5 * fw;
+    float r0 = max(1.0 - abs(x0) / fw, 0.0), r1 = max(1.0 - abs(x1) / fw, 0.0);
+    return 0.5 * (sign(x1) * (1.0 - r1 * r1) - sign(x0) * (1.0 - r0 * r0));
+}
+
+float tent_box_slope(float d, float fw) {
+    float r0 = max(1.0 - abs(d - 0.5 * fw) / fw, 0.0), r1 = max(1.0 - abs(d + 0.5 * fw) / fw, 0.0);
+    return (r1 - r0) / fw;
+}
+
 #ifdef CRACK_CHIP
 uniform float u_chip;        // relative amplitude of the half-width noise, 0..0.9
 uniform float u_chip_scale;  // feature size of the noise, mesh units

@@ -7,6 +7,7 @@
 // x the world distance to the crack axis, hw the half width, D the depth.
 
 const int VIS_SAMPLES = 8;  // profile samples per side for the horizon search (exact for a V)
+const int BOX_OCC_SAMPLES = 4;  // occlusion samples across a thin groove's box
 
 float profile_z(float x, float hw, float depth) {
     return -depth * pow(max(1.0 - abs(x) / hw, 0.0), u_shape);
@@ -58,10 +59,13 @@ float groove_mean_visibility(float hw, float depth) {
 // World gradient of the segment's depth term at p (the term crack_bake.frag maximises), and the
 // occlusion there.  Full cracks (w >= fw): the point-sampled profile D(t) (1 - d / hw(t))^shape,
 // differentiated across (along the distance gradient g/d) and along the segment (D and w vary
-// linearly in t).  Sub-texel cracks (w < fw): the bake stores the area average over the texel,
-// a tent D w / ((shape + 1) fw) * (1 - d / fw) of one footprint's half width; its slope is the
-// slope of the texel-filtered height field (what a mip level of the full profile would show), and
-// the occlusion is the covered fraction times the groove's mean wall visibility.
+// linearly in t); drawn fewer than GROOVE_BOX_NONE footprints wide, that profile averaged over a
+// box about one footprint across (crack_look.glsl), differentiated the same way.  Sub-texel
+// cracks (w < fw): the bake stores the area average over the texel, a tent
+// D w / ((shape + 1) fw) * (1 - d / fw) of one footprint's half width, averaged over one more
+// footprint across (tent_box: a point-sampled tent's slope flips sign at the axis: dashes); the
+// normal is that filtered height field's slope, and the occlusion the filtered covered fraction
+// times the groove's mean wall visibility.
 vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out float occ) {
     vec3 ab = s.b.xyz - s.a.xyz;
     float len2 = dot(ab, ab);
@@ -92,14 +96,43 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
     occ = 1.0;
     if (w_phys >= fw || w > fw) {  // the branch crack_bake.frag takes
         float u = d / max(hw, 1e-30);
+        // Thin grooves: the box-averaged profile reaches half a box past the rim.
+        float box = groove_box(w, fw);
 #ifdef CRACK_CURL
         // The curled rim beside the crack: height u_curl D (1 - x)^2, x = (d - hw) / (R hw).
-        if (u >= 1.0 && u < 1.0 + CURL_REACH) {
+        if (d - 0.5 * box >= hw && u < 1.0 + CURL_REACH) {
             float x = (u - 1.0) / CURL_REACH;
             return (2.0 * u_curl * depth * (1.0 - x) / (CURL_REACH * max(hw, 1e-30))) * gn;
         }
 #endif
-        if (u >= 1.0) return vec3(0.0);
+        if (d - 0.5 * box >= hw) return vec3(0.0);
+        if (box > 0.0) {
+            // The depth D(t) A(d, hw(t)), A the profile's mean over [d - box/2, d + box/2]
+            // (crack_bake.frag): across, A's derivative is the profile's difference over the
+            // box; along, D and hw vary with t (dF/dhw, F the profile's integral).
+            float x0 = d - 0.5 * box;
+            float x1 = d + 0.5 * box;
+            float mean = (groove_integral(x1, hw) - groove_integral(x0, hw)) / box;
+            float across = depth * (groove_q(x1, hw) - groove_q(x0, hw)) / box;
+            float r0 = max(1.0 - abs(x0) / hw, 0.0);
+            float r1 = max(1.0 - abs(x1) / hw, 0.0);
+            float g0 = sign(x0) * ((1.0 - pow(r0, u_shape + 1.0)) / (u_shape + 1.0)
+                                   - groove_q(x0, hw) * min(abs(x0) / hw, 1.0));
+            float g1 = sign(x1) * ((1.0 - pow(r1, u_shape + 1.0)) / (u_shape + 1.0)
+                                   - groove_q(x1, hw) * min(abs(x1) / hw, 1.0));
+            float along = ddepth * mean + depth * (g1 - g0) / box * (0.5 * dw);
+            // The occlusion averaged over the box too: each point's wall (or flat ground
+            // beyond the rim) with its own normal, as the point-sampled groove shades it.
+            occ = 0.0;
+            for (int k = 0; k < BOX_OCC_SAMPLES; ++k) {
+                float x = abs(mix(x0, x1, (float(k) + 0.5) / float(BOX_OCC_SAMPLES)));
+                if (x >= hw) { occ += 1.0; continue; }
+                float wall = -depth * u_shape * pow(max(1.0 - x / hw, 1e-6), u_shape - 1.0) / hw;
+                occ += groove_visibility(x, hw, depth, normalize(vec2(wall, 1.0)));
+            }
+            occ /= float(BOX_OCC_SAMPLES);
+            return across * gn + along * grad_t;
+        }
         float q = max(1.0 - u, 1e-6);  // U profiles (shape < 1) have vertical walls at the rim
         float qs = pow(q, u_shape);
         float qs1 = pow(q, u_shape - 1.0);
@@ -108,9 +141,10 @@ vec3 depth_gradient(Segment s, vec3 p, vec3 dpx, vec3 dpy, float texel_iso, out 
         occ = groove_visibility(d, hw, depth, normalize(vec2(across, 1.0)));
         return across * gn + along * grad_t;
     }
-    float ramp = clamp(1.0 - d / fw, 0.0, 1.0);
+    // The tent averaged over a footprint across (crack_bake.frag), and its exact slope.
+    float ramp = tent_box(d, fw);
     float k = 1.0 / (fw * (u_shape + 1.0));
-    float across = ramp > 0.0 ? -depth * w * k / fw : 0.0;
+    float across = depth * w * k * tent_box_slope(d, fw);
     float along = (ddepth * w + depth * dw) * ramp * k;
     occ = 1.0 - ramp * (w / fw) * (1.0 - groove_mean_visibility(hw, depth));
     return across * gn + along * grad_t;
