@@ -174,7 +174,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         t = time.perf_counter()
         effective = effective_params(params, solver_stats, maps, uvmesh)
         write_outputs(
-            stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx, stress
+            stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx, stress,
+            effective,
         )
         _decals(ctx, uvmesh, network, maps, params, stage, timings)
         files = stage.records()

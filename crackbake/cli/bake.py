@@ -23,7 +23,10 @@ from crackbake.params import (
     CRACK_WIDTH_REL_DEFAULT,
     DECAL_RES_DEFAULT,
     DEFAULT_MAX_DISTANCE_FRACTION,
+    EXR_COMPRESSION_DEFAULT,
+    EXR_COMPRESSIONS,
     FORMATS,
+    FORMATS_DEFAULT,
     METHODS,
     MIN_PX_DEFAULT,
     NORMAL_Y,
@@ -278,10 +281,11 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("--seed", type=int, default=SEED_DEFAULT, show_default=True, help="Random seed.")
 @click.option(
     "--formats",
-    default=",".join(FORMATS),
+    default=",".join(FORMATS_DEFAULT),
     show_default=True,
     callback=_split_formats,
-    help="Which outputs to write (cracks.json, cracks.obj and manifest.json always are).",
+    help="Which outputs to write (cracks.json, cracks.obj and manifest.json always are); "
+    "also usd (<stem>.usda with its material; needs the usd extra).",
 )
 @click.option(
     "--decal",
@@ -323,6 +327,14 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     help="The preview's up axis [y, or z when the mesh clearly stands on its -Z side].",
 )
 @click.option("--float", "float32", is_flag=True, help="Write every EXR channel as 32-bit float.")
+@click.option(
+    "--exr-compression",
+    type=click.Choice(EXR_COMPRESSIONS),
+    default=EXR_COMPRESSION_DEFAULT,
+    show_default=True,
+    help="Lossless compression of the EXR files: zip (scanline blocks of 16), zips (one line), "
+    "piz (wavelet, best on noisy data), none.",
+)
 @click.option("--object", "object_name", help="Pick this object from a multi-object file.")
 @click.option(
     "--allow-outside-textures",

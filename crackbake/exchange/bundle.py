@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crackbake import __version__
-from crackbake.bake.preview import preview_camera, render_preview
+from crackbake.bake.preview import preview_camera, render_preview, up_vector
 from crackbake.bake.raster import CrackMaps
 from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
@@ -27,6 +27,7 @@ from crackbake.exchange.halving import base_color_half, normal_half
 from crackbake.exchange.layers import (
     crack_attributes,
     crack_planes,
+    run_attributes,
     stress_attributes,
     stress_planes,
 )
@@ -37,7 +38,14 @@ from crackbake.exchange.materials import (
     downsample,
 )
 from crackbake.exchange.pngenc import png_bytes, png_rows, write_bytes
-from crackbake.exchange.targets import TARGETS, data16_filtered, normal_convention, pack
+from crackbake.exchange.targets import (
+    TARGETS,
+    data16_filtered,
+    data_scales,
+    normal_convention,
+    pack,
+)
+from crackbake.exchange.usd import UsdTextures, write_usd
 from crackbake.io.mesh import Mesh
 from crackbake.io.obj_lines import write_obj
 from crackbake.io.sidecar import write_sidecar
@@ -138,8 +146,9 @@ def write_outputs(
     maps: CrackMaps,
     ctx=None,
     stress: StressMaps | None = None,
+    effective: dict | None = None,
 ) -> None:
-    """Write the requested maps, the GLB, the preview and the network into ``stage``.
+    """Write the requested maps, the GLB, the USD, the preview and the network into ``stage``.
 
     Parameters
     ----------
@@ -156,9 +165,12 @@ def write_outputs(
         The run's GL context, for the preview; a temporary one when not given.
     stress : StressMaps, optional
         The baked stress fields: written as ``<stem>_stress.exr`` with the ``stress`` format.
+    effective : dict, optional
+        The run's effective parameters (the manifest's ``params``), summarised in the EXR
+        headers' ``comments`` (:func:`~crackbake.exchange.layers.run_attributes`).
     """
     with _exr_threads(EXR_THREADS if {"exr", "stress"} & set(params.formats) else None):
-        _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress)
+        _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
 
 
 @contextmanager
@@ -176,10 +188,11 @@ def _exr_threads(n: int | None):
             OpenEXR.set_global_thread_count(before)
 
 
-def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) -> None:
+def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective) -> None:
     formats = params.formats
     texture = None
-    if mesh.source and {"png", "glb", "preview"} & set(formats):
+    exr = {"compression": params.exr_compression, "run": run_attributes(__version__, effective)}
+    if mesh.source and {"png", "glb", "preview", "usd"} & set(formats):
         texture = base_color_texture(mesh.source, maps.res, params.allow_outside_textures)
     with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
         jobs: list[Future] = []
@@ -188,10 +201,10 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) ->
             # converted in the job: numpy casts release the GIL, and the texture packs are
             # nogil kernels, so the conversion no longer waits behind them.
             path = stage.path(f"{stem}_cracks.exr")
-            jobs.append(pool.submit(_write_exr, path, maps, params.float32))
+            jobs.append(pool.submit(_write_exr, path, maps, params.float32, **exr))
         if stress is not None and "stress" in formats:
             jobs.append(
-                pool.submit(_write_stress_exr, stage.path(f"{stem}_stress.exr"), stress)
+                pool.submit(_write_stress_exr, stage.path(f"{stem}_stress.exr"), stress, **exr)
             )
         enc = _Encoder(pool, maps, texture)
         if "png" in formats:
@@ -203,6 +216,9 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) ->
         if "glb" in formats:
             size = min(maps.res, GLB_TEXTURE_MAX)
             glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal", "orm")}
+        usd_textures = None
+        if "usd" in formats:
+            usd_textures = _usd_textures(enc, stage, stem, params, maps)
         encoded = enc.start(set(glb_keys.values()))
         jobs.extend(encoded.values())
         jobs.extend(submit_frames(pool, stage.path, stem, maps, params.frames))
@@ -213,6 +229,11 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) ->
             write_obj(network, stage.path("cracks.obj"))
             if glb_keys:
                 _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, encoded, glb_keys)
+            if usd_textures is not None:
+                write_usd(
+                    stage.path(f"{stem}.usda"), stem, uvmesh, usd_textures,
+                    up=up_vector(params.up, mesh), doc=f"crackbake {__version__}: {stem}",
+                )  # fmt: skip
         finally:
             for job in jobs:  # every job ends before the stage can be committed or discarded
                 job.exception()
@@ -220,18 +241,64 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress) ->
             job.result()  # the first failure, in submission order
 
 
-def _write_exr(path, maps: CrackMaps, float32: bool) -> None:
+def _write_exr(path, maps: CrackMaps, float32: bool, compression: str, run: dict) -> None:
     planes = crack_planes(maps.channels(), float32=float32)
     attributes = crack_attributes(
         __version__, maps.max_distance, maps.profile_shape, channels=planes
     )
-    write_exr(path, planes, attributes=attributes)
+    write_exr(path, planes, attributes={**run, **attributes}, compression=compression)
 
 
-def _write_stress_exr(path, stress: StressMaps) -> None:
+def _write_stress_exr(path, stress: StressMaps, compression: str, run: dict) -> None:
     attributes = stress_attributes(__version__, units=stress.units)
     attributes["crackbake:stressFrame"] = stress.frame
-    write_exr(path, stress_planes(stress.fields(), units=stress.units), attributes=attributes)
+    write_exr(path, stress_planes(stress.fields(), units=stress.units),
+              attributes={**run, **attributes}, compression=compression)  # fmt: skip
+
+
+#: The glTF profile's name of each file the USD material reads, when the run's own PNGs hold
+#: no such map: (content, bits, file suffix).
+_USD_FILES = (("base_color", 8, "basecolor"), ("normal", 8, "normal"), ("orm", 8, "orm"),
+              ("data", 16, "data"))  # fmt: skip
+
+
+def _usd_textures(enc: _Encoder, stage, stem: str, params, maps: CrackMaps) -> UsdTextures:
+    """The PNGs the USD material binds: the target's own files where they hold the map USD
+    reads (base colour, OpenGL normal, ORM or roughness + occlusion, 16-bit data), the glTF
+    profile's names for the rest (``<stem>_usd_<map>.png`` where such a name is taken)."""
+    have: dict[str, str] = {}
+    taken: set[str] = set()
+    if "png" in params.formats:
+        normal_y = normal_convention(params.target, params.normal_y)
+        for f in TARGETS[params.target].files:
+            name = f.name.format(stem=stem)
+            taken.add(name.lower())  # case-insensitive file systems: _Normal and _normal clash
+            usable = (f.content != "normal" or normal_y == "gl") and (
+                f.content != "data" or f.bits == 16
+            )
+            if usable:
+                have.setdefault(f.content, name)
+    if "roughness" in have and "occlusion" in have and "orm" not in have:
+        rough, occ = (have["roughness"], "r"), (have["occlusion"], "r")
+        wanted = [f for f in _USD_FILES if f[0] != "orm"]
+    else:
+        rough = occ = None
+        wanted = list(_USD_FILES)
+    for content, bits, suffix in wanted:
+        if content in have:
+            continue
+        name = f"{stem}_{suffix}.png"
+        if name.lower() in taken:
+            name = f"{stem}_usd_{suffix}.png"
+        enc.want((content, bits, "gl", maps.res), stage.path(name))
+        have[content] = name
+    if rough is None:
+        rough, occ = (have["orm"], "g"), (have["orm"], "r")
+    scales = data_scales(maps)
+    return UsdTextures(
+        base_color=have["base_color"], normal=have["normal"], occlusion=occ, roughness=rough,
+        data=have["data"], width_scale=scales["width"], depth_scale=scales["depth"],
+    )  # fmt: skip
 
 
 def _write_glb(path, stem, uvmesh: UVMesh, maps: CrackMaps, encoded, keys: dict) -> None:

@@ -317,3 +317,49 @@ def stress_attributes(version: str, units: str = "stress") -> dict[str, str | fl
 def layer_of(name: str) -> str:
     """The layer part of a channel name (all but the last dot-separated part; '' if none)."""
     return name.rpartition(".")[0]
+
+
+def run_attributes(version: str, params: Mapping[str, object] | None) -> dict[str, str]:
+    """The standard ``owner`` and ``comments`` attributes naming crackbake and the run.
+
+    Compositing tools show these two (OpenImageIO reads them as ``Copyright`` and
+    ``ImageDescription``): ``owner`` is ``crackbake <version>``; ``comments`` the run as a short
+    command line (mesh file name, preset, method, seed, resolution, target, impacts) and the
+    SHA-256 of the run's effective parameters, the ``params`` object of ``manifest.json``
+    serialised as ``json.dumps(params, sort_keys=True, separators=(",", ":"))``, so a file can be
+    matched to its manifest.  No ``chromaticities``: every channel is data, not colour.
+
+    Parameters
+    ----------
+    version : str
+        crackbake version.
+    params : mapping or None
+        The effective parameters (:func:`crackbake.exchange.manifest.effective_params`); None
+        gives ``comments`` with the version only.
+    """
+    import hashlib
+    from pathlib import PurePath
+
+    out = {"owner": f"crackbake {version}"}
+    if params is None:
+        out["comments"] = f"crackbake {version}"
+        return out
+    words = ["crackbake", PurePath(str(params.get("mesh", "mesh"))).name]
+    for key in ("cracks", "preset", "method", "seed", "res", "target"):
+        value = params.get(key)
+        if value is not None:
+            words += [f"--{key}", PurePath(str(value)).name if key == "cracks" else str(value)]
+    impacts = list(params.get("impacts") or [])
+    for imp in impacts[:3]:
+        pos = imp.get("point") if isinstance(imp, Mapping) else imp
+        if isinstance(pos, list | tuple) and len(pos) == 3:
+            words += ["--impact", ",".join(f"{float(x):.4g}" for x in pos)]
+    if len(impacts) > 3:
+        words.append(f"(+{len(impacts) - 3} impacts)")
+    text = json.dumps(params, sort_keys=True, separators=(",", ":"), default=str)
+    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+    out["comments"] = (
+        f"{' '.join(words)} (crackbake {version}); parameters sha256 {digest}... "
+        "(manifest.json params)"
+    )
+    return out

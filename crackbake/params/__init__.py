@@ -46,7 +46,10 @@ from crackbake.params.presets import (
     preset_names,
 )
 from crackbake.params.ranges import (
+    EXR_COMPRESSION_DEFAULT,
+    EXR_COMPRESSIONS,
     FORMATS,
+    FORMATS_DEFAULT,
     FRAMES_MAX,
     LENGTH_MAX,
     MAX_MEMORY_GIB,
@@ -79,7 +82,10 @@ __all__ = [
     "DECALS_DEFAULTS",
     "DECAL_RES_DEFAULT",
     "DEFAULT_MAX_DISTANCE_FRACTION",
+    "EXR_COMPRESSIONS",
+    "EXR_COMPRESSION_DEFAULT",
     "FORMATS",
+    "FORMATS_DEFAULT",
     "FRAMES_MAX",
     "IMPACT_RADIUS_REL_DEFAULT",
     "LENGTH_MAX",

@@ -11,7 +11,13 @@ import numbers
 
 from crackbake.errors import CrackbakeError
 
-FORMATS = ("exr", "png", "glb", "preview", "stress")
+#: Every ``--formats`` choice.  ``usd`` needs the ``usd`` extra (usd-core), so it is not a default.
+FORMATS = ("exr", "png", "glb", "preview", "stress", "usd")
+#: What a run writes when ``--formats`` is not given.
+FORMATS_DEFAULT = ("exr", "png", "glb", "preview", "stress")
+#: ``--exr-compression``: the lossless OpenEXR methods (a lossy one would change data values).
+EXR_COMPRESSIONS = ("zip", "piz", "zips", "none")
+EXR_COMPRESSION_DEFAULT = "zip"
 #: Most ``--frames`` (the frame number has four digits).
 FRAMES_MAX = 10_000
 UV_MODES = ("auto", "keep", "unwrap")

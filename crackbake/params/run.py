@@ -26,7 +26,10 @@ from crackbake.params.defaults import (
 from crackbake.params.impacts import Impact, check_impact
 from crackbake.params.presets import load_preset
 from crackbake.params.ranges import (
+    EXR_COMPRESSION_DEFAULT,
+    EXR_COMPRESSIONS,
     FORMATS,
+    FORMATS_DEFAULT,
     FRAMES_MAX,
     LENGTH_MAX,
     MAX_MEMORY_GIB,
@@ -81,7 +84,8 @@ class RunParams:
         Random seed.
     formats : tuple of str
         Subset of ``exr``, ``png``, ``glb``, ``preview`` (a shaded picture, ``preview.png``) and
-        ``stress`` (``<stem>_stress.exr``, the solver's stress fields; not with ``--cracks``).
+        ``stress`` (``<stem>_stress.exr``, the solver's stress fields; not with ``--cracks``),
+        and ``usd`` (``<stem>.usda`` with its material; needs usd-core, not a default).
     decal : float or None
         Decal width = height, mesh units: one projected decal per impact (needs ``impacts``).
     decal_res : int or None
@@ -92,6 +96,8 @@ class RunParams:
         Growth frames ``<stem>_growth_NNNN.png`` (2..:data:`FRAMES_MAX`); ``None``: none.
     float32 : bool
         Write every EXR channel as 32-bit float.
+    exr_compression : str
+        Lossless compression of the EXR files, one of :data:`EXR_COMPRESSIONS`.
     target : str
         Engine profile deciding the PNG set: one of :data:`TARGETS`.
     normal_y : str or None
@@ -153,12 +159,13 @@ class RunParams:
     profile: float = PROFILE_DEFAULT
     min_px: float = MIN_PX_DEFAULT
     seed: int = SEED_DEFAULT
-    formats: tuple[str, ...] = FORMATS
+    formats: tuple[str, ...] = FORMATS_DEFAULT
     stress_res: int | None = None
     frames: int | None = None
     decal: float | None = None
     decal_res: int | None = None
     float32: bool = False
+    exr_compression: str = EXR_COMPRESSION_DEFAULT
     target: str = TARGET_DEFAULT
     normal_y: str | None = None
     up: str | None = None
@@ -239,6 +246,15 @@ class RunParams:
         if bad:
             raise CrackbakeError(
                 f"--formats: unknown format '{bad[0]}'; use a subset of {','.join(FORMATS)}"
+            )
+        if "usd" in self.formats:
+            from crackbake.exchange.usd import require_pxr
+
+            require_pxr()  # now, not after the solver
+        if self.exr_compression not in EXR_COMPRESSIONS:
+            raise CrackbakeError(
+                f"--exr-compression '{self.exr_compression}' is unknown or lossy; use one of "
+                f"{', '.join(EXR_COMPRESSIONS)}"
             )
         if self.target not in TARGETS:
             raise CrackbakeError(

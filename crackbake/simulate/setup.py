@@ -117,6 +117,7 @@ def sidecar_params(effective: dict) -> dict:
         "out",
         "formats",
         "float32",
+        "exr_compression",
         "unwrap_timeout",
         "max_memory",
         "cache",
