@@ -234,7 +234,8 @@ def test_old_layout_is_invisible_to_blender(tmp_path):
 
 @pytest.fixture(scope="module")
 def run_exrs(tmp_path_factory):
-    """Both EXRs of a real run (solve, bake with tangents, stress bake) on a small plate."""
+    """Both EXRs of a real run (solve, bake with tangents, stress bake) on a small plate,
+    PIZ-compressed (the values must still come back bit-exact)."""
     from crackbake.params import Impact, RunParams
     from crackbake.pipeline import run
     from crackbake.precompile import plate_obj
@@ -244,8 +245,10 @@ def run_exrs(tmp_path_factory):
     plate_obj(mesh)
     out = folder / "out"
     run(RunParams(mesh=mesh, preset="glass", impacts=(Impact((0.5, 0.5, 0.0), 0.3),),
-                  res=96, stress_res=64, sim_faces=3000, formats=("exr", "stress"), out=out))
-    return {"crack": out / "plate_cracks.exr", "stress": out / "plate_stress.exr"}
+                  res=96, stress_res=64, sim_faces=3000, formats=("exr", "stress"), out=out,
+                  exr_compression="piz"))
+    return {"crack": out / "plate_cracks.exr", "stress": out / "plate_stress.exr",
+            "manifest": out / "manifest.json"}
 
 
 def _layout_of(kind):
@@ -280,3 +283,34 @@ def test_every_exr_a_run_writes_through_blender(run_exrs, kind, tmp_path):
     for info in got["passes"]:
         key = info["pass"] if kind == "crack" else f"{info['layer']}.{info['pass']}"
         _check_blender_pass(info, layers[key], want)
+
+
+@pytest.mark.parametrize("kind", ["crack", "stress"])
+def test_run_exrs_name_crackbake_and_the_run(run_exrs, kind):
+    """--exr-compression reaches both files; the standard owner and comments attributes (what
+    OpenImageIO calls Copyright and ImageDescription) name crackbake, the run's options and the
+    hash of the manifest's parameters; data-only files carry no chromaticities."""
+    import hashlib
+
+    from crackbake import __version__
+
+    spec = oiio.ImageInput.open(str(run_exrs[kind])).spec()
+    assert spec.getattribute("compression") == "piz"
+    assert spec.getattribute("Copyright") == f"crackbake {__version__}"
+    comments = spec.getattribute("ImageDescription")
+    params = json.loads(run_exrs["manifest"].read_text())["params"]
+    digest = hashlib.sha256(json.dumps(params, sort_keys=True, separators=(",", ":")).encode())
+    assert comments.startswith("crackbake plate.obj --preset glass --method iben --seed 0 --res 96")
+    assert "--impact 0.5,0.5,0" in comments and f"sha256 {digest.hexdigest()[:16]}" in comments
+    names = {a.name.lower() for a in spec.extra_attribs}
+    assert not {n for n in names if "chromaticities" in n}
+    _, header = read_exr(run_exrs[kind])
+    assert "chromaticities" not in header and header["owner"] == f"crackbake {__version__}"
+
+
+def test_exr_compression_is_lossless_only():
+    from crackbake.params import RunParams
+
+    assert RunParams(mesh="x.obj").exr_compression == "zip"  # the default before the option
+    with pytest.raises(CrackbakeError, match=r"--exr-compression 'dwaa' is unknown or lossy"):
+        RunParams(mesh="x.obj", exr_compression="dwaa").validate()
