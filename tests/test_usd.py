@@ -237,3 +237,26 @@ def test_missing_pxr_is_one_clear_error(monkeypatch):
     with pytest.raises(CrackbakeError, match=r"usd-core.*or drop usd from --formats"):
         RunParams(mesh="x.obj", formats=("png", "usd")).validate()
     RunParams(mesh="x.obj").validate()  # not a default format: runs without USD are untouched
+
+
+@pytest.mark.reference
+@pytest.mark.parametrize("up", ["y", "z"])
+def test_blender_imports_the_material_and_the_up_axis(tmp_path, up):
+    """Blender's USD importer binds each texture to the right Principled BSDF input in the
+    right colour space, reads the st UVs, and stands a Y-up and a Z-up layer the same way up
+    (Blender is Z-up: the plate lies in the mesh's z = 0 plane)."""
+    from tests.blender_runner import run_blender
+
+    out, uvm, _ = _write(tmp_path, up=up, name=up)
+    got = run_blender("import_usd.py", out / "rock.usda")
+    bound = {k: (v["image"].rsplit("/", 1)[-1], v["colorspace"], v["via"])
+             for k, v in got["bound"].items()}  # fmt: skip
+    assert bound["Base Color"] == ("rock_basecolor.png", "sRGB", [])
+    assert bound["Normal"] == ("rock_normal.png", "Non-Color", ["NORMAL_MAP.Normal"])
+    assert bound["Roughness"] == ("rock_orm.png", "Non-Color", ["SEPARATE_COLOR.Green"])
+    assert got["uv_maps"] == ["st"] and got["faces"] == len(uvm.faces)
+    assert all(got["images_found"].values())
+    lo, hi = (np.asarray(c) for c in got["bbox"])
+    flat = {"y": 1, "z": 2}[up]  # Blender axis the plate's normal (mesh +z) ends on
+    extent = hi - lo
+    assert extent[flat] < 1e-6 and (np.delete(extent, flat) > 0.99).all()
