@@ -72,6 +72,9 @@ def test_mesh_reads_back_welded_with_face_varying_uvs(tmp_path):
     assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
     assert stage.HasAuthoredMetadata("metersPerUnit") and stage.HasAuthoredMetadata("upAxis")
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/rock/mesh"))
+    # the arrays live in the binary geometry layer the text layer references
+    assert [s.layer.identifier.rsplit("/", 1)[-1] for s in mesh.GetPrim().GetPrimStack()] == [
+        "rock.usda", "rock_mesh.usdc"]
     points = np.asarray(mesh.GetPointsAttr().Get())
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
     fvi = np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)

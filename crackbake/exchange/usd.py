@@ -1,12 +1,14 @@
 """USD (``<stem>.usda``): the output mesh with a bound UsdPreviewSurface and MaterialX material.
 
-Written with Pixar's ``pxr`` (the ``usd-core`` wheel, the ``usd`` extra).  The layer holds:
+Written with Pixar's ``pxr`` (the ``usd-core`` wheel, the ``usd`` extra).  The stage holds:
 
-* ``/<stem>`` (Xform, ``kind = component``, the ``defaultPrim``) with the mesh ``/<stem>/mesh``:
-  the asset's welded points (one per input vertex the faces use), its triangles, and
-  face-varying indexed primvars ``st`` (the baked UVs, ``v`` up), ``normals`` and
-  ``tangents`` (float4, MikkTSpace ``xyz`` + bitangent sign ``w``, as the GLB's TANGENT).
-  ``subdivisionScheme = "none"``: the triangles are the surface the maps were baked on.
+* ``/<stem>`` (Xform, ``kind = component``, the ``defaultPrim``) with the mesh ``/<stem>/mesh``,
+  whose arrays are referenced from the binary layer ``<stem>_mesh.usdc`` beside it (as text a
+  big mesh is slow and large to write): the asset's welded points (one per input vertex the
+  faces use), its triangles, and face-varying indexed primvars ``st`` (the baked UVs, ``v``
+  up), ``normals`` and ``tangents`` (float4, MikkTSpace ``xyz`` + bitangent sign ``w``, as
+  the GLB's TANGENT).  ``subdivisionScheme = "none"``: the triangles are the surface the maps
+  were baked on.
 * ``/<stem>/Looks/crack_material``, bound with ``MaterialBindingAPI``:
 
   - ``outputs:surface``: a ``UsdPreviewSurface`` with diffuseColor from the base-colour PNG
@@ -122,8 +124,13 @@ def write_usd(
     up: np.ndarray = (0.0, 1.0, 0.0),
     meters_per_unit: float = 1.0,
     doc: str = "",
-) -> None:
-    """Write ``uvmesh`` and its material as a USD text layer.
+) -> str:
+    """Write ``uvmesh`` and its material as a USD text layer and a binary geometry layer.
+
+    The text layer ``path`` holds the stage metadata, the prims, the material and its binding;
+    the mesh's arrays go into ``<path stem>_mesh.usdc`` beside it, referenced by the mesh prim
+    (as text a 1M-face mesh took 14 s and 166 MB; as crate 1.3 s and 42 MB,
+    ``benchmarks/bench_usd.py``).  Opening ``path`` composes both.
 
     Parameters
     ----------
@@ -141,22 +148,38 @@ def write_usd(
         The mesh's up axis: ``+Y`` or ``+Z`` become ``upAxis``; any other axis is rotated to
         +Y by the root prim's transform.
     meters_per_unit : float
-        Stage ``metersPerUnit``.
+        Stage ``metersPerUnit`` (of both layers).
     doc : str
         The layer's ``doc`` string.
+
+    Returns
+    -------
+    str
+        The geometry layer's file name.
     """
     require_pxr()
     from pxr import Kind, Sdf, Tf, Usd, UsdGeom, UsdShade
 
+    path = os.fspath(path)
     root_name = Tf.MakeValidIdentifier(name) or "crackbake"
-    layer = Sdf.Layer.CreateAnonymous(".usda")
-    stage = Usd.Stage.Open(layer)
+    geometry = os.path.splitext(os.path.basename(path))[0] + "_mesh.usdc"
     axis, rotation = up_transform(np.asarray(up, np.float64))
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if axis == "Y" else UsdGeom.Tokens.z)
-    UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
+
+    def new_stage(ext: str):
+        layer = Sdf.Layer.CreateAnonymous(ext)
+        stage = Usd.Stage.Open(layer)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if axis == "Y" else UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
+        return layer, stage
+
+    geo_layer, geo_stage = new_stage(".usdc")
+    mesh = _define_mesh(geo_stage, Sdf.Path("/mesh"), uvmesh)
+    geo_stage.SetDefaultPrim(mesh.GetPrim())
+    _export(geo_layer, os.path.join(os.path.dirname(path), geometry))
+
+    layer, stage = new_stage(".usda")
     if doc:
         layer.documentation = doc
-
     root = UsdGeom.Xform.Define(stage, Sdf.Path(f"/{root_name}"))
     Usd.ModelAPI(root.GetPrim()).SetKind(Kind.Tokens.component)
     stage.SetDefaultPrim(root.GetPrim())
@@ -166,13 +189,25 @@ def write_usd(
         m = np.eye(4)
         m[:3, :3] = rotation
         root.AddTransformOp().Set(Gf.Matrix4d(m.tolist()))
-
-    mesh = _define_mesh(stage, root.GetPath().AppendChild("mesh"), uvmesh)
+    # The prim is defined here (its type readable without the geometry layer); its arrays come
+    # from the reference, added to the layer once no stage composes it: an anonymous layer
+    # cannot resolve the relative path, and the stage would warn that it tried.
+    mesh_prim = UsdGeom.Mesh.Define(stage, root.GetPath().AppendChild("mesh")).GetPrim()
     material = _define_material(stage, root.GetPath().AppendPath(Sdf.Path("Looks/crack_material")),
                                 textures)  # fmt: skip
-    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+    UsdShade.MaterialBindingAPI.Apply(mesh_prim).Bind(material)
+    mesh_path = mesh_prim.GetPath()
+    del mesh_prim, material, root, stage
+    layer.GetPrimAtPath(mesh_path).referenceList.Prepend(Sdf.Reference(f"./{geometry}"))
+    _export(layer, path)
+    return geometry
+
+
+def _export(layer, path: str) -> None:
+    from pxr import Tf
+
     try:
-        ok = layer.Export(os.fspath(path))
+        ok = layer.Export(path)
     except Tf.ErrorException as exc:
         ok, why = False, str(exc).strip().splitlines()[-1]
     else:
