@@ -263,3 +263,30 @@ def test_blender_imports_the_material_and_the_up_axis(tmp_path, up):
     flat = {"y": 1, "z": 2}[up]  # Blender axis the plate's normal (mesh +z) ends on
     extent = hi - lo
     assert extent[flat] < 1e-6 and (np.delete(extent, flat) > 0.99).all()
+
+
+def test_usdz_packs_the_preview_surface_and_its_textures(tmp_path):
+    """The package passes the usdz validators (what usdchecker --arkit runs); it holds one
+    binary root layer and the three textures the UsdPreviewSurface reads, no MaterialX (ARKit
+    reads no other shader) and no leftover source layers beside it."""
+    import zipfile
+
+    from pxr import UsdValidation as V
+
+    out, uvm, _ = _write(tmp_path, formats=("usd", "usdz"))
+    package = out / "rock.usdz"
+    names = zipfile.ZipFile(package).namelist()
+    assert names[0] == "rock.usdc" and sorted(names[1:]) == [
+        "rock_basecolor.png", "rock_normal.png", "rock_orm.png"]  # fmt: skip
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]
+    stage = Usd.Stage.Open(str(package))
+    reg = V.ValidationRegistry()
+    names = [m.name for m in reg.GetAllValidatorMetadata()]
+    errors = V.ValidationContext(reg.GetOrLoadValidatorsByName(names)).Validate(stage)
+    assert [f"{e.GetName()}: {e.GetMessage()}" for e in errors] == []
+    shaders = {UsdShade.Shader(p).GetShaderId() for p in stage.Traverse() if p.IsA(UsdShade.Shader)}
+    assert shaders == {"UsdPreviewSurface", "UsdUVTexture", "UsdPrimvarReader_float2"}
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/rock/mesh"))
+    assert len(mesh.GetFaceVertexCountsAttr().Get()) == len(uvm.faces)
+    material, _ = UsdShade.MaterialBindingAPI(mesh.GetPrim()).ComputeBoundMaterial()
+    assert material.ComputeSurfaceSource()[0].GetShaderId() == "UsdPreviewSurface"

@@ -285,7 +285,8 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     show_default=True,
     callback=_split_formats,
     help="Which outputs to write (cracks.json, cracks.obj and manifest.json always are); "
-    "also usd (<stem>.usda with its material; needs the usd extra).",
+    "also usd (<stem>.usda with its material) and usdz (AR Quick Look); both need the usd "
+    "extra.",
 )
 @click.option(
     "--decal",

@@ -45,7 +45,7 @@ from crackbake.exchange.targets import (
     normal_convention,
     pack,
 )
-from crackbake.exchange.usd import UsdTextures, write_usd
+from crackbake.exchange.usd import UsdTextures, write_usd, write_usdz
 from crackbake.io.mesh import Mesh
 from crackbake.io.obj_lines import write_obj
 from crackbake.io.sidecar import write_sidecar
@@ -192,7 +192,7 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, ef
     formats = params.formats
     texture = None
     exr = {"compression": params.exr_compression, "run": run_attributes(__version__, effective)}
-    if mesh.source and {"png", "glb", "preview", "usd"} & set(formats):
+    if mesh.source and {"png", "glb", "preview", "usd", "usdz"} & set(formats):
         texture = base_color_texture(mesh.source, maps.res, params.allow_outside_textures)
     with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
         jobs: list[Future] = []
@@ -217,7 +217,7 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, ef
             size = min(maps.res, GLB_TEXTURE_MAX)
             glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal", "orm")}
         usd_textures = None
-        if "usd" in formats:
+        if {"usd", "usdz"} & set(formats):
             usd_textures = _usd_textures(enc, stage, stem, params, maps)
         encoded = enc.start(set(glb_keys.values()))
         jobs.extend(encoded.values())
@@ -230,10 +230,14 @@ def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, ef
             if glb_keys:
                 _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, encoded, glb_keys)
             if usd_textures is not None:
-                write_usd(
-                    stage.path(f"{stem}.usda"), stem, uvmesh, usd_textures,
-                    up=up_vector(params.up, mesh), doc=f"crackbake {__version__}: {stem}",
-                )  # fmt: skip
+                usd_args = (stem, uvmesh, usd_textures, up_vector(params.up, mesh))
+                doc = f"crackbake {__version__}: {stem}"
+                if "usd" in formats:
+                    write_usd(stage.path(f"{stem}.usda"), *usd_args, doc=doc)
+                if "usdz" in formats:
+                    for future in encoded.values():  # the package copies the textures in
+                        future.result()
+                    write_usdz(stage.path(f"{stem}.usdz"), *usd_args, doc=doc)
         finally:
             for job in jobs:  # every job ends before the stage can be committed or discarded
                 job.exception()

@@ -40,14 +40,15 @@ PathLike = str | os.PathLike
 INSTALL_HINT = "pip install 'crackbake[usd]' (the usd-core package)"
 
 
-def require_pxr() -> None:
-    """Raise a one-line :class:`CrackbakeError` when ``pxr`` (usd-core) cannot be imported."""
+def require_pxr(fmt: str = "usd") -> None:
+    """Raise a one-line :class:`CrackbakeError` naming ``--formats fmt`` when ``pxr``
+    (usd-core) cannot be imported."""
     try:
         import pxr.Usd  # noqa: F401
     except ImportError as exc:
         raise CrackbakeError(
-            f"--formats usd needs Pixar's USD Python module (pxr), which is not installed; "
-            f"run {INSTALL_HINT} or drop usd from --formats"
+            f"--formats {fmt} needs Pixar's USD Python module (pxr), which is not installed; "
+            f"run {INSTALL_HINT} or drop {fmt} from --formats"
         ) from exc
 
 
@@ -124,7 +125,9 @@ def write_usd(
     up: np.ndarray = (0.0, 1.0, 0.0),
     meters_per_unit: float = 1.0,
     doc: str = "",
-) -> str:
+    lookdev: bool = True,
+    split: bool = True,
+) -> str | None:
     """Write ``uvmesh`` and its material as a USD text layer and a binary geometry layer.
 
     The text layer ``path`` holds the stage metadata, the prims, the material and its binding;
@@ -151,11 +154,16 @@ def write_usd(
         Stage ``metersPerUnit`` (of both layers).
     doc : str
         The layer's ``doc`` string.
+    lookdev : bool
+        Also the MaterialX network and the crack-map readers (False: the UsdPreviewSurface
+        network alone, what AR Quick Look reads).
+    split : bool
+        The mesh's arrays in the geometry layer (False: in ``path`` itself).
 
     Returns
     -------
-    str
-        The geometry layer's file name.
+    str or None
+        The geometry layer's file name (None when not ``split``).
     """
     require_pxr()
     from pxr import Kind, Sdf, Tf, Usd, UsdGeom, UsdShade
@@ -172,12 +180,13 @@ def write_usd(
         UsdGeom.SetStageMetersPerUnit(stage, float(meters_per_unit))
         return layer, stage
 
-    geo_layer, geo_stage = new_stage(".usdc")
-    mesh = _define_mesh(geo_stage, Sdf.Path("/mesh"), uvmesh)
-    geo_stage.SetDefaultPrim(mesh.GetPrim())
-    _export(geo_layer, os.path.join(os.path.dirname(path), geometry))
+    if split:
+        geo_layer, geo_stage = new_stage(".usdc")
+        mesh = _define_mesh(geo_stage, Sdf.Path("/mesh"), uvmesh)
+        geo_stage.SetDefaultPrim(mesh.GetPrim())
+        _export(geo_layer, os.path.join(os.path.dirname(path), geometry))
 
-    layer, stage = new_stage(".usda")
+    layer, stage = new_stage(os.path.splitext(path)[1] or ".usda")
     if doc:
         layer.documentation = doc
     root = UsdGeom.Xform.Define(stage, Sdf.Path(f"/{root_name}"))
@@ -192,12 +201,18 @@ def write_usd(
     # The prim is defined here (its type readable without the geometry layer); its arrays come
     # from the reference, added to the layer once no stage composes it: an anonymous layer
     # cannot resolve the relative path, and the stage would warn that it tried.
-    mesh_prim = UsdGeom.Mesh.Define(stage, root.GetPath().AppendChild("mesh")).GetPrim()
+    mesh_path = root.GetPath().AppendChild("mesh")
+    if split:
+        mesh_prim = UsdGeom.Mesh.Define(stage, mesh_path).GetPrim()
+    else:
+        mesh_prim = _define_mesh(stage, mesh_path, uvmesh).GetPrim()
     material = _define_material(stage, root.GetPath().AppendPath(Sdf.Path("Looks/crack_material")),
-                                textures)  # fmt: skip
+                                textures, lookdev)  # fmt: skip
     UsdShade.MaterialBindingAPI.Apply(mesh_prim).Bind(material)
-    mesh_path = mesh_prim.GetPath()
     del mesh_prim, material, root, stage
+    if not split:
+        _export(layer, path)
+        return None
     layer.GetPrimAtPath(mesh_path).referenceList.Prepend(Sdf.Reference(f"./{geometry}"))
     _export(layer, path)
     return geometry
@@ -265,7 +280,7 @@ def _asset(name: str):
     return Sdf.AssetPath(f"./{name}")
 
 
-def _define_material(stage, path, tex: UsdTextures):
+def _define_material(stage, path, tex: UsdTextures, lookdev: bool = True):
     from pxr import Sdf, UsdShade
 
     T = Sdf.ValueTypeNames
@@ -310,6 +325,8 @@ def _define_material(stage, path, tex: UsdTextures):
         for slot, channel in slots:
             surface.CreateInput(slot, T.Float).ConnectToSource(outs[channel])
     material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+    if not lookdev:
+        return material
 
     # --- crack maps for look-dev (no surface reads them) -----------------------------------
     for name, channel, scale in (
@@ -369,3 +386,45 @@ def _materialx(material, shader, tex: UsdTextures) -> None:
     )
     out = surf.CreateOutput("out", T.Token)
     material.CreateSurfaceOutput("mtlx").ConnectToSource(out)
+
+
+def write_usdz(
+    path: PathLike,
+    name: str,
+    uvmesh,
+    textures: UsdTextures,
+    up: np.ndarray = (0.0, 1.0, 0.0),
+    meters_per_unit: float = 1.0,
+    doc: str = "",
+) -> None:
+    """Write a ``.usdz`` package for AR Quick Look: the stage flattened into one binary layer
+    with its textures, by ``UsdUtils.CreateNewARKitUsdzPackage``.
+
+    The material is the UsdPreviewSurface network alone (ARKit reads no other shader; the
+    MaterialX network and the crack readers stay in the ``.usda``).  The textures must already
+    be written in ``path``'s folder.  Parameters as :func:`write_usd`.
+    """
+    require_pxr()
+    from pxr import Tf, UsdUtils
+
+    path = os.fspath(path)
+    # One binary layer, the mesh inline, beside the textures (their paths are relative): the
+    # package's root layer, named after it; removed once packed.
+    source = os.path.splitext(path)[0] + ".usdc"
+    try:
+        write_usd(source, name, uvmesh, textures, up, meters_per_unit, doc, lookdev=False,
+                  split=False)  # fmt: skip
+        try:
+            ok = UsdUtils.CreateNewARKitUsdzPackage(source, path)
+        except Tf.ErrorException as exc:
+            ok = False
+            why = str(exc).strip().splitlines()[-1]
+        else:
+            why = "the USD library refused it"
+        if not ok:
+            raise CrackbakeError(
+                f"cannot write USDZ '{path}': {why}; check the folder is writable and has space"
+            )
+    finally:
+        if os.path.exists(source):
+            os.remove(source)

@@ -11,8 +11,9 @@ import numbers
 
 from crackbake.errors import CrackbakeError
 
-#: Every ``--formats`` choice.  ``usd`` needs the ``usd`` extra (usd-core), so it is not a default.
-FORMATS = ("exr", "png", "glb", "preview", "stress", "usd")
+#: Every ``--formats`` choice.  ``usd`` and ``usdz`` need the ``usd`` extra (usd-core), so they
+#: are not defaults.
+FORMATS = ("exr", "png", "glb", "preview", "stress", "usd", "usdz")
 #: What a run writes when ``--formats`` is not given.
 FORMATS_DEFAULT = ("exr", "png", "glb", "preview", "stress")
 #: ``--exr-compression``: the lossless OpenEXR methods (a lossy one would change data values).

@@ -85,7 +85,8 @@ class RunParams:
     formats : tuple of str
         Subset of ``exr``, ``png``, ``glb``, ``preview`` (a shaded picture, ``preview.png``) and
         ``stress`` (``<stem>_stress.exr``, the solver's stress fields; not with ``--cracks``),
-        and ``usd`` (``<stem>.usda`` with its material; needs usd-core, not a default).
+        ``usd`` (``<stem>.usda`` with its material) and ``usdz`` (``<stem>.usdz`` for AR Quick
+        Look); both need usd-core and are not defaults.
     decal : float or None
         Decal width = height, mesh units: one projected decal per impact (needs ``impacts``).
     decal_res : int or None
@@ -247,10 +248,11 @@ class RunParams:
             raise CrackbakeError(
                 f"--formats: unknown format '{bad[0]}'; use a subset of {','.join(FORMATS)}"
             )
-        if "usd" in self.formats:
-            from crackbake.exchange.usd import require_pxr
+        for fmt in ("usd", "usdz"):
+            if fmt in self.formats:
+                from crackbake.exchange.usd import require_pxr
 
-            require_pxr()  # now, not after the solver
+                require_pxr(fmt)  # now, not after the solver
         if self.exr_compression not in EXR_COMPRESSIONS:
             raise CrackbakeError(
                 f"--exr-compression '{self.exr_compression}' is unknown or lossy; use one of "
