@@ -290,3 +290,31 @@ def test_usdz_packs_the_preview_surface_and_its_textures(tmp_path):
     assert len(mesh.GetFaceVertexCountsAttr().Get()) == len(uvm.faces)
     material, _ = UsdShade.MaterialBindingAPI(mesh.GetPrim()).ComputeBoundMaterial()
     assert material.ComputeSurfaceSource()[0].GetShaderId() == "UsdPreviewSurface"
+
+
+def test_materialx_network_matches_the_standard_library(tmp_path):
+    """Every ``ND_`` shader of the MaterialX network is a node definition of MaterialX's own
+    standard library, with each authored input and output named and typed as it declares (the
+    check usd-core's registry cannot make: it ships without MaterialX)."""
+    mx = pytest.importorskip("MaterialX", reason="the MaterialX package is not installed")
+    lib = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
+    usd_type = {"float": "float", "integer": "int", "string": "string", "filename": "asset",
+                "vector2": "float2", "vector3": "float3", "color3": "color3f",
+                "surfaceshader": "token"}  # fmt: skip
+
+    out, _, _ = _write(tmp_path)
+    stage = _open(out / "rock.usda")
+    shaders = [UsdShade.Shader(p) for p in stage.Traverse() if p.IsA(UsdShade.Shader)]
+    mtlx = [s for s in shaders if s.GetShaderId().startswith("ND_")]
+    assert len(mtlx) == 7
+    for shader in mtlx:
+        nodedef = lib.getNodeDef(shader.GetShaderId())
+        assert nodedef is not None, shader.GetShaderId()
+        for port, declared in ((p, nodedef.getActiveInput(p.GetBaseName()))
+                               for p in shader.GetInputs()):  # fmt: skip
+            assert declared is not None, f"{shader.GetPath()} {port.GetBaseName()}"
+            assert str(port.GetTypeName()) == usd_type[declared.getType()], port.GetBaseName()
+        for port in shader.GetOutputs():
+            declared = nodedef.getActiveOutput(port.GetBaseName())
+            assert declared is not None and str(port.GetTypeName()) == usd_type[declared.getType()]
