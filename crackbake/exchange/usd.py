@@ -96,7 +96,7 @@ def welded(uvmesh) -> tuple[np.ndarray, np.ndarray]:
     face_points : (F, 3) int64
         Point of each face corner (the corners of ``uvmesh.faces``).
     """
-    ids, first, inverse = np.unique(
+    _, first, inverse = np.unique(
         np.asarray(uvmesh.vertex_map), return_index=True, return_inverse=True
     )
     points = np.asarray(uvmesh.vertices, np.float64)[first]
