@@ -271,7 +271,7 @@ def test_no_star_names_only_the_starless_impact(tmp_path):
 def _shape(path: Path, name: str) -> tuple[Path, np.ndarray]:
     """A generated shape and an impact point on it.
 
-    lobe: a flat ellipsoid 2 x 0.6 x 0.12 (an ear), hit on its face 0.05 from the tip; corner:
+    lobe: a flat ellipsoid 2 x 0.6 x 0.12 (an ear), hit on its face 0.2 from the tip; corner:
     a 1 x 1 x 0.05 plate hit on its top corner; plate: a 2 x 2 x 0.05 plate hit in the middle
     of its top; sphere: radius 1; finger: a capsule of radius 0.1, 3 between its pole centres,
     hit on its top pole.
@@ -279,7 +279,7 @@ def _shape(path: Path, name: str) -> tuple[Path, np.ndarray]:
     if name == "lobe":
         t = trimesh.creation.icosphere(subdivisions=4)
         t.apply_scale((1.0, 0.3, 0.06))
-        point = np.array([0.95, 0.0, 0.06 * np.sqrt(1 - 0.95**2)])
+        point = np.array([0.8, 0.0, 0.06 * np.sqrt(1 - 0.8**2)])
     elif name == "corner":
         t, point = trimesh.creation.box(extents=(1.0, 1.0, 0.05)), np.array([0.5, 0.5, 0.025])
     elif name == "plate":

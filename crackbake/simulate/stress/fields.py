@@ -355,7 +355,7 @@ def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray
         warnings.warn(
             f"the impact at ({at}) wraps round the surface: {wraps}, so its cracks will likely "
             f"grow as a web of cells, not a star; give a smaller radius (--impact {xyz}:{r:.3g} "
-            f"{'fits it' if share < BACK_SHARE_MAX else 'wraps least'}) or a point on a broader "
+            f"{'fits it' if share < BACK_SHARE_MAX else 'wraps less'}) or a point on a broader "
             "area",
             CrackbakeWarning,
             stacklevel=4,
@@ -364,8 +364,8 @@ def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray
     if share < BACK_SHARE_MAX:
         said = f"radius {r:.3g} used, whose star fits it ({share:.0%})"
     else:
-        said = (f"radius {r:.3g} used, the least wrapping tried ({share:.0%}): its cracks may "
-                "still grow as a web; a point on a broader area gives a star")
+        said = (f"radius {r:.3g} used, the smallest tried ({share:.0%}, as on a sheet's rim): "
+                "its cracks may still grow as a web; a point on a broader area gives a star")
     warnings.warn(
         f"the impact at ({at}) lies on a thin feature: {wraps}, so a star of the default radius "
         f"{radius:.3g} would wrap round it as a web of cells; {said}; give --impact "
@@ -652,8 +652,10 @@ BACK_SHARE_MAX = 0.15
 #: A default radius is shrunk by steps of this factor until the share falls below
 #: :data:`BACK_SHARE_MAX` (:func:`fitted_radius`) ...
 FIT_STEP = 2.0 ** -0.25
-#: ... down to this share of the default at most.
-FIT_MIN = 0.25
+#: ... down to this share of the default at most.  On a sheet's rim (the bunny's ear, the
+#: teapot's spout) every ball wraps and the share stays high; there half the default radius
+#: grows a fan of 5-8 straight arms, a quarter 2-7 arms on a patch too small to read.
+FIT_MIN = 0.5
 
 
 def back_share(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray, face: int,
@@ -711,9 +713,9 @@ def fitted_radius(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray,
 
     Tries ``radius`` times :data:`FIT_STEP` powers down to :data:`FIT_MIN` (and not below
     ``least``) until the :func:`back_share` falls below :data:`BACK_SHARE_MAX`; where none does
-    (an impact on the very rim of a sheet), the one with the least share.  ``distance``
-    (N,) is the impact's surface distance, right up to ``BACK_BALL_REACH`` of ``radius``'s
-    reach; ``face`` the face holding it; ``normal_min`` as :func:`back_share`'s.
+    (an impact on a sheet's rim), the smallest tried.  ``distance`` (N,) is the impact's
+    surface distance, right up to :data:`BACK_BALL_REACH` of ``radius``'s reach; ``face`` the
+    face holding it; ``normal_min`` as :func:`back_share`'s.
 
     Returns
     -------
@@ -729,17 +731,13 @@ def fitted_radius(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray,
     keep = np.isfinite(d).all(axis=1) & (d.mean(axis=1) <= BACK_BALL_REACH * 0.5 * np.pi * radius)
     keep[face] = True
     sub, at = faces[keep], int(np.count_nonzero(keep[:face]))
-    best = (np.inf, radius)
     share0 = None
     scale = 1.0
     while True:
         r = radius * scale
-        share = back_share(vertices, sub, distance, at, 0.5 * np.pi * r,
-                           normal_min=normal_min)
+        share = back_share(vertices, sub, distance, at, 0.5 * np.pi * r, normal_min=normal_min)
         share0 = share if share0 is None else share0
-        if share < BACK_SHARE_MAX:
-            return r, share, share0
-        best = min(best, (share, -r))
         scale *= FIT_STEP
-        if scale < FIT_MIN * (1 - 1e-9) or radius * scale < least:
-            return -best[1], best[0], share0
+        if (share < BACK_SHARE_MAX or scale < FIT_MIN * (1 - 1e-9)
+                or radius * scale < least):
+            return r, share, share0
