@@ -370,17 +370,28 @@ def test_given_radius_that_wraps_warns(tmp_path):
     assert fits < 0.15 * diag
 
 
+def _far_side_share(network) -> float:
+    """Share of the crack length on the lobe's far side (z < 0; the impact is on z > 0)."""
+    total = far = 0.0
+    for p in polylines(network):
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        total += seg.sum()
+        far += seg[(p[1:, 2] + p[:-1, 2]) < 0].sum()
+    return far / total
+
+
 @pytest.mark.slow
 def test_lobe_tip_grows_a_star(tmp_path):
-    # Glass at a lobe's tip, default radius: the fitted star radiates from the impact (arms at
-    # 0.3 reach, straight along the surface, few concentric links), where the default radius
-    # given as such wraps round the lobe into a web of rings across it.
+    # Glass near a lobe's tip, default radius: the fitted star radiates from the impact (arms at
+    # 0.3 reach, straight along the surface) on the side it was hit, where the default radius
+    # given as such wraps round the tip (measured: 27 % of the crack length on the far side,
+    # fitted 6 %).
     path, point = _shape(tmp_path / "lobe.obj", "lobe")
     diag = load_mesh(path).diagonal
-    web, solved_web = _solve(path, [(point, 0.15 * diag)])
+    web, _ = _solve(path, [(point, 0.15 * diag)])
     star, solved = _solve(path, [(point, None)])
     assert star.impacts[0]["radius"] < 0.15 * diag
-    m_web, m = _measure(web, solved_web, 0, False), _measure(star, solved, 0, False)
+    m = _measure(star, solved, 0, False)
     assert m["arms"] >= 5
     assert m["radial_median"] >= 0.9
-    assert m["tangential"] < m_web["tangential"]
+    assert _far_side_share(star) < 0.1 < 0.5 * _far_side_share(web)
