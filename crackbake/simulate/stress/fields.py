@@ -285,13 +285,15 @@ def _impact_field(
         )
     edge = _edge_at(sim, snapped)
     # An ImpactSource without a radius has the default one: fitted too.
-    fitted = _fit_radius(geo, dist, face, snapped, radius,
-                         True if src.radius is None else src.fit, edge)
+    fitted, wraps = _fit_radius(geo, dist, face, snapped, radius,
+                                True if src.radius is None else src.fit, edge)
     if fitted != radius:
         radius, reach = fitted, 0.5 * np.pi * fitted
         dist, snapped, face = impact_distance(sim, src.point, max_distance=reach)
     nodal = dist[geo.faces]  # (M, 3)
-    _warn_small_piece(geo, nodal, snapped, radius, edge)
+    # A small separate piece wraps too: its own warning says more.
+    if not _warn_small_piece(geo, nodal, snapped, radius, edge) and wraps:
+        warnings.warn(wraps, CrackbakeWarning, stacklevel=3)
     d_face = nodal.mean(axis=1)  # inf when any corner is out of reach
     # Inside the source face the surface is flat, so the straight distance is the geodesic one.
     d_face[face] = np.linalg.norm(geo.centroid[face] - snapped)
@@ -333,34 +335,33 @@ def _impact_field(
 
 
 def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray,
-                radius: float, fit: bool | None, edge: float) -> float:
-    """The radius an impact uses (``ImpactSource.fit``): a default one shrunk to a thin
-    feature its star would wrap round (:func:`fitted_radius`), said in one warning; a given one
-    kept, with a warning when its star wraps (a web of cells, not a star, is likely); one
-    fitted before as it is."""
+                radius: float, fit: bool | None, edge: float) -> tuple[float, str]:
+    """The radius an impact uses (``ImpactSource.fit``) and a warning for the caller, or "".
+
+    A default radius is shrunk to a thin feature its star would wrap round
+    (:func:`fitted_radius`), said in one warning (here); a given one is kept, and the caller
+    warns when its star wraps (a web of cells, not a star, is likely); one fitted before is
+    used as it is.
+    """
     if fit is None:
-        return radius
+        return radius, ""
     # Not below what the sim mesh, refined for a thin feature, resolves (the 0.3-reach circle
     # spanning IMPACT_SHADOW_MIN_EDGES edges of the finer mesh) nor below the edge itself.
     least = max(edge, IMPACT_SHADOW_MIN_EDGES * edge / IMPACT_REFINE_MAX / (0.3 * 0.5 * np.pi))
     r, share, share0 = fitted_radius(geo.vertices, geo.faces, dist, face, radius, least,
                                      1.5 * edge)
     if share0 < BACK_SHARE_MAX:
-        return radius
+        return radius, ""
     at = ", ".join(f"{float(x):.4g}" for x in snapped)
     xyz = at.replace(" ", "")  # as --impact takes it
     wraps = (f"{share0:.0%} of the surface within {BACK_BALL_REACH:g} of its reach faces away "
              "from it (a thin feature or a sharp corner smaller than its star)")
     if not fit:
-        warnings.warn(
+        return radius, (
             f"the impact at ({at}) wraps round the surface: {wraps}, so its cracks will likely "
             f"grow as a web of cells, not a star; give a smaller radius (--impact {xyz}:{r:.3g} "
             f"{'fits it' if share < BACK_SHARE_MAX else 'wraps less'}) or a point on a broader "
-            "area",
-            CrackbakeWarning,
-            stacklevel=4,
-        )
-        return radius
+            "area")
     if share < BACK_SHARE_MAX:
         said = f"radius {r:.3g} used, whose star fits it ({share:.0%})"
     else:
@@ -373,7 +374,7 @@ def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray
         CrackbakeWarning,
         stacklevel=4,
     )
-    return r
+    return r, ""
 
 
 #: An impact whose reachable surface within its reach is under this share of a flat star's
@@ -382,8 +383,9 @@ SMALL_PIECE_SHARE = 0.25
 
 
 def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, radius: float,
-                      edge: float) -> None:
-    """Warn when the surface the impact can reach is a piece too small for its star.
+                      edge: float) -> bool:
+    """Warn when the surface the impact can reach is a piece too small for its star; whether
+    it warned.
 
     ``nodal`` (M, 3) is the impact's geodesic distance at each face's corners (``inf`` past
     the reach or on other pieces).  The piece counts as small when every point it reaches lies
@@ -393,12 +395,12 @@ def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, ra
     reach = 0.5 * np.pi * radius
     finite = np.isfinite(nodal).all(axis=1)
     if not finite.any():
-        return
+        return False
     far = float(nodal[finite].max())
     area = float(geo.area[finite].sum())
     flat = np.pi * reach * reach
     if far >= reach - 2.0 * edge or area >= SMALL_PIECE_SHARE * flat:
-        return
+        return False
     corners = geo.vertices[geo.faces[finite]].reshape(-1, 3)
     size = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
     at = ", ".join(f"{float(x):.4g}" for x in snapped)
@@ -410,6 +412,7 @@ def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, ra
         CrackbakeWarning,
         stacklevel=4,
     )
+    return True
 
 
 def _directional_field(geo: _Geometry, src: DirectionalSource) -> np.ndarray:
