@@ -330,6 +330,7 @@ def solve(
             field = stress_field(sim, mesh, sources, seed=params.seed)
         local = None if relative.get("sim_size_set") else impact_refinement(field, sim)
         if local is not None:
+            sources = _fitted_sources(sources, field)
             # An impact on a thin feature: its star needs a finer sim mesh, round it only (the
             # other impacts' stars keep theirs).
             logger.info("impact(s) on a thin feature: sim edge %.4g -> %s within %s",
@@ -381,6 +382,23 @@ def solve(
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
     return network, jsonable(stats), Solved(sim=sim, field=field, result=result)
+
+
+def _fitted_sources(sources: list, field) -> list:
+    """``sources`` with each impact's radius the one ``field`` used (a default radius fitted
+    to a thin feature): a rebuilt sim mesh keeps the radius the refinement was sized for."""
+    from dataclasses import replace
+
+    from crackbake.simulate.stress import ImpactSource
+
+    out = []
+    used = iter(field.impacts)
+    for s in sources:
+        if isinstance(s, ImpactSource):
+            radius = next(used)["radius"]
+            s = replace(s, radius=radius, fit=None) if s.fit else s
+        out.append(s)
+    return out
 
 
 def _warn_kind(w) -> tuple:

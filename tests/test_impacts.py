@@ -262,3 +262,136 @@ def test_no_star_names_only_the_starless_impact(tmp_path):
     assert len(said) == 1
     assert "at 1 impact(s)" in said[0] and "(0.8, 0.5, 0)" in said[0]
     assert "(0.3, 0.5, 0)" not in said[0]
+
+
+# Thin extremities (issue 18 §3): a default radius larger than the feature wraps the star round
+# it and grows a web of cells; the radius is fitted to the feature (``fields.fitted_radius``).
+
+
+def _shape(path: Path, name: str) -> tuple[Path, np.ndarray]:
+    """A generated shape and an impact point on it.
+
+    lobe: a flat ellipsoid 2 x 0.6 x 0.12 (an ear), hit on its face 0.2 from the tip; corner:
+    a 1 x 1 x 0.05 plate hit on its top corner; plate: a 2 x 2 x 0.05 plate hit in the middle
+    of its top; sphere: radius 1; finger: a capsule of radius 0.1, 3 between its pole centres,
+    hit on its top pole.
+    """
+    if name == "lobe":
+        t = trimesh.creation.icosphere(subdivisions=4)
+        t.apply_scale((1.0, 0.3, 0.06))
+        point = np.array([0.8, 0.0, 0.06 * np.sqrt(1 - 0.8**2)])
+    elif name == "corner":
+        t, point = trimesh.creation.box(extents=(1.0, 1.0, 0.05)), np.array([0.5, 0.5, 0.025])
+    elif name == "plate":
+        t, point = trimesh.creation.box(extents=(2.0, 2.0, 0.05)), np.array([0.0, 0.0, 0.025])
+    elif name == "sphere":
+        t, point = trimesh.creation.icosphere(subdivisions=4), np.array([0.0, 0.0, 1.0])
+    else:
+        t = trimesh.creation.capsule(height=3.0, radius=0.1, count=[48, 48])
+        point = np.array([0.0, 0.0, 1.6])
+    t.export(path)
+    return path, point
+
+
+def _share(path: Path, point: np.ndarray, radius_rel: float = 0.15) -> float:
+    """The back-facing share of an impact of ``radius_rel`` diagonals on a 20k-face sim mesh."""
+    from crackbake.simulate.stress.fields import back_share
+    from crackbake.simulate.stress.geodesic import impact_distance
+
+    mesh = load_mesh(path)
+    sim = build_simmesh(mesh, target_faces=20000)
+    reach = impact_reach(radius_rel * mesh.diagonal)
+    dist, _, face = impact_distance(sim, point, max_distance=reach)
+    return back_share(sim.vertices, sim.faces, dist, face, reach,
+                      normal_min=1.5 * sim.edge_length)
+
+
+@pytest.mark.parametrize("name", ["lobe", "corner", "plate", "sphere", "finger"])
+def test_back_share_tells_thin_features_from_broad_ones(tmp_path, name):
+    # The star of the default radius wraps round a thin lobe's tip or a thin plate's corner
+    # (their far side lies within 0.75 reach: about half the area faces away), not round a
+    # broad plate, a sphere, or a finger hit at its tip (its sides run at 90 degrees).
+    from crackbake.simulate.stress.fields import BACK_SHARE_MAX
+
+    share = _share(*_shape(tmp_path / f"{name}.obj", name))
+    if name in ("lobe", "corner"):
+        assert share > 2 * BACK_SHARE_MAX
+    else:
+        assert share < 0.2 * BACK_SHARE_MAX
+
+
+def _field(path: Path, src) -> tuple:
+    from crackbake.simulate.stress import stress_field
+
+    mesh = load_mesh(path)
+    sim = build_simmesh(mesh, target_faces=20000)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        field = stress_field(sim, mesh, [src])
+    said = [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+    return field, said, mesh.diagonal
+
+
+def test_default_radius_fits_a_thin_lobe(tmp_path):
+    # A default radius (fit) on a lobe's tip is shrunk until its star no longer wraps round the
+    # lobe, said in one line; the same on a sphere is kept, silently.
+    from crackbake.simulate.stress import ImpactSource
+    from crackbake.simulate.stress.fields import BACK_SHARE_MAX, FIT_MIN
+
+    path, point = _shape(tmp_path / "lobe.obj", "lobe")
+    diag = load_mesh(path).diagonal
+    field, said, _ = _field(path, ImpactSource(tuple(point), 0.15 * diag, fit=True))
+    used = field.impacts[0]["radius"]
+    assert FIT_MIN * 0.15 * diag * 0.999 <= used < 0.15 * diag
+    assert _share(path, point, used / diag) < BACK_SHARE_MAX
+    assert len(said) == 1 and "lies on a thin feature" in said[0]
+    assert f"radius {used:.3g} used" in said[0] and "--impact" in said[0]
+    # An ImpactSource without a radius has the default one, fitted too.
+    field_none, _, _ = _field(path, ImpactSource(tuple(point)))
+    assert field_none.impacts[0]["radius"] == pytest.approx(used)
+
+    path, point = _shape(tmp_path / "sphere.obj", "sphere")
+    diag = load_mesh(path).diagonal
+    field, said, _ = _field(path, ImpactSource(tuple(point), 0.15 * diag, fit=True))
+    assert said == [] and field.impacts[0]["radius"] == 0.15 * diag
+
+
+def test_given_radius_that_wraps_warns(tmp_path):
+    # A radius the user chose is kept; when its star wraps round a thin plate's corner the run
+    # says that a web is likely, and which radius fits.
+    from crackbake.simulate.stress import ImpactSource
+
+    path, point = _shape(tmp_path / "corner.obj", "corner")
+    diag = load_mesh(path).diagonal
+    field, said, _ = _field(path, ImpactSource(tuple(point), 0.15 * diag))
+    assert field.impacts[0]["radius"] == 0.15 * diag
+    assert len(said) == 1 and "web of cells" in said[0]
+    fits = float(said[0].split("--impact 0.5,0.5,0.025:")[1].split(" ")[0])
+    assert fits < 0.15 * diag
+
+
+def _far_side_share(network) -> float:
+    """Share of the crack length on the lobe's far side (z < 0; the impact is on z > 0)."""
+    total = far = 0.0
+    for p in polylines(network):
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        total += seg.sum()
+        far += seg[(p[1:, 2] + p[:-1, 2]) < 0].sum()
+    return far / total
+
+
+@pytest.mark.slow
+def test_lobe_tip_grows_a_star(tmp_path):
+    # Glass near a lobe's tip, default radius: the fitted star radiates from the impact (arms at
+    # 0.3 reach, straight along the surface) on the side it was hit, where the default radius
+    # given as such wraps round the tip (measured: 27 % of the crack length on the far side,
+    # fitted 6 %).
+    path, point = _shape(tmp_path / "lobe.obj", "lobe")
+    diag = load_mesh(path).diagonal
+    web, _ = _solve(path, [(point, 0.15 * diag)])
+    star, solved = _solve(path, [(point, None)])
+    assert star.impacts[0]["radius"] < 0.15 * diag
+    m = _measure(star, solved, 0, False)
+    assert m["arms"] >= 5
+    assert m["radial_median"] >= 0.9
+    assert _far_side_share(star) < 0.1 < 0.5 * _far_side_share(web)

@@ -513,5 +513,8 @@ def test_glass_impacts_on_watertight_meshes_do_not_warn(which):
         for radius in (0.1, 0.3, 0.6):
             with warnings.catch_warnings():
                 warnings.simplefilter("error", CrackbakeWarning)
+                # A large radius on a leg or an ear wraps round it (a web is likely): said on
+                # purpose, and not what this test is about.
+                warnings.filterwarnings("ignore", "the impact at .* wraps round the surface")
                 field = stress_field(sim, mesh, [ImpactSource(p, radius=radius)])
             assert np.abs(field.stress).max() > 0

@@ -63,7 +63,9 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
     for imp in params.impacts:
         radius = imp.resolved_radius(
             diagonal, relative.get("impact_radius_rel", IMPACT_RADIUS_REL_DEFAULT))
-        sources.append(ImpactSource(imp.point, radius, imp.strength, hoop=params.hoop))
+        # A radius the user did not give is fitted to a thin feature (issue 18 §3).
+        fit = imp.radius is None and imp.radius_rel is None
+        sources.append(ImpactSource(imp.point, radius, imp.strength, hoop=params.hoop, fit=fit))
     if params.shrink:
         sources.append(ShrinkSource(params.shrink, params.shrink_rate or 0.0))
     for x, y, z, strength in params.directions:

@@ -283,8 +283,17 @@ def _impact_field(
             CrackbakeWarning,
             stacklevel=3,
         )
+    edge = _edge_at(sim, snapped)
+    # An ImpactSource without a radius has the default one: fitted too.
+    fitted, wraps = _fit_radius(geo, dist, face, snapped, radius,
+                                True if src.radius is None else src.fit, edge)
+    if fitted != radius:
+        radius, reach = fitted, 0.5 * np.pi * fitted
+        dist, snapped, face = impact_distance(sim, src.point, max_distance=reach)
     nodal = dist[geo.faces]  # (M, 3)
-    _warn_small_piece(geo, nodal, snapped, radius, _edge_at(sim, snapped))
+    # A small separate piece wraps too: its own warning says more.
+    if not _warn_small_piece(geo, nodal, snapped, radius, edge) and wraps:
+        warnings.warn(wraps, CrackbakeWarning, stacklevel=3)
     d_face = nodal.mean(axis=1)  # inf when any corner is out of reach
     # Inside the source face the surface is flat, so the straight distance is the geodesic one.
     d_face[face] = np.linalg.norm(geo.centroid[face] - snapped)
@@ -322,7 +331,50 @@ def _impact_field(
         "radius": float(radius),
         "strength": float(src.strength),
     }
-    return stress, info, _impact_shadow(geo, dist, radius, _edge_at(sim, snapped))
+    return stress, info, _impact_shadow(geo, dist, radius, edge)
+
+
+def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray,
+                radius: float, fit: bool | None, edge: float) -> tuple[float, str]:
+    """The radius an impact uses (``ImpactSource.fit``) and a warning for the caller, or "".
+
+    A default radius is shrunk to a thin feature its star would wrap round
+    (:func:`fitted_radius`), said in one warning (here); a given one is kept, and the caller
+    warns when its star wraps (a web of cells, not a star, is likely); one fitted before is
+    used as it is.
+    """
+    if fit is None:
+        return radius, ""
+    # Not below what the sim mesh, refined for a thin feature, resolves (the 0.3-reach circle
+    # spanning IMPACT_SHADOW_MIN_EDGES edges of the finer mesh) nor below the edge itself.
+    least = max(edge, IMPACT_SHADOW_MIN_EDGES * edge / IMPACT_REFINE_MAX / (0.3 * 0.5 * np.pi))
+    r, share, share0 = fitted_radius(geo.vertices, geo.faces, dist, face, radius, least,
+                                     1.5 * edge)
+    if share0 < BACK_SHARE_MAX:
+        return radius, ""
+    at = ", ".join(f"{float(x):.4g}" for x in snapped)
+    xyz = at.replace(" ", "")  # as --impact takes it
+    wraps = (f"{share0:.0%} of the surface within {BACK_BALL_REACH:g} of its reach faces away "
+             "from it (a thin feature or a sharp corner smaller than its star)")
+    if not fit:
+        return radius, (
+            f"the impact at ({at}) wraps round the surface: {wraps}, so its cracks will likely "
+            f"grow as a web of cells, not a star; give a smaller radius (--impact {xyz}:{r:.3g} "
+            f"{'fits it' if share < BACK_SHARE_MAX else 'wraps less'}) or a point on a broader "
+            "area")
+    if share < BACK_SHARE_MAX:
+        said = f"radius {r:.3g} used, whose star fits it ({share:.0%})"
+    else:
+        said = (f"radius {r:.3g} used, the smallest tried ({share:.0%}, as on a sheet's rim): "
+                "its cracks may still grow as a web; a point on a broader area gives a star")
+    warnings.warn(
+        f"the impact at ({at}) lies on a thin feature: {wraps}, so a star of the default radius "
+        f"{radius:.3g} would wrap round it as a web of cells; {said}; give --impact "
+        f"{xyz}:RADIUS to choose",
+        CrackbakeWarning,
+        stacklevel=4,
+    )
+    return r, ""
 
 
 #: An impact whose reachable surface within its reach is under this share of a flat star's
@@ -331,8 +383,9 @@ SMALL_PIECE_SHARE = 0.25
 
 
 def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, radius: float,
-                      edge: float) -> None:
-    """Warn when the surface the impact can reach is a piece too small for its star.
+                      edge: float) -> bool:
+    """Warn when the surface the impact can reach is a piece too small for its star; whether
+    it warned.
 
     ``nodal`` (M, 3) is the impact's geodesic distance at each face's corners (``inf`` past
     the reach or on other pieces).  The piece counts as small when every point it reaches lies
@@ -342,12 +395,12 @@ def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, ra
     reach = 0.5 * np.pi * radius
     finite = np.isfinite(nodal).all(axis=1)
     if not finite.any():
-        return
+        return False
     far = float(nodal[finite].max())
     area = float(geo.area[finite].sum())
     flat = np.pi * reach * reach
     if far >= reach - 2.0 * edge or area >= SMALL_PIECE_SHARE * flat:
-        return
+        return False
     corners = geo.vertices[geo.faces[finite]].reshape(-1, 3)
     size = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
     at = ", ".join(f"{float(x):.4g}" for x in snapped)
@@ -359,6 +412,7 @@ def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, ra
         CrackbakeWarning,
         stacklevel=4,
     )
+    return True
 
 
 def _directional_field(geo: _Geometry, src: DirectionalSource) -> np.ndarray:
@@ -581,3 +635,112 @@ def _impact_share(rest: np.ndarray, norms: list[np.ndarray]) -> np.ndarray:
     norm = np.stack(norms)  # (K, M)
     den = norm.sum(axis=0) + np.sqrt(np.einsum("eab,eab->e", rest, rest))
     return np.where(den > 0, norm / np.where(den > 0, den, 1.0), 0.0).astype(np.float32)
+
+
+
+#: The ball round an impact whose back-facing share :func:`back_share` measures, in reaches
+#: of surface (geodesic) distance: a star's radial arms and its rings lie inside it.  A
+#: straight ball would hold both sides of a thin plate hit in its middle.
+BACK_BALL_REACH = 0.75
+#: The impact's own normal is the mean over this ball (reaches, geodesic): one face's normal
+#: is noisy on scans and tilted at a hoof's rim; a wider ball averages a sheet's two sides.
+BACK_NORMAL_REACH = 0.03
+#: A face faces away when the dot of its unit normal with the impact's is below this (turned
+#: over about 96 degrees): a cylinder's side (dot 0: a finger hit at its tip) does not count,
+#: the far side of a lobe, a sheet or a sharp corner does.
+BACK_DOT = -0.1
+#: An impact whose back-facing share reaches this wraps round a feature smaller than its star
+#: and grows a web of cells (issue 18 §3; benchmarks/bench_extremities.py has the table).
+BACK_SHARE_MAX = 0.15
+#: A default radius is shrunk by steps of this factor until the share falls below
+#: :data:`BACK_SHARE_MAX` (:func:`fitted_radius`) ...
+FIT_STEP = 2.0 ** -0.25
+#: ... down to this share of the default at most.  On a sheet's rim (the bunny's ear, the
+#: teapot's spout) every ball wraps and the share stays high; there half the default radius
+#: grows a fan of 5-8 straight arms, a quarter 2-7 arms on a patch too small to read.
+FIT_MIN = 0.5
+
+
+def back_share(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray, face: int,
+               reach: float, ball: float = BACK_BALL_REACH, below: float = BACK_DOT,
+               normal_min: float = 0.0) -> float:
+    """Share of the surface near an impact that faces away from the impact's side.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float64
+    faces : (M, 3) int
+    distance : (N,) float64
+        The impact's surface distance at each node, mesh units (``inf`` where not reached).
+    face : int
+        The face holding the impact.
+    reach : float
+        The impact's reach, mesh units.
+    ball : float
+        Faces whose mean corner distance is at most ``ball * reach`` count.
+    below : float
+        A face faces away when its unit normal's dot with the impact's (the area-weighted
+        mean within :data:`BACK_NORMAL_REACH` reach or ``normal_min``, the larger) is below
+        this.
+    normal_min : float
+        Mesh units: at least the faces round the impact's corner (1.5 sim edges), so that an
+        impact on a box's corner does not take one side face's normal for its own.
+
+    Returns
+    -------
+    float
+        Area share in [0, 1]: 0 on a plate, a gently curved body or a finger hit at its tip,
+        0.2-0.5 where the ball wraps round to the far side of a thin lobe or sheet, or past a
+        sharp corner (the star would wrap round it).
+    """
+    d = distance[faces]
+    d = np.where(np.isfinite(d).all(axis=1), d.mean(axis=1), np.inf)
+    d[face] = 0.0
+    inside = d <= ball * reach
+    tri = vertices[faces[inside]]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # |n| = 2 x area
+    n0 = n[d[inside] <= max(BACK_NORMAL_REACH * reach, normal_min)].sum(axis=0)
+    area = np.linalg.norm(n, axis=1)
+    total = float(area.sum())
+    n0_len = float(np.linalg.norm(n0))
+    if not total > 0 or not n0_len > 0:
+        return 0.0
+    cos = (n @ (n0 / n0_len)) / np.where(area > 0, area, 1.0)
+    return float(area[cos < below].sum() / total)
+
+
+def fitted_radius(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray, face: int,
+                  radius: float, least: float = 0.0,
+                  normal_min: float = 0.0) -> tuple[float, float, float]:
+    """The largest radius up to ``radius`` whose star does not wrap round a thin feature.
+
+    Tries ``radius`` times :data:`FIT_STEP` powers down to :data:`FIT_MIN` (and not below
+    ``least``) until the :func:`back_share` falls below :data:`BACK_SHARE_MAX`; where none does
+    (an impact on a sheet's rim), the smallest tried.  ``distance`` (N,) is the impact's
+    surface distance, right up to :data:`BACK_BALL_REACH` of ``radius``'s reach; ``face`` the
+    face holding it; ``normal_min`` as :func:`back_share`'s.
+
+    Returns
+    -------
+    radius : float
+        Mesh units.
+    share : float
+        Its back-facing share.
+    share0 : float
+        The share at ``radius``.
+    """
+    # Every ball tried lies in the first: measure on its faces only.
+    d = distance[faces]
+    keep = np.isfinite(d).all(axis=1) & (d.mean(axis=1) <= BACK_BALL_REACH * 0.5 * np.pi * radius)
+    keep[face] = True
+    sub, at = faces[keep], int(np.count_nonzero(keep[:face]))
+    share0 = None
+    scale = 1.0
+    while True:
+        r = radius * scale
+        share = back_share(vertices, sub, distance, at, 0.5 * np.pi * r, normal_min=normal_min)
+        share0 = share if share0 is None else share0
+        scale *= FIT_STEP
+        if (share < BACK_SHARE_MAX or scale < FIT_MIN * (1 - 1e-9)
+                or radius * scale < least):
+            return r, share, share0

@@ -61,12 +61,19 @@ class ImpactSource:
         Principal (radial) stress at the impact point is ``2 * strength``.
     hoop : float
         Ratio of hoop (tangential) to radial tension.
+    fit : bool or None
+        True: ``radius`` is a default the user did not choose; on a thin feature (a lobe, a
+        sheet's rim, a sharp corner) it is shrunk until the star no longer wraps round the
+        feature (:func:`crackbake.simulate.stress.fields.fitted_radius`), with a warning.
+        False: a chosen radius, kept, with a warning when its star wraps.  None: a radius
+        fitted before (the same run on a rebuilt sim mesh), used as is.
     """
 
     point: tuple[float, float, float]
     radius: float | None = None
     strength: float = 1.0
     hoop: float = 1.25
+    fit: bool | None = False
 
     def __post_init__(self) -> None:
         _finite_vector(self.point, "impact point")
