@@ -253,3 +253,149 @@ def test_embedded_ray_on_a_pipe_leaves_nothing_running(tmp_path):
     assert doc["ray"]["cpus"] >= 1 and doc["ray"]["start_s"] > 0
     assert {j["numba_threads"] for j in doc["jobs"]} == {str(max(1, len(os.sched_getaffinity(0))
                                                                  // 2))}
+
+
+def _default_signals() -> None:
+    # A shell's background job (``make test &``) ignores SIGINT and its children inherit that;
+    # Ctrl-C must reach the batch as it does from a terminal.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _on_a_terminal() -> None:
+    """In the child: a session of its own whose controlling terminal is its stdin (a pty), so a
+    ^C typed into the pty is SIGINT to its whole foreground process group, Ray's too."""
+    import fcntl
+    import termios
+
+    _default_signals()
+    fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+
+def _wait_for(check, what: str, proc, timeout: float = 240.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        got = check()
+        if got:
+            return got
+        assert proc.poll() is None, f"the batch ended (exit {proc.returncode}) before {what}"
+        time.sleep(0.1)
+    raise AssertionError(f"waited {timeout:.0f} s for {what}")
+
+
+def _interrupted_batch(tmp_path: Path, how: str):
+    """Run a 3-job batch (--workers 1) as a real process, wait until the first job's folder is
+    committed and the second job's staging folder exists, then interrupt it: ``how`` is
+    ``ctrl-c`` (^C typed into its terminal, a pty) or ``sigterm`` (``kill PID``, on a pipe).
+    Returns the exit code, what it printed, the first folder's files when committed."""
+    import subprocess
+    import sys
+
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n"
+        '[[job]]\nmesh = "spot.obj"\npreset = "mud"\nname = "first"\n\n'
+        # slow enough to be caught mid-run: cancelled while its staging folder exists
+        '[[job]]\nmesh = "spot.obj"\npreset = "crackle"\nname = "second"\nres = 2048\n'
+        "sim-faces = 20000\n\n"
+        '[[job]]\nmesh = "spot.obj"\npreset = "glaze"\nname = "third"\n')
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
+    cmd = [sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out", "--workers", "1"]
+    chunks: list[bytes] = []
+    if how == "ctrl-c":
+        import pty
+
+        master, slave = pty.openpty()
+        proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdin=slave, stdout=slave,
+                                stderr=slave, start_new_session=True, preexec_fn=_on_a_terminal)
+        os.close(slave)
+
+        def read() -> None:
+            while True:
+                try:
+                    data = os.read(master, 4096)
+                except OSError:  # the child closed its end
+                    return
+                if not data:
+                    return
+                chunks.append(data)
+    else:
+        proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                preexec_fn=_default_signals)
+
+        def read() -> None:
+            for data in iter(lambda: proc.stdout.read1(4096), b""):
+                chunks.append(data)
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        _wait_for(lambda: (out / "first" / "manifest.json").is_file(), "the first job's folder",
+                  proc)
+        first = _folder(out / "first")  # committed: the folder appears whole, by one rename
+        _wait_for(lambda: any(p.name.startswith(".second.crackbake-staging-")
+                              for p in out.iterdir()), "the second job's staging folder", proc)
+        if how == "ctrl-c":
+            os.write(master, b"\x03")
+        else:
+            proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join(10)
+    if how == "ctrl-c":
+        os.close(master)
+    return rc, b"".join(chunks).decode(errors="replace"), first
+
+
+@pytest.mark.parametrize("how", ["ctrl-c", pytest.param("sigterm", marks=pytest.mark.slow)])
+def test_interrupted_batch(tmp_path, how):
+    """Ctrl-C (or SIGTERM) mid-batch: the running job is cancelled and its staging folder
+    removed, the queued one never starts, the finished folder stays as it was, the summary is
+    written with both marked cancelled, exit 130 (143); the local Ray is shut down."""
+    before = _ray_processes()
+    rc, text, first = _interrupted_batch(tmp_path, how)
+    out = tmp_path / "out"
+    assert rc == (130 if how == "ctrl-c" else 143), text
+    assert _folder(out / "first") == first
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+    assert not (out / "second").exists() and not (out / "third").exists()
+    doc = json.loads((out / "batch.json").read_text())
+    jobs = {j["name"]: j for j in doc["jobs"]}
+    assert [jobs[n]["status"] for n in ("first", "second", "third")] == [
+        "ok", "cancelled", "cancelled"]
+    assert "while running" in jobs["second"]["error"]
+    assert "before it started" in jobs["third"]["error"]
+    assert doc["counts"] == {"ok": 1, "cancelled": 2}
+    assert doc["ray"]["interrupted"] == (signal.SIGINT if how == "ctrl-c" else signal.SIGTERM)
+    import csv
+
+    with open(out / "batch.csv", newline="") as fh:
+        assert [row["status"] for row in csv.DictReader(fh)] == ["ok", "cancelled", "cancelled"]
+    assert (out / "batch_sheet.png").is_file()
+    assert "interrupted (" in text
+    if how == "ctrl-c":  # the terminal showed the live bar
+        assert "batch  [" in text and "1 running" in text and "1/3" in text
+    else:  # a pipe: one line per finished job, no bar
+        assert "[1/1]" not in text and "[1/3] ok     first" in text
+        assert "\r" not in text
+    time.sleep(1.0)  # Ray's daemons exit a moment after the driver
+    assert _ray_processes() <= before
+
+
+def test_worker_imports_no_numba_before_its_job():
+    """A worker unpickles crackbake.batch.run (the task) and the job's RunParams before the job
+    sets NUMBA_NUM_THREADS: none may import numba."""
+    import subprocess
+    import sys
+
+    code = ("import pickle, sys\n"
+            "import crackbake.batch.run, crackbake.batch.progress, crackbake.params\n"
+            "print('numba' in sys.modules)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(SPOT.parents[1])}, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "False"
+
