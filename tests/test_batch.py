@@ -387,7 +387,7 @@ def test_interrupted_batch(tmp_path, how):
 
 def test_worker_imports_no_numba_before_its_job():
     """A worker unpickles crackbake.batch.run (the task) and the job's RunParams before the job
-    sets NUMBA_NUM_THREADS: none may import numba."""
+    sets NUMBA_NUM_THREADS and NUMBA_CACHE_DIR: neither may import numba."""
     import subprocess
     import sys
 
@@ -399,3 +399,83 @@ def test_worker_imports_no_numba_before_its_job():
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "False"
 
+
+def _committed(folder: Path) -> bool:
+    """The folder holds exactly the files its manifest lists, plus the manifest."""
+    manifest = json.loads((folder / "manifest.json").read_text())
+    return sorted(p.name for p in folder.iterdir()) == sorted(
+        [f["name"] for f in manifest["files"]] + ["manifest.json"])
+
+
+@pytest.mark.slow
+def test_two_node_cluster(tmp_path, monkeypatch):
+    """Two Ray nodes of 1 CPU each on this machine (ray.cluster_utils.Cluster) and the batch
+    command as a separate driver with --address: the 2 jobs land one on each node (node ids in
+    batch.json), both folders complete, each worker's numba cache the node-local folder."""
+    import subprocess
+    import sys
+
+    from ray.cluster_utils import Cluster
+
+    from crackbake.batch.numba_cache import node_cache_dir
+
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n[[job]]\nmesh = \"spot.obj\"\npreset = \"mud\"\nseeds = [1, 2]\n")
+    # The nodes' workers import crackbake from this tree; each node's raylet passes on this env.
+    monkeypatch.setenv("PYTHONPATH", str(SPOT.parents[1]))
+    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
+    node = {"num_cpus": 1, "object_store_memory": 80 * 2**20}
+    cluster = Cluster(initialize_head=True, head_node_args={**node, "include_dashboard": False})
+    try:
+        cluster.add_node(**node)
+        cluster.wait_for_nodes()
+        alive = {n.node_id for n in [cluster.head_node, *cluster.worker_nodes]}
+        r = subprocess.run([sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out",
+                            "--address", cluster.address], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=600)
+    finally:
+        cluster.shutdown()
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "out" / "batch.json").read_text())
+    assert doc["ray"]["nodes"] == 2 and doc["ray"]["cpus"] == 2
+    jobs = doc["jobs"]
+    assert [j["status"] for j in jobs] == ["ok", "ok"]
+    assert {j["node"] for j in jobs} == alive and len(alive) == 2
+    for j in jobs:
+        assert _committed(Path(j["folder"]))
+        assert j["numba_cache"] == str(node_cache_dir())
+    assert any(node_cache_dir().rglob("*.nbi"))
+
+
+def test_numba_cache_seeded_per_node(tmp_path):
+    """A package's in-tree numba cache, seeded into a node cache folder, is what numba loads
+    there (nothing recompiled or rewritten); seeding again copies nothing; the user's own
+    NUMBA_CACHE_DIR is left alone."""
+    import subprocess
+    import sys
+
+    from crackbake.batch.numba_cache import seed, use_node_cache
+
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "sub" / "kern.py").write_text(
+        "from numba import njit\n\n@njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
+    run = [sys.executable, "-c", "import sys; sys.path.insert(0, sys.argv[1]); "
+           "from sub.kern import twice; print(twice(21))", str(pkg)]
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    first = subprocess.run(run, env={**env, "NUMBA_DEBUG_CACHE": "1"}, capture_output=True,
+                           text=True, timeout=300)
+    assert first.stdout.strip().endswith("42") and "data saved" in first.stdout, first.stderr
+    node = tmp_path / "node"
+    assert seed(node, pkg) == 2  # the index and one overload's object code
+    assert seed(node, pkg) == 0
+    again = subprocess.run(run, env={**env, "NUMBA_DEBUG_CACHE": "1",
+                                     "NUMBA_CACHE_DIR": str(node)},
+                           capture_output=True, text=True, timeout=300)
+    assert again.stdout.strip().endswith("42")
+    assert "data loaded" in again.stdout and "data saved" not in again.stdout, again.stdout
+    assert str(node) in again.stdout
+    mine = {"NUMBA_CACHE_DIR": str(tmp_path / "mine")}
+    assert use_node_cache(mine) == str(tmp_path / "mine") and mine == {
+        "NUMBA_CACHE_DIR": str(tmp_path / "mine")}

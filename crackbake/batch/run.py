@@ -7,6 +7,10 @@ folder through the output transaction.  Its task declares ``num_cpus`` (and the 
 memory holds.  ``max_calls=1``: the worker process exits after its job, so no GL context, numba
 state or leaked memory passes from one asset to the next.
 
+numba's kernel cache is a folder on each node's own disk, seeded from the package's precompiled
+kernels (:mod:`crackbake.batch.numba_cache`): nodes never write the same cache files over a
+shared file system.
+
 Faults: a worker that dies (SIGKILL, the OOM killer, a lost node) is a system failure Ray
 retries (``max_retries``); the staging folder it left is removed by the retry's output
 transaction.  A job failing on its input (a :class:`CrackbakeError`) returns its one-line error
@@ -64,8 +68,12 @@ def _run_job(params, extra: dict) -> dict:
     # Before numba is imported (a fresh worker has not): its thread pool follows the task's CPUs.
     os.environ["NUMBA_NUM_THREADS"] = str(max(1, int(ray.get_runtime_context()
                                                      .get_assigned_resources().get("CPU", 1))))
+    # ... and its cache is a folder on this node's own disk (crackbake/batch/numba_cache.py).
+    from crackbake.batch.numba_cache import use_node_cache
+
     record = {"node": ray.get_runtime_context().get_node_id(), "host": socket.gethostname(),
-              "pid": os.getpid(), "numba_threads": os.environ.get("NUMBA_NUM_THREADS")}
+              "pid": os.getpid(), "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
+              "numba_cache": use_node_cache()}
     try:
         from crackbake.pipeline import run
 
