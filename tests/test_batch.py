@@ -479,3 +479,44 @@ def test_numba_cache_seeded_per_node(tmp_path):
     mine = {"NUMBA_CACHE_DIR": str(tmp_path / "mine")}
     assert use_node_cache(mine) == str(tmp_path / "mine") and mine == {
         "NUMBA_CACHE_DIR": str(tmp_path / "mine")}
+
+
+def test_contact_sheet_bounded_for_large_batches(tmp_path):
+    """The sheet's size does not grow without bound with the job count (the driver's memory):
+    1,000 jobs get smaller tiles, 5,000 as many tiles as fit, the failed ones first."""
+    from crackbake.batch.summary import MAX_SHEET_PIXELS, contact_sheet
+
+    def records(n, failed=()):
+        return [{"name": f"job{k}", "folder": str(tmp_path / f"job{k}"),
+                 "status": "failed" if k in failed else "ok"} for k in range(n)]
+
+    small = contact_sheet(records(12))
+    assert small.size == (4 * 256, 3 * (256 + 40))
+    big = contact_sheet(records(1000))
+    assert big.width * big.height <= MAX_SHEET_PIXELS * 1.05 and big.width >= 32 * 64
+    huge = contact_sheet(records(5000, failed={4321}))
+    assert huge.width * huge.height <= MAX_SHEET_PIXELS * 1.05
+    # the failed job is the first tile: red label strip under it
+    assert huge.getpixel((2, 64 + 2)) == (190, 40, 40)
+    assert big.getpixel((2, big.height // 32 - 2)) == (40, 140, 60)
+
+
+def test_egl_device_for_the_gpu_ray_assigned():
+    """CUDA_VISIBLE_DEVICES (nvidia-smi's index, PCI bus order) -> the EGL device at the same
+    PCI address, whatever EGL's own order (here software renderers first and the GPUs in
+    reverse)."""
+    from crackbake.batch.gpu import egl_device_for, normalise_pci
+
+    gpus = ["00000000:1A:00.0", "00000000:3B:00.0", "00000000:D8:00.0"]  # nvidia-smi's spelling
+    egl = [None, "0000:d8:00.0", "0000:3b:00.0", None, "0000:1a:00.0"]
+    assert [egl_device_for(str(i), gpus, egl) for i in range(3)] == [4, 2, 1]
+    assert egl_device_for("2,0", gpus, egl) == 1  # one context per job: the first GPU
+    assert egl_device_for(" 1 ", gpus, egl) == 2
+    for none in (None, "", "-1", "NoDevFiles", "GPU-8f2a3c1e-0000-1111-2222-333344445555"):
+        assert egl_device_for(none, gpus, egl) is None
+    assert egl_device_for("1", gpus, [None, "0000:1a:00.0"]) is None  # no EGL on that GPU
+    with pytest.raises(ValueError, match="GPU 3 but the node has 3"):
+        egl_device_for("3", gpus, egl)
+    assert normalise_pci("3b:00.0") == "0000:3b:00.0"
+    with pytest.raises(ValueError, match="not a PCI address"):
+        normalise_pci("card1")
