@@ -520,3 +520,33 @@ def test_egl_device_for_the_gpu_ray_assigned():
     assert normalise_pci("3b:00.0") == "0000:3b:00.0"
     with pytest.raises(ValueError, match="not a PCI address"):
         normalise_pci("card1")
+
+
+def _library_hashes(out: Path) -> dict[str, str]:
+    return {f["name"]: f["sha256"]
+            for f in json.loads((out / "manifest.json").read_text())["files"]}
+
+
+def test_decals_on_ray_equal_the_local_library(tmp_path, local_ray):
+    """``crackbake decals --address`` (a separate driver on the running local Ray): the variants
+    bake as tasks in fresh workers, one variant per task here, and every file equals the library
+    baked in one process."""
+    import subprocess
+    import sys
+
+    args = ["decals", "--preset", "glass", "-n", "3", "--size", "0.5", "--res", "64",
+            "--sim-faces", "5000", "--seed", "5"]
+    env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
+    address = local_ray.get_runtime_context().gcs_address
+    on_ray = subprocess.run([sys.executable, "-m", "crackbake", *args, "--address", address,
+                             "-o", str(tmp_path / "ray")], capture_output=True, text=True,
+                            env=env, timeout=600)
+    assert on_ray.returncode == 0, on_ray.stderr
+    assert "3 glass decals in a" in on_ray.stderr
+    here = subprocess.run([sys.executable, "-m", "crackbake", *args, "-q", "-o",
+                           str(tmp_path / "here")], capture_output=True, text=True, env=env,
+                          timeout=600)
+    assert here.returncode == 0, here.stderr
+    want = _library_hashes(tmp_path / "here")
+    assert _library_hashes(tmp_path / "ray") == want and len(want) >= 5
+

@@ -56,24 +56,89 @@ class Plan:
     ray_info: dict = field(default_factory=dict)
 
 
+def _prepare_worker() -> dict:
+    """Set up a fresh worker before numba is imported (it has not been): its thread pool
+    follows the task's CPUs and its cache is a folder on this node's own disk
+    (:mod:`crackbake.batch.numba_cache`).  Returns where the task runs (node, host, pid) and
+    those settings."""
+    import ray
+
+    from crackbake.batch.numba_cache import use_node_cache
+
+    context = ray.get_runtime_context()
+    cpus = context.get_assigned_resources().get("CPU", 1)
+    os.environ["NUMBA_NUM_THREADS"] = str(max(1, int(cpus)))
+    return {"node": context.get_node_id(), "host": socket.gethostname(), "pid": os.getpid(),
+            "numba_threads": os.environ["NUMBA_NUM_THREADS"], "numba_cache": use_node_cache()}
+
+
+def _run_variants(params, chunk: list) -> tuple[list, list[str]]:
+    """The task body of ``crackbake decals --address``: bake ``chunk``'s variants in a fresh
+    worker; the baked variants and the warnings they raised."""
+    import warnings
+
+    from crackbake.errors import CrackbakeWarning
+
+    _prepare_worker()
+    from crackbake.decals.library import bake_variants
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", CrackbakeWarning)
+        baked = bake_variants(params, chunk)
+    return baked, [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+
+
+def map_variants(params, variants: list, plan: Plan) -> list:
+    """Bake a decal library's ``variants`` on Ray (``plan.address``): contiguous chunks, two per
+    job slot, each a task in a fresh worker; the :class:`~crackbake.decals.library.Baked`
+    variants in order.  A variant's :class:`CrackbakeError` is raised here, its warnings are
+    warned here; Ctrl-C cancels the tasks."""
+    import warnings
+
+    from crackbake.errors import CrackbakeError, CrackbakeWarning
+
+    try:
+        ray, owned = _start_ray(plan)
+    except ImportError:
+        raise CrackbakeError("--address needs Ray: pip install 'crackbake[batch]'") from None
+    except Exception as exc:  # no cluster there
+        text = " ".join(str(exc).split())[:200]
+        raise CrackbakeError(f"cannot reach a Ray cluster at --address {plan.address} "
+                             f"({type(exc).__name__}: {text}); start one with ray start --head "
+                             "or leave --address out") from None
+    refs = []
+    try:
+        per_job = plan.cpus_per_job or 1
+        slots = max(1, int(ray.cluster_resources().get("CPU", 1) // per_job))
+        count = min(len(variants), 2 * slots)
+        size = -(-len(variants) // count)
+        task = ray.remote(max_calls=1)(_run_variants)
+        refs = [task.options(num_cpus=per_job, max_retries=plan.retries, retry_exceptions=False,
+                             name=f"crackbake:decals:{k // size}")
+                .remote(params, variants[k:k + size]) for k in range(0, len(variants), size)]
+        baked = []
+        for chunk, caught in ray.get(refs):  # a task's CrackbakeError comes back as one
+            baked += chunk
+            for message in caught:
+                warnings.warn(message, CrackbakeWarning, stacklevel=2)
+        return baked
+    except KeyboardInterrupt:
+        for ref in refs:
+            ray.cancel(ref)
+        raise
+    finally:
+        if owned:
+            ray.shutdown()
+
+
 def _run_job(params, extra: dict) -> dict:
     """The task body (in a fresh worker): one pipeline run, its outcome as a record."""
     import warnings
 
-    import ray
-
     from crackbake.errors import CrackbakeError, CrackbakeWarning
 
     t0 = time.perf_counter()
-    # Before numba is imported (a fresh worker has not): its thread pool follows the task's CPUs.
-    os.environ["NUMBA_NUM_THREADS"] = str(max(1, int(ray.get_runtime_context()
-                                                     .get_assigned_resources().get("CPU", 1))))
-    # ... and its cache is a folder on this node's own disk (crackbake/batch/numba_cache.py).
-    from crackbake.batch.numba_cache import use_node_cache
-
-    record = {"node": ray.get_runtime_context().get_node_id(), "host": socket.gethostname(),
-              "pid": os.getpid(), "numba_threads": os.environ.get("NUMBA_NUM_THREADS"),
-              "numba_cache": use_node_cache()}
+    record = _prepare_worker()
     try:
         from crackbake.pipeline import run
 
