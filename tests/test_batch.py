@@ -350,7 +350,8 @@ def _interrupted_batch(tmp_path: Path, how: str):
     return rc, b"".join(chunks).decode(errors="replace"), first
 
 
-@pytest.mark.parametrize("how", ["ctrl-c", pytest.param("sigterm", marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
 def test_interrupted_batch(tmp_path, how):
     """Ctrl-C (or SIGTERM) mid-batch: the running job is cancelled and its staging folder
     removed, the queued one never starts, the finished folder stays as it was, the summary is
@@ -527,6 +528,7 @@ def _library_hashes(out: Path) -> dict[str, str]:
             for f in json.loads((out / "manifest.json").read_text())["files"]}
 
 
+@pytest.mark.slow
 def test_decals_on_ray_equal_the_local_library(tmp_path, local_ray):
     """``crackbake decals --address`` (a separate driver on the running local Ray): the variants
     bake as tasks in fresh workers, one variant per task here, and every file equals the library
