@@ -396,8 +396,7 @@ def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
             for ref in ready:
                 i, _ = left.pop(ref)
                 outcome = _outcome(ray, ref, plan)
-                if outcome.get("status") == "cancelled" or outcome.get("exit_code") in (
-                        128 + signal.SIGINT, 128 + signal.SIGTERM):
+                if outcome.get("exit_code") in (128 + signal.SIGINT, 128 + signal.SIGTERM):
                     outcome = {"status": "cancelled", "error": f"{why} while running"}
                 records[i].update(outcome)
 
@@ -414,6 +413,8 @@ def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
         except KeyboardInterrupt:
             pass
     for i in killed:
+        if records[i].get("status") == "ok":  # it committed before the kill reached it
+            continue
         left_behind = _remove_staging(Path(records[i]["folder"]))
         records[i].update(status="cancelled", error=f"{why} while running; its worker was "
                           "killed" + (f"; {left_behind}" if left_behind else ""))
