@@ -470,7 +470,8 @@ def test_two_node_cluster(tmp_path, monkeypatch):
     jobs = doc["jobs"]
     assert [j["status"] for j in jobs] == ["ok", "ok"]
     assert {j["node"] for j in jobs} == alive and len(alive) == 2
-    for j in jobs:
+    for j in jobs:  # in OUT: the workers' current folder is not the driver's
+        assert Path(j["folder"]).parent == tmp_path / "out"
         assert _committed(Path(j["folder"]))
         assert j["numba_cache"] == str(node_cache_dir())
     assert any(node_cache_dir().rglob("*.nbi"))
