@@ -103,3 +103,4 @@ bench: setup
 clean:
 	rm -rf $(VENV) $(BPY_VENV) $(NODE_DIR) build dist *.egg-info spot_cracks .pytest_cache
 	find crackbake tests benchmarks examples -name __pycache__ -type d -prune -exec rm -rf {} +
+	rm -rf $${TMPDIR:-/tmp}/crackbake-numba-$$(id -u)

@@ -12,10 +12,18 @@ impact).  Measured, each in a fresh process:
 
 Times on a shared machine are noisy: run it on a quiet one.
 
+``--driver-memory N``: the batch driver's peak resident memory with N queued jobs (floor: <= 500
+MB whatever the count).  N jobs of a 320-face sphere at ``--res 64 --sim-faces 1500`` (mud,
+seeds 1..N) run with ``--workers 1``; the driver's ``VmRSS``/``VmHWM`` (``/proc``) are sampled
+every 50 ms for ``--sample-s`` seconds, then it gets SIGINT, as from Ctrl-C, and writes its
+summary (``batch.json`` and the contact sheet for all N jobs, the cancelled ones included); the
+peak covers all of it.
+
 Usage::
 
     python benchmarks/bench_batch.py [--res 1024] [--seeds 3] [--presets mud crackle glaze glass]
                                      [--skip-plain] [--markdown]
+    python benchmarks/bench_batch.py --driver-memory 1000 [--sample-s 90]
 """
 
 from __future__ import annotations
@@ -23,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -60,6 +69,58 @@ def timed(args: list[str], cwd: Path) -> float:
     return time.perf_counter() - t
 
 
+def _status(pid: int) -> dict[str, int]:
+    """VmRSS and VmHWM of ``pid`` in kB ({} once it has exited)."""
+    try:
+        text = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return {}
+    return {k: int(v.split()[0]) for k, v in (line.split(":", 1) for line in text.splitlines())
+            if k in ("VmRSS", "VmHWM")}
+
+
+def driver_memory(n: int, sample_s: float) -> None:
+    """Peak RSS of the batch driver with ``n`` queued jobs (see the module docstring)."""
+    import trimesh
+
+    with tempfile.TemporaryDirectory(prefix="bench_batch_mem_") as tmp:
+        tmp = Path(tmp)
+        trimesh.creation.icosphere(subdivisions=2).export(tmp / "ball.obj")
+        (tmp / "jobs.toml").write_text(
+            '[defaults]\nres = 64\nsim-faces = 1500\npreset = "mud"\nformats = "png,preview"\n'
+            '[[job]]\n'
+            f'mesh = "ball.obj"\nseeds = {list(range(1, n + 1))}\n')
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out",
+             "--workers", "1"], cwd=tmp, env=ENV, stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE, text=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        timeline: list[tuple[float, int]] = []
+        peak = 0
+        sent = False
+        while proc.poll() is None:
+            st = _status(proc.pid)
+            if st:
+                peak = max(peak, st["VmHWM"])
+                timeline.append((time.perf_counter() - t0, st["VmRSS"]))
+            if not sent and time.perf_counter() - t0 > sample_s:
+                proc.send_signal(signal.SIGINT)
+                sent, t_int = True, time.perf_counter() - t0
+            time.sleep(0.05)
+        err = proc.stderr.read()
+        doc = json.loads((tmp / "out" / "batch.json").read_text())
+        sheet = (tmp / "out" / "batch_sheet.png").stat().st_size
+    print(f"{n} jobs queued, --workers 1, SIGINT after {t_int:.0f} s; exit {proc.returncode}; "
+          f"counts {doc['counts']}; sheet {sheet / 2**20:.1f} MiB")
+    print(f"driver peak RSS (VmHWM): {peak / 1024:.0f} MB (floor: <= 500 MB)")
+    step = max(1, len(timeline) // 12)
+    print("driver RSS over time: " + ", ".join(
+        f"{t:.0f} s {rss / 1024:.0f} MB" for t, rss in timeline[::step]))
+    if proc.returncode not in (130, 0):
+        print(err[-2000:])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--res", type=int, default=1024)
@@ -68,7 +129,14 @@ def main() -> None:
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--skip-plain", action="store_true", help="only the batch runs")
     ap.add_argument("--markdown", action="store_true")
+    ap.add_argument("--driver-memory", type=int, metavar="N",
+                    help="only the driver's peak memory with N queued jobs")
+    ap.add_argument("--sample-s", type=float, default=90.0,
+                    help="with --driver-memory: seconds of running before the SIGINT")
     a = ap.parse_args()
+    if a.driver_memory:
+        driver_memory(a.driver_memory, a.sample_s)
+        return
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:

@@ -253,3 +253,330 @@ def test_embedded_ray_on_a_pipe_leaves_nothing_running(tmp_path):
     assert doc["ray"]["cpus"] >= 1 and doc["ray"]["start_s"] > 0
     assert {j["numba_threads"] for j in doc["jobs"]} == {str(max(1, len(os.sched_getaffinity(0))
                                                                  // 2))}
+
+
+def _default_signals() -> None:
+    # A shell's background job (``make test &``) ignores SIGINT and its children inherit that;
+    # Ctrl-C must reach the batch as it does from a terminal.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def _on_a_terminal() -> None:
+    """In the child: a session of its own whose controlling terminal is its stdin (a pty), so a
+    ^C typed into the pty is SIGINT to its whole foreground process group, Ray's too."""
+    import fcntl
+    import termios
+
+    _default_signals()
+    fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+
+def _wait_for(check, what: str, proc, timeout: float = 240.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        got = check()
+        if got:
+            return got
+        assert proc.poll() is None, f"the batch ended (exit {proc.returncode}) before {what}"
+        time.sleep(0.1)
+    raise AssertionError(f"waited {timeout:.0f} s for {what}")
+
+
+def _descendants(pid: int) -> set[int]:
+    """Pids of every process below ``pid`` (children, their children...)."""
+    found, todo = set(), [pid]
+    while todo:
+        for task in Path(f"/proc/{todo.pop()}/task").glob("*"):
+            try:
+                kids = {int(k) for k in (task / "children").read_text().split()}
+            except OSError:
+                continue
+            todo += kids - found
+            found |= kids
+    return found
+
+
+def _alive(pid: int) -> bool:
+    """The process exists and is not a zombie."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def _interrupted_batch(tmp_path: Path, how: str):
+    """Run a 3-job batch (--workers 1) as a real process, wait until the first job's folder is
+    committed and the second job's staging folder exists, then interrupt it: ``how`` is
+    ``ctrl-c`` (^C typed into its terminal, a pty) or ``sigterm`` (``kill PID``, on a pipe).
+    Returns the exit code, what it printed, the first folder's files when committed."""
+    import subprocess
+    import sys
+
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n"
+        '[[job]]\nmesh = "spot.obj"\npreset = "mud"\nname = "first"\n\n'
+        # slow enough to be caught mid-run: cancelled while its staging folder exists
+        '[[job]]\nmesh = "spot.obj"\npreset = "crackle"\nname = "second"\nres = 2048\n'
+        "sim-faces = 20000\n\n"
+        '[[job]]\nmesh = "spot.obj"\npreset = "glaze"\nname = "third"\n')
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
+    cmd = [sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out", "--workers", "1"]
+    chunks: list[bytes] = []
+    if how == "ctrl-c":
+        import pty
+
+        master, slave = pty.openpty()
+        proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdin=slave, stdout=slave,
+                                stderr=slave, start_new_session=True, preexec_fn=_on_a_terminal)
+        os.close(slave)
+
+        def read() -> None:
+            while True:
+                try:
+                    data = os.read(master, 4096)
+                except OSError:  # the child closed its end
+                    return
+                if not data:
+                    return
+                chunks.append(data)
+    else:
+        proc = subprocess.Popen(cmd, cwd=tmp_path, env=env, stdin=subprocess.DEVNULL,
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                preexec_fn=_default_signals)
+
+        def read() -> None:
+            for data in iter(lambda: proc.stdout.read1(4096), b""):
+                chunks.append(data)
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        _wait_for(lambda: (out / "first" / "manifest.json").is_file(), "the first job's folder",
+                  proc)
+        first = _folder(out / "first")  # committed: the folder appears whole, by one rename
+        _wait_for(lambda: any(p.name.startswith(".second.crackbake-staging-")
+                              for p in out.iterdir()), "the second job's staging folder", proc)
+        started = _descendants(proc.pid)  # its Ray: raylet, gcs_server, workers, agents
+        assert started & _ray_processes(), "no Ray daemon under the batch process"
+        if how == "ctrl-c":
+            os.write(master, b"\x03")
+        else:
+            proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    reader.join(10)
+    if how == "ctrl-c":
+        os.close(master)
+    return rc, b"".join(chunks).decode(errors="replace"), first, started
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["ctrl-c", "sigterm"])
+def test_interrupted_batch(tmp_path, how):
+    """Ctrl-C (or SIGTERM) mid-batch: the running job is cancelled and its staging folder
+    removed, the queued one never starts, the finished folder stays as it was, the summary is
+    written with both marked cancelled, exit 130 (143); the local Ray is shut down."""
+    rc, text, first, started = _interrupted_batch(tmp_path, how)
+    out = tmp_path / "out"
+    assert rc == (130 if how == "ctrl-c" else 143), text
+    assert _folder(out / "first") == first
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+    assert not (out / "second").exists() and not (out / "third").exists()
+    doc = json.loads((out / "batch.json").read_text())
+    jobs = {j["name"]: j for j in doc["jobs"]}
+    assert [jobs[n]["status"] for n in ("first", "second", "third")] == [
+        "ok", "cancelled", "cancelled"]
+    assert jobs["second"]["error"].startswith(
+        "cancelled (Ctrl-C)" if how == "ctrl-c" else "cancelled (SIGTERM)")
+    assert "before it started" in jobs["third"]["error"]
+    assert doc["counts"] == {"ok": 1, "cancelled": 2}
+    assert doc["ray"]["interrupted"] == (signal.SIGINT if how == "ctrl-c" else signal.SIGTERM)
+    import csv
+
+    with open(out / "batch.csv", newline="") as fh:
+        assert [row["status"] for row in csv.DictReader(fh)] == ["ok", "cancelled", "cancelled"]
+    assert (out / "batch_sheet.png").is_file()
+    assert "interrupted (" in text
+    if how == "ctrl-c":  # the terminal showed the live bar
+        assert "batch  [" in text and "1 running" in text and "1/3" in text
+    else:  # a pipe: one line per finished job, no bar
+        assert "[1/1]" not in text and "[1/3] ok     first" in text
+        assert "\r" not in text
+    end = time.monotonic() + 30  # Ray's daemons exit a moment after the driver
+    while any(_alive(p) for p in started) and time.monotonic() < end:
+        time.sleep(0.2)
+    assert not [p for p in started if _alive(p)], "processes of the batch's Ray outlived it"
+
+
+def test_worker_imports_no_numba_before_its_job():
+    """A worker unpickles crackbake.batch.run (the task) and the job's RunParams before the job
+    sets NUMBA_NUM_THREADS and NUMBA_CACHE_DIR: neither may import numba."""
+    import subprocess
+    import sys
+
+    code = ("import pickle, sys\n"
+            "import crackbake.batch.run, crackbake.batch.progress, crackbake.params\n"
+            "print('numba' in sys.modules)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(SPOT.parents[1])}, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "False"
+
+
+def _committed(folder: Path) -> bool:
+    """The folder holds exactly the files its manifest lists, plus the manifest."""
+    manifest = json.loads((folder / "manifest.json").read_text())
+    return sorted(p.name for p in folder.iterdir()) == sorted(
+        [f["name"] for f in manifest["files"]] + ["manifest.json"])
+
+
+@pytest.mark.slow
+def test_two_node_cluster(tmp_path, monkeypatch):
+    """Two Ray nodes of 1 CPU each on this machine (ray.cluster_utils.Cluster) and the batch
+    command as a separate driver with --address: the 2 jobs land one on each node (node ids in
+    batch.json), both folders complete, each worker's numba cache the node-local folder."""
+    import subprocess
+    import sys
+
+    from ray.cluster_utils import Cluster
+
+    from crackbake.batch.numba_cache import node_cache_dir
+
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text(
+        f"[defaults]\n{SMALL}\n[[job]]\nmesh = \"spot.obj\"\npreset = \"mud\"\nseeds = [1, 2]\n")
+    # The nodes' workers import crackbake from this tree; each node's raylet passes on this env.
+    monkeypatch.setenv("PYTHONPATH", str(SPOT.parents[1]))
+    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
+    node = {"num_cpus": 1, "object_store_memory": 80 * 2**20}
+    cluster = Cluster(initialize_head=True, head_node_args={**node, "include_dashboard": False})
+    try:
+        cluster.add_node(**node)
+        cluster.wait_for_nodes()
+        alive = {n.node_id for n in [cluster.head_node, *cluster.worker_nodes]}
+        r = subprocess.run([sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out",
+                            "--address", cluster.address], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=600)
+    finally:
+        cluster.shutdown()
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "out" / "batch.json").read_text())
+    assert doc["ray"]["nodes"] == 2 and doc["ray"]["cpus"] == 2
+    jobs = doc["jobs"]
+    assert [j["status"] for j in jobs] == ["ok", "ok"]
+    assert {j["node"] for j in jobs} == alive and len(alive) == 2
+    for j in jobs:  # in OUT: the workers' current folder is not the driver's
+        assert Path(j["folder"]).parent == tmp_path / "out"
+        assert _committed(Path(j["folder"]))
+        assert j["numba_cache"] == str(node_cache_dir())
+    assert any(node_cache_dir().rglob("*.nbi"))
+
+
+def test_numba_cache_seeded_per_node(tmp_path):
+    """A package's in-tree numba cache, seeded into a node cache folder, is what numba loads
+    there (nothing recompiled or rewritten); seeding again copies nothing; the user's own
+    NUMBA_CACHE_DIR is left alone."""
+    import subprocess
+    import sys
+
+    from crackbake.batch.numba_cache import seed, use_node_cache
+
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "sub" / "kern.py").write_text(
+        "from numba import njit\n\n@njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
+    run = [sys.executable, "-c", "import sys; sys.path.insert(0, sys.argv[1]); "
+           "from sub.kern import twice; print(twice(21))", str(pkg)]
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    first = subprocess.run(run, env={**env, "NUMBA_DEBUG_CACHE": "1"}, capture_output=True,
+                           text=True, timeout=300)
+    assert first.stdout.strip().endswith("42") and "data saved" in first.stdout, first.stderr
+    node = tmp_path / "node"
+    assert seed(node, pkg) == 2  # the index and one overload's object code
+    assert seed(node, pkg) == 0
+    again = subprocess.run(run, env={**env, "NUMBA_DEBUG_CACHE": "1",
+                                     "NUMBA_CACHE_DIR": str(node)},
+                           capture_output=True, text=True, timeout=300)
+    assert again.stdout.strip().endswith("42")
+    assert "data loaded" in again.stdout and "data saved" not in again.stdout, again.stdout
+    assert str(node) in again.stdout
+    mine = {"NUMBA_CACHE_DIR": str(tmp_path / "mine")}
+    assert use_node_cache(mine) == str(tmp_path / "mine") and mine == {
+        "NUMBA_CACHE_DIR": str(tmp_path / "mine")}
+
+
+def test_contact_sheet_bounded_for_large_batches(tmp_path):
+    """The sheet's size does not grow without bound with the job count (the driver's memory):
+    1,000 jobs get smaller tiles, 5,000 as many tiles as fit, the failed ones first."""
+    from crackbake.batch.summary import MAX_SHEET_PIXELS, contact_sheet
+
+    def records(n, failed=()):
+        return [{"name": f"job{k}", "folder": str(tmp_path / f"job{k}"),
+                 "status": "failed" if k in failed else "ok"} for k in range(n)]
+
+    small = contact_sheet(records(12))
+    assert small.size == (4 * 256, 3 * (256 + 40))
+    big = contact_sheet(records(1000))
+    assert big.width * big.height <= MAX_SHEET_PIXELS * 1.05 and big.width >= 32 * 64
+    huge = contact_sheet(records(5000, failed={4321}))
+    assert huge.width * huge.height <= MAX_SHEET_PIXELS * 1.05
+    # the failed job is the first tile: red label strip under it
+    assert huge.getpixel((2, 64 + 2)) == (190, 40, 40)
+    assert big.getpixel((2, big.height // 32 - 2)) == (40, 140, 60)
+
+
+def test_egl_device_for_the_gpu_ray_assigned():
+    """CUDA_VISIBLE_DEVICES (nvidia-smi's index, PCI bus order) -> the EGL device at the same
+    PCI address, whatever EGL's own order (here software renderers first and the GPUs in
+    reverse)."""
+    from crackbake.batch.gpu import egl_device_for, normalise_pci
+
+    gpus = ["00000000:1A:00.0", "00000000:3B:00.0", "00000000:D8:00.0"]  # nvidia-smi's spelling
+    egl = [None, "0000:d8:00.0", "0000:3b:00.0", None, "0000:1a:00.0"]
+    assert [egl_device_for(str(i), gpus, egl) for i in range(3)] == [4, 2, 1]
+    assert egl_device_for("2,0", gpus, egl) == 1  # one context per job: the first GPU
+    assert egl_device_for(" 1 ", gpus, egl) == 2
+    for none in (None, "", "-1", "NoDevFiles", "GPU-8f2a3c1e-0000-1111-2222-333344445555"):
+        assert egl_device_for(none, gpus, egl) is None
+    assert egl_device_for("1", gpus, [None, "0000:1a:00.0"]) is None  # no EGL on that GPU
+    with pytest.raises(ValueError, match="GPU 3 but the node has 3"):
+        egl_device_for("3", gpus, egl)
+    assert normalise_pci("3b:00.0") == "0000:3b:00.0"
+    with pytest.raises(ValueError, match="not a PCI address"):
+        normalise_pci("card1")
+
+
+def _library_hashes(out: Path) -> dict[str, str]:
+    return {f["name"]: f["sha256"]
+            for f in json.loads((out / "manifest.json").read_text())["files"]}
+
+
+@pytest.mark.slow
+def test_decals_on_ray_equal_the_local_library(tmp_path, local_ray):
+    """``crackbake decals --address`` (a separate driver on the running local Ray): the variants
+    bake as tasks in fresh workers, one variant per task here, and every file equals the library
+    baked in one process."""
+    import subprocess
+    import sys
+
+    args = ["decals", "--preset", "glass", "-n", "3", "--size", "0.5", "--res", "64",
+            "--sim-faces", "5000", "--seed", "5"]
+    env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
+    address = local_ray.get_runtime_context().gcs_address
+    on_ray = subprocess.run([sys.executable, "-m", "crackbake", *args, "--address", address,
+                             "-o", str(tmp_path / "ray")], capture_output=True, text=True,
+                            env=env, timeout=600)
+    assert on_ray.returncode == 0, on_ray.stderr
+    assert "3 glass decals in a" in on_ray.stderr
+    here = subprocess.run([sys.executable, "-m", "crackbake", *args, "-q", "-o",
+                           str(tmp_path / "here")], capture_output=True, text=True, env=env,
+                          timeout=600)
+    assert here.returncode == 0, here.stderr
+    want = _library_hashes(tmp_path / "here")
+    assert _library_hashes(tmp_path / "ray") == want and len(want) >= 5
+

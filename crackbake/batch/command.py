@@ -24,7 +24,8 @@ JOBS (TOML): a [defaults] table with any option of the bake command, and [[job]]
 mesh (a path or a glob, relative to the file), name (the output sub-folder), any bake option,
 and seeds = [...] / presets = [...] for sweeps.  Outputs: OUT/<name>/ (what crackbake MESH -o
 OUT/<name> writes), OUT/batch.json, OUT/batch.csv, OUT/batch_sheet.png.  Exit 0: every job ok;
-1: some failed (listed at the end); 2: a bad batch file (nothing was run).  docs/batch.md.
+1: some failed (listed at the end); 2: a bad batch file (nothing was run); 130 (Ctrl-C) or
+143 (SIGTERM): interrupted, the summary written with the unfinished jobs cancelled.  docs/batch.md.
 """
 
 
@@ -62,6 +63,7 @@ def batch(jobs: Path, out: Path, workers, cpus_per_job, address, retries, resume
             click.echo(f"{job.name}: crackbake {' '.join(job.argv)} -o {job.params.out_dir}")
         return 0
 
+    from crackbake.batch.progress import report_for
     from crackbake.batch.run import Plan, run_batch
     from crackbake.batch.summary import counts, write_summary
 
@@ -72,10 +74,7 @@ def batch(jobs: Path, out: Path, workers, cpus_per_job, address, retries, resume
     plan = Plan(address=address, workers=workers, cpus_per_job=cpus_per_job, retries=retries,
                 resume=resume)
     try:
-        records = run_batch(job_list, plan, echo)
-    except KeyboardInterrupt:
-        err("interrupted")
-        sys.exit(130)
+        records = run_batch(job_list, plan, report_for(sys.stderr, echo, quiet))
     except Exception as exc:  # Ray could not start or connect: one line
         text = " ".join(str(exc).split())[:300]
         err(f"error: cannot run the batch on Ray ({type(exc).__name__}: {text})")
@@ -88,7 +87,9 @@ def batch(jobs: Path, out: Path, workers, cpus_per_job, address, retries, resume
         err(f"{len(records)} jobs: {parts}; summary in {out}/batch.json, batch_sheet.png")
     for r in failed:
         err(f"  {r['status']}: {r['name']}: {r.get('error', '')}")
-    if plan.ray_info.get("interrupted"):
-        err("interrupted")
-        return 130
+    signum = plan.ray_info.get("interrupted")
+    if signum:  # as a shell reports a process ended by that signal: 130 Ctrl-C, 143 SIGTERM
+        err(f"interrupted ({'Ctrl-C' if signum == 2 else 'SIGTERM'}): finished folders kept, "
+            "unfinished jobs cancelled")
+        return 128 + signum
     return 1 if failed else 0

@@ -65,7 +65,7 @@ class Job:
     name : str
         Output sub-folder name, unique in the batch.
     params : RunParams
-        Validated; ``out`` is ``OUT/<name>``, ``mesh`` an absolute path.
+        Validated; ``out`` is ``OUT/<name>`` and ``mesh`` an absolute path.
     argv : tuple of str
         The bake command line equal to this job (without ``-o``), for people and logs.
     """
@@ -320,7 +320,10 @@ def load_jobs(path: str | os.PathLike, out: str | os.PathLike) -> list[Job]:
             try:
                 params = _parse_run(mesh, default_words + words)
                 folder = out / name
-                params = RunParams(**{**params.__dict__, "out": folder}).validate()
+                # Absolute: a worker's current folder is not the driver's (on a cluster, where
+                # its node's Ray was started), and a relative path would land there.
+                params = RunParams(**{**params.__dict__,
+                                      "out": Path(os.path.abspath(folder))}).validate()
             except click.ClickException as exc:
                 from crackbake.cli.common import usage_line
 

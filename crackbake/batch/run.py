@@ -7,6 +7,10 @@ folder through the output transaction.  Its task declares ``num_cpus`` (and the 
 memory holds.  ``max_calls=1``: the worker process exits after its job, so no GL context, numba
 state or leaked memory passes from one asset to the next.
 
+numba's kernel cache is a folder on each node's own disk, seeded from the package's precompiled
+kernels (:mod:`crackbake.batch.numba_cache`): nodes never write the same cache files over a
+shared file system.
+
 Faults: a worker that dies (SIGKILL, the OOM killer, a lost node) is a system failure Ray
 retries (``max_retries``); the staging folder it left is removed by the retry's output
 transaction.  A job failing on its input (a :class:`CrackbakeError`) returns its one-line error
@@ -18,16 +22,25 @@ from __future__ import annotations
 import logging
 import os
 import resource
+import signal
 import socket
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from crackbake.batch.jobs import Job, face_count
+from crackbake.batch.progress import LineReport
+
+# Nothing here may import numba at module level: a worker unpickles this module before its job
+# sets NUMBA_NUM_THREADS (crackbake.transaction's package imports the pipeline's kernels).
 
 #: Least object store Ray accepts; the tasks return small dicts, so more only takes /dev/shm.
 OBJECT_STORE_BYTES = 80 * 2**20
+#: Seconds a cancelled job gets to unwind (remove its staging folder) before its worker is
+#: killed.
+CANCEL_GRACE_S = 10.0
 
 
 @dataclass
@@ -43,20 +56,89 @@ class Plan:
     ray_info: dict = field(default_factory=dict)
 
 
+def _prepare_worker() -> dict:
+    """Set up a fresh worker before numba is imported (it has not been): its thread pool
+    follows the task's CPUs and its cache is a folder on this node's own disk
+    (:mod:`crackbake.batch.numba_cache`).  Returns where the task runs (node, host, pid) and
+    those settings."""
+    import ray
+
+    from crackbake.batch.numba_cache import use_node_cache
+
+    context = ray.get_runtime_context()
+    cpus = context.get_assigned_resources().get("CPU", 1)
+    os.environ["NUMBA_NUM_THREADS"] = str(max(1, int(cpus)))
+    return {"node": context.get_node_id(), "host": socket.gethostname(), "pid": os.getpid(),
+            "numba_threads": os.environ["NUMBA_NUM_THREADS"], "numba_cache": use_node_cache()}
+
+
+def _run_variants(params, chunk: list) -> tuple[list, list[str]]:
+    """The task body of ``crackbake decals --address``: bake ``chunk``'s variants in a fresh
+    worker; the baked variants and the warnings they raised."""
+    import warnings
+
+    from crackbake.errors import CrackbakeWarning
+
+    _prepare_worker()
+    from crackbake.decals.library import bake_variants
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", CrackbakeWarning)
+        baked = bake_variants(params, chunk)
+    return baked, [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+
+
+def map_variants(params, variants: list, plan: Plan) -> list:
+    """Bake a decal library's ``variants`` on Ray (``plan.address``): contiguous chunks, two per
+    job slot, each a task in a fresh worker; the :class:`~crackbake.decals.library.Baked`
+    variants in order.  A variant's :class:`CrackbakeError` is raised here, its warnings are
+    warned here; Ctrl-C cancels the tasks."""
+    import warnings
+
+    from crackbake.errors import CrackbakeError, CrackbakeWarning
+
+    try:
+        ray, owned = _start_ray(plan)
+    except ImportError:
+        raise CrackbakeError("--address needs Ray: pip install 'crackbake[batch]'") from None
+    except Exception as exc:  # no cluster there
+        text = " ".join(str(exc).split())[:200]
+        raise CrackbakeError(f"cannot reach a Ray cluster at --address {plan.address} "
+                             f"({type(exc).__name__}: {text}); start one with ray start --head "
+                             "or leave --address out") from None
+    refs = []
+    try:
+        per_job = plan.cpus_per_job or 1
+        slots = max(1, int(ray.cluster_resources().get("CPU", 1) // per_job))
+        count = min(len(variants), 2 * slots)
+        size = -(-len(variants) // count)
+        task = ray.remote(max_calls=1)(_run_variants)
+        refs = [task.options(num_cpus=per_job, max_retries=plan.retries, retry_exceptions=False,
+                             name=f"crackbake:decals:{k // size}")
+                .remote(params, variants[k:k + size]) for k in range(0, len(variants), size)]
+        baked = []
+        for chunk, caught in ray.get(refs):  # a task's CrackbakeError comes back as one
+            baked += chunk
+            for message in caught:
+                warnings.warn(message, CrackbakeWarning, stacklevel=2)
+        return baked
+    except KeyboardInterrupt:
+        for ref in refs:
+            ray.cancel(ref)
+        raise
+    finally:
+        if owned:
+            ray.shutdown()
+
+
 def _run_job(params, extra: dict) -> dict:
     """The task body (in a fresh worker): one pipeline run, its outcome as a record."""
     import warnings
 
-    import ray
-
     from crackbake.errors import CrackbakeError, CrackbakeWarning
 
     t0 = time.perf_counter()
-    # Before numba is imported (a fresh worker has not): its thread pool follows the task's CPUs.
-    os.environ["NUMBA_NUM_THREADS"] = str(max(1, int(ray.get_runtime_context()
-                                                     .get_assigned_resources().get("CPU", 1))))
-    record = {"node": ray.get_runtime_context().get_node_id(), "host": socket.gethostname(),
-              "pid": os.getpid(), "numba_threads": os.environ.get("NUMBA_NUM_THREADS")}
+    record = _prepare_worker()
     try:
         from crackbake.pipeline import run
 
@@ -133,18 +215,27 @@ def resume_record(job: Job, job_hash: str) -> dict | None:
             "pipeline_s": doc.get("timings_s", {})}
 
 
-def run_batch(jobs: list[Job], plan: Plan, echo: Callable[[str], None] = print) -> list[dict]:
+def run_batch(jobs: list[Job], plan: Plan, report: LineReport | Callable[[str], None] = print,
+              ) -> list[dict]:
     """Run ``jobs`` on Ray; one record per job, in the batch file's order.
 
     Each record holds ``name``, ``status`` (``ok``, ``failed``, ``skipped``, ``cancelled``),
     ``error`` (one line) where it failed, ``node``, ``host``, ``pid``, timings, the peak
-    resident memory and the memory estimate, the files written.  ``echo`` gets one line per
-    finished job.  A local Ray started here is shut down before returning (a Ray this process
-    already connected to is used and left running).  On Ctrl-C the jobs not finished are
-    ``cancelled`` and ``plan.ray_info["interrupted"]`` is set.
+    resident memory and the memory estimate, the files written.  ``report`` hears of every
+    finished job (a :class:`~crackbake.batch.progress.LineReport`, or a callable that gets one
+    line per finished job).  A local Ray started here is shut down before returning (a Ray this
+    process already connected to is used and left running).
+
+    SIGINT (Ctrl-C) or SIGTERM: the running tasks are cancelled (each one's output transaction
+    removes its staging folder), the queued ones never start, finished folders stay; the
+    unfinished jobs are ``cancelled`` and ``plan.ray_info["interrupted"]`` holds the signal's
+    number.
     """
     from crackbake.memory import estimate_peak, run_sizes
+    from crackbake.transaction.interrupt import interruptible, received
 
+    if not isinstance(report, LineReport):
+        report = LineReport(report)
     records: list[dict] = []
     todo: list[tuple[int, Job, dict]] = []
     hashes: dict[Path, dict] = {}
@@ -168,32 +259,73 @@ def run_batch(jobs: list[Job], plan: Plan, echo: Callable[[str], None] = print) 
         records.append(record)
     for r in records:
         if r.get("status") == "skipped":
-            echo(f"skipped {r['name']} (finished, same job hash)")
+            report.echo(f"skipped {r['name']} (finished, same job hash)")
     if not todo:
         return records
 
     t_start = time.perf_counter()
-    ray, owned = _start_ray(plan)
+    owned = False
+    ray = None
+    report.start(len(todo))
     try:
+        ray, owned = _start_ray(plan)
         plan.ray_info.update(start_s=round(time.perf_counter() - t_start, 3),
                              nodes=len([n for n in ray.nodes() if n.get("Alive")]),
                              cpus=ray.cluster_resources().get("CPU", 0),
                              gpus=ray.cluster_resources().get("GPU", 0))
-        _drive(ray, todo, records, plan, echo)
+        # SIGTERM (a scheduler, ``kill``, ``timeout``) unwinds like Ctrl-C instead of killing
+        # the driver with its local Ray under the running jobs.  Installed after ray.init,
+        # whose own SIGTERM handler aborts the process.
+        with interruptible():
+            _drive(ray, todo, records, plan, report)
+    except KeyboardInterrupt as exc:  # before Ray was up, or between the driver's steps
+        plan.ray_info["interrupted"] = received() or getattr(exc, "signum", signal.SIGINT)
     finally:
+        report.close()
         if owned:
             ray.shutdown()
+    if plan.ray_info.get("interrupted"):
+        for r in records:
+            if "status" not in r:
+                r.update(status="cancelled", error=f"cancelled ({_signal_name(plan)}) before "
+                         "it started")
     return records
 
 
-def _drive(ray, todo, records, plan: Plan, echo) -> None:
-    """Submit the jobs (at most ``plan.workers`` at once when set), gather each as it ends."""
+def _signal_name(plan: Plan) -> str:
+    signum = plan.ray_info.get("interrupted", signal.SIGINT)
+    return "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+
+
+def _outcome(ray, ref, plan: Plan) -> dict:
+    """A finished task's record, or the failure Ray reports for it."""
+    try:
+        return ray.get(ref)
+    except ray.exceptions.TaskCancelledError:
+        return {"status": "cancelled", "error": f"cancelled ({_signal_name(plan)})"}
+    except ray.exceptions.OutOfMemoryError:
+        return {"status": "failed", "exit_code": 1, "error": (
+            "error: the node ran out of memory running it (after "
+            f"{plan.retries} retries); lower --res or run fewer jobs per node")}
+    except (ray.exceptions.WorkerCrashedError, ray.exceptions.RayError) as exc:
+        text = " ".join(str(exc).split())[:200]
+        return {"status": "failed", "exit_code": 1, "error": (
+            f"error: its worker died {plan.retries + 1} times ({type(exc).__name__}: {text})")}
+
+
+def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
+    """Submit the jobs lazily, at most ``window`` in flight (so the driver's memory does not
+    grow with the batch), and gather each as it ends."""
+    from crackbake.transaction.interrupt import received
+
     task = ray.remote(max_calls=1)(_run_job)
     largest = _largest_memory(ray)
     cores = ray.cluster_resources().get("CPU", 1)
     per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers else 1)
-    window = plan.workers or max(1, int(cores // per_job)) * 2
-    queue = list(todo)
+    slots = plan.workers or max(1, int(cores // per_job))
+    # Twice the slots: the next job is already queued on Ray when one ends.
+    window = plan.workers or slots * 2
+    queue = deque(todo)
     pending: dict = {}
     done = 0
     total = len(todo)
@@ -210,12 +342,12 @@ def _drive(ray, todo, records, plan: Plan, echo) -> None:
                 line += f", node {r['node'][:8]}"
         elif r.get("error"):
             line += f"  {r['error']}"
-        echo(line)
+        report.finished(r, line)
 
     try:
         while queue or pending:
             while queue and len(pending) < window:
-                i, job, extra = queue.pop(0)
+                i, job, extra = queue.popleft()
                 need = records[i]["memory_estimate_mb"] * 2**20
                 if largest and need > largest:
                     finish(i, {"status": "failed", "exit_code": 2, "error": (
@@ -228,28 +360,75 @@ def _drive(ray, todo, records, plan: Plan, echo) -> None:
                     retry_exceptions=False, name=f"crackbake:{job.name}",
                 ).remote(job.params, extra)
                 pending[ref] = (i, time.perf_counter())
+            report.running(min(len(pending), slots))
             ready, _ = ray.wait(list(pending), num_returns=1)
             for ref in ready:
                 i, t_sub = pending.pop(ref)
-                try:
-                    outcome = ray.get(ref)
-                except ray.exceptions.OutOfMemoryError:
-                    outcome = {"status": "failed", "exit_code": 1, "error": (
-                        "error: the node ran out of memory running it (after "
-                        f"{plan.retries} retries); lower --res or run fewer jobs per node")}
-                except (ray.exceptions.WorkerCrashedError, ray.exceptions.RayError) as exc:
-                    text = " ".join(str(exc).split())[:200]
-                    outcome = {"status": "failed", "exit_code": 1, "error": (
-                        f"error: its worker died {plan.retries + 1} times ({type(exc).__name__}"
-                        f": {text})")}
+                outcome = _outcome(ray, ref, plan)
                 outcome["wall_s"] = round(time.perf_counter() - t_sub, 3)
                 finish(i, outcome)
-    except KeyboardInterrupt:
-        for ref, (i, _) in pending.items():
-            ray.cancel(ref)
-            records[i].update(status="cancelled", error="cancelled (Ctrl-C)")
-        for i, _, _ in queue:
-            records[i].update(status="cancelled", error="cancelled (Ctrl-C) before it started")
-        if pending:  # let the running jobs unwind their staging folders
-            ray.wait(list(pending), num_returns=len(pending), timeout=30)
-        plan.ray_info["interrupted"] = True
+    except KeyboardInterrupt as exc:
+        # Ray's wait turns the handler's Interrupt into a plain KeyboardInterrupt: the signal
+        # that came is what the handler saw.
+        plan.ray_info["interrupted"] = received() or getattr(exc, "signum", signal.SIGINT)
+        _cancel(ray, pending, records, plan)
+
+
+def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
+    """Cancel the tasks in flight.
+
+    A running job gets :data:`CANCEL_GRACE_S` (or until another Ctrl-C) to unwind: Ray raises
+    KeyboardInterrupt in its worker and the output transaction removes its staging folder.  A
+    job still running then (inside a long compiled call, where Python cannot raise) has its
+    worker killed, and the driver removes what it staged, under the folder's lock (which the
+    kernel frees with the dead process, so no live run can own it).  A job that had committed
+    its folder before the cancel reached it keeps its ``ok`` record.
+    """
+    for ref in pending:
+        ray.cancel(ref)
+    left = dict(pending)
+    why = f"cancelled ({_signal_name(plan)})"
+
+    def gather(timeout: float) -> None:
+        end = time.monotonic() + timeout
+        while left and time.monotonic() < end:
+            ready, _ = ray.wait(list(left), num_returns=1, timeout=end - time.monotonic())
+            for ref in ready:
+                i, _ = left.pop(ref)
+                outcome = _outcome(ray, ref, plan)
+                if outcome.get("exit_code") in (128 + signal.SIGINT, 128 + signal.SIGTERM):
+                    outcome = {"status": "cancelled", "error": f"{why} while running"}
+                records[i].update(outcome)
+
+    try:
+        gather(CANCEL_GRACE_S)
+    except KeyboardInterrupt:  # asked twice: stop waiting
+        pass
+    killed = [i for i, _ in left.values()]
+    if left:
+        for ref in left:
+            ray.cancel(ref, force=True)
+        try:
+            gather(10.0)
+        except KeyboardInterrupt:
+            pass
+    for i in killed:
+        if records[i].get("status") == "ok":  # it committed before the kill reached it
+            continue
+        left_behind = _remove_staging(Path(records[i]["folder"]))
+        records[i].update(status="cancelled", error=f"{why} while running; its worker was "
+                          "killed" + (f"; {left_behind}" if left_behind else ""))
+
+
+def _remove_staging(folder: Path) -> str | None:
+    """Remove what a killed job staged beside ``folder``; None, or why it could not."""
+    from crackbake.errors import CrackbakeError
+    from crackbake.transaction.outdir import FolderLock, remove_leftovers, target_dir
+
+    final = target_dir(folder)
+    try:
+        with FolderLock(final):
+            remove_leftovers(final)
+    except CrackbakeError:  # its worker still holds the lock: the next run cleans up
+        return "its staging folder is left until the next run into that folder"
+    return None

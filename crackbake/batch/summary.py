@@ -20,6 +20,10 @@ CSV_COLUMNS = ("name", "status", "error", "node", "host", "wall_s", "run_s", "pi
                "peak_rss_mb", "memory_estimate_mb", "files", "folder", "mesh", "hash")
 THUMB = 256
 LABEL = 40
+#: The contact sheet's size bound, so the driver's memory does not grow with the batch (an
+#: RGB sheet of this many pixels is 48 MiB): tiles shrink to fit, down to MIN_THUMB.
+MAX_SHEET_PIXELS = 16 * 2**20
+MIN_THUMB = 64
 STATUS_COLOURS = {"ok": (40, 140, 60), "skipped": (60, 90, 160), "failed": (190, 40, 40),
                   "cancelled": (150, 110, 30)}
 
@@ -63,13 +67,34 @@ def _png(image) -> bytes:
     return buf.getvalue()
 
 
+def sheet_layout(n: int, thumb: int = THUMB) -> tuple[int, int, int]:
+    """``(columns, tile size in pixels, tiles shown)`` of a contact sheet of ``n`` jobs: rows of
+    up to 6 tiles of ``thumb`` pixels while that fits :data:`MAX_SHEET_PIXELS`; beyond, a
+    square grid of smaller tiles (at least :data:`MIN_THUMB`), and past that only as many tiles
+    as fit."""
+    n = max(1, n)
+    cols = min(6, math.ceil(math.sqrt(n)))
+    if n * thumb * (thumb + LABEL) <= MAX_SHEET_PIXELS:
+        return cols, thumb, n
+    # t * (t + LABEL) = MAX / n, solved for t
+    size = int((-LABEL + math.sqrt(LABEL**2 + 4 * MAX_SHEET_PIXELS / n)) / 2)
+    size = max(MIN_THUMB, min(thumb, size))
+    shown = min(n, MAX_SHEET_PIXELS // (size * (size + LABEL)))
+    return math.ceil(math.sqrt(shown)), size, shown
+
+
 def contact_sheet(records: list[dict], thumb: int = THUMB):
     """A PIL image: each job's preview scaled to ``thumb`` pixels, its name and status beneath
-    (a grey tile where the job wrote no preview), rows of up to 6."""
+    (a grey tile where the job wrote no preview), rows of up to 6; for a large batch smaller
+    tiles (:func:`sheet_layout`), and where even those do not fit, the jobs that did not end
+    ok first, then the others in order, as many as fit."""
     from PIL import Image, ImageDraw, ImageFont
 
+    cols, thumb, shown = sheet_layout(len(records), thumb)
+    if shown < len(records):
+        records = ([r for r in records if r.get("status") not in ("ok", "skipped")]
+                   + [r for r in records if r.get("status") in ("ok", "skipped")])[:shown]
     n = max(1, len(records))
-    cols = min(6, math.ceil(math.sqrt(n)))
     rows = math.ceil(n / cols)
     sheet = Image.new("RGB", (cols * thumb, rows * (thumb + LABEL)), (24, 24, 24))
     draw = ImageDraw.Draw(sheet)

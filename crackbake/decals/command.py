@@ -19,6 +19,9 @@ Examples:
   # mud patches for Unreal (DirectX normals)
   crackbake decals --preset mud -n 9 --size 2 --normal-y dx -o mud_decals/
 \b
+  # 64 variants baked by the workers of a running Ray cluster
+  crackbake decals --preset crackle -n 64 --address auto -o lib/
+\b
 Outputs: decals_alpha.png, decals_normal.png, decals_orm.png, decals_height.png (16 bit),
 contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias), manifest.json.
 """
@@ -60,15 +63,17 @@ contact_sheet.png, decals.json (each variant's atlas rectangle as UV scale/bias)
     "-o", "--out", type=click.Path(path_type=Path), default=Path(DD["out"]), show_default=True,
     help="Output folder (replaced as a whole).",
 )  # fmt: skip
+@click.option("--address", help="Bake the variants on a running Ray cluster: auto, HOST:PORT "
+              "or ray://HOST:PORT (pip install 'crackbake[batch]'; docs/batch.md) [this process].")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.option("--json", "as_json", is_flag=True, help="Print decals.json's content on stdout.")
-def decals(quiet: bool, as_json: bool, **options) -> None:
+def decals(quiet: bool, as_json: bool, address: str | None, **options) -> None:
     """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
 
     from crackbake.decals.library import LibraryParams, build_library
 
     params = reported(lambda: LibraryParams(**options).validate(), quiet)
-    doc = reported(lambda: build_library(params), quiet)
+    doc = reported(lambda: build_library(params, address), quiet)
     if as_json:
         click.echo(json.dumps(doc, indent=1))
     if not quiet:

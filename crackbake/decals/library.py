@@ -215,8 +215,32 @@ def bake_variant(ctx, mesh, uvmesh, params: LibraryParams, variant: Variant) -> 
     return Baked(variant, maps, len(network.cracks), timings)
 
 
-def build_library(params: LibraryParams) -> dict:
+def bake_variants(params: LibraryParams, chunk: list[Variant]) -> list[Baked]:
+    """Bake the variants of ``chunk`` in this process, on one GL context and one plate."""
+    from crackbake.bake.context import create_context
+    from crackbake.bake.tangents import with_tangents
+    from crackbake.bake.uv import prepare_uvs
+
+    mesh = plate_mesh(params.size)
+    ctx = create_context()
+    try:
+        uvmesh = with_tangents(prepare_uvs(mesh, "keep", params.res, cache=False, ctx=ctx))
+        baked = []
+        for v in chunk:
+            logger.info("variant %d/%d (%s)", v.index + 1, params.n, v.name)
+            baked.append(bake_variant(ctx, mesh, uvmesh, params, v))
+        return baked
+    finally:
+        ctx.release()
+
+
+def build_library(params: LibraryParams, address: str | None = None) -> dict:
     """Bake every variant and write the library folder atomically.
+
+    ``address``: a running Ray cluster (``auto``, ``HOST:PORT``, ``ray://...``) whose workers
+    bake the variants, in chunks, one fresh process each (:func:`crackbake.batch.run.map_variants`);
+    the atlases are packed and written here.  Each variant depends only on (seed, index), so the
+    files are the same either way.
 
     Returns
     -------
@@ -233,31 +257,24 @@ def build_library(params: LibraryParams) -> dict:
 
     params = params.validate()
     stage = OutputStage(params.out)
-    return run_staged(stage, lambda: _build(params, stage))
+    return run_staged(stage, lambda: _build(params, stage, address))
 
 
-def _build(params: LibraryParams, stage) -> dict:
+def _build(params: LibraryParams, stage, address: str | None = None) -> dict:
     """The variants' solves and bakes, then the files, inside the open ``stage``."""
-    from crackbake.bake.context import create_context
-    from crackbake.bake.tangents import with_tangents
-    from crackbake.bake.uv import prepare_uvs
     from crackbake.decals.atlas import write_library
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {"solve": 0.0, "bake": 0.0}
-    mesh = plate_mesh(params.size)
-    ctx = create_context()
-    try:
-        uvmesh = with_tangents(prepare_uvs(mesh, "keep", params.res, cache=False, ctx=ctx))
-        baked = []
-        for v in variants(params):
-            logger.info("variant %d/%d (%s)", v.index + 1, params.n, v.name)
-            b = bake_variant(ctx, mesh, uvmesh, params, v)
-            timings["solve"] += sum(b.timings[k] for k in ("simmesh", "stress", "solve"))
-            timings["bake"] += b.timings["bake"]
-            baked.append(b)
-    finally:
-        ctx.release()
+    if address is None:
+        baked = bake_variants(params, variants(params))
+    else:
+        from crackbake.batch.run import Plan, map_variants
+
+        baked = map_variants(params, variants(params), Plan(address=address))
+    for b in baked:
+        timings["solve"] += sum(b.timings[k] for k in ("simmesh", "stress", "solve"))
+        timings["bake"] += b.timings["bake"]
     doc = write_library(stage, params, baked, timings, t0)
     stage.commit()
     return doc
@@ -268,6 +285,7 @@ __all__ = [
     "LibraryParams",
     "Variant",
     "bake_variant",
+    "bake_variants",
     "build_library",
     "plate_mesh",
     "variants",
