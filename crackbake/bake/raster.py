@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from crackbake.bake.cells import image_bins
 from crackbake.bake.context import GLScope
 from crackbake.bake.dilation import dilate
 from crackbake.bake.grid import FaceBins, face_bins
@@ -231,7 +232,11 @@ def bake_cracks(
     reached = segments
     if terms["reach"] != 1.0:  # chipped or curled cracks draw beyond their half width
         reached = replace(segments, width=segments.width * terms["reach"])
-    bins = face_bins(vertices, faces, uv, reached, res, max_distance, float(min_px))
+    if projection is None:
+        bins = face_bins(vertices, faces, uv, reached, res, max_distance, float(min_px))
+    else:  # a camera's image: lists per image cell (crackbake.bake.cells)
+        bins = image_bins(vertices, faces, uv, reached, res, max_distance, projection,
+                          float(min_px))  # fmt: skip
     timings["candidates"] = time.perf_counter() - t0
 
     images = _render(
@@ -245,6 +250,10 @@ def bake_cracks(
     maps.look = look
     return maps
 
+
+#: Most texels in one band of a camera's image (the decal bake): about 0.3 s of llvmpipe on a
+#: dense star's centre, so an interrupt waits at most that long for the GL call to return.
+CAMERA_BAND_TEXELS = 1 << 20
 
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 # width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
@@ -266,7 +275,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     ctx = gl.ctx
     with_normals = frames is not None
     terms = terms or look_terms(None, segments)
-    defines = tuple(terms["defines"])
+    defines = tuple(terms["defines"]) + (("CRACK_CELLS",) if bins.cell else ())
     vertex = np.empty((len(vertices), 5), np.float32)
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
@@ -310,6 +319,9 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
             prog[name].value = value
     prog["u_shape"].value = profile_shape
     prog["u_min_px"].value = min_px
+    if bins.cell:
+        prog["u_cell"].value = bins.cell
+        prog["u_cells_x"].value = bins.cells_x
     return surface, vao, screen
 
 
@@ -357,11 +369,16 @@ def _render(
         surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
                                          max_distance, profile_shape, frames, projection, min_px,
                                          terms)
+        prog_row0 = screen.program["u_row0"] if bins.cell else None
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
         # (69 bytes a texel: 48 for the surface pass, 21 for the maps; 72 with the normal map,
         # whose inside target holds the winning segment as R32F).
         band = max(1, min(res, (tile * tile) // res))
+        if bins.cell:
+            # A camera's image (the decal) can put a dense star's centre in every texel: short
+            # bands keep each GL call short, so SIGINT/SIGTERM stop the bake between two.
+            band = max(1, min(band, CAMERA_BAND_TEXELS // res))
         # With the normal map the inside target also says which segment's depth wins (R32F).
         dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
         images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
@@ -386,6 +403,8 @@ def _render(
             surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
             vao.render(moderngl.TRIANGLES)
             fbo.use()
+            if bins.cell:
+                prog_row0.value = y0
             screen.render(moderngl.TRIANGLES, vertices=3)
             gl.ctx.finish()
             tb = time.perf_counter()
