@@ -251,9 +251,11 @@ def bake_cracks(
     return maps
 
 
-#: Most texels in one band of a camera's image (the decal bake): about 0.3 s of llvmpipe on a
-#: dense star's centre, so an interrupt waits at most that long for the GL call to return.
-CAMERA_BAND_TEXELS = 1 << 20
+#: Most texels the crack pass measures in one GL call (rows of a band, scissored): a fraction of
+#: a second of llvmpipe even in a dense star's centre, so SIGINT/SIGTERM, which Python handles
+#: only between calls, stop a bake of any size promptly.  The bands themselves (and so the
+#: surface pass's rounding: the pixels) stay as ``tile`` makes them.
+SLICE_TEXELS = 1 << 19
 
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 # width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
@@ -375,10 +377,6 @@ def _render(
         # (69 bytes a texel: 48 for the surface pass, 21 for the maps; 72 with the normal map,
         # whose inside target holds the winning segment as R32F).
         band = max(1, min(res, (tile * tile) // res))
-        if bins.cell:
-            # A camera's image (the decal) can put a dense star's centre in every texel: short
-            # bands keep each GL call short, so SIGINT/SIGTERM stop the bake between two.
-            band = max(1, min(band, CAMERA_BAND_TEXELS // res))
         # With the normal map the inside target also says which segment's depth wins (R32F).
         dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
         images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
@@ -405,8 +403,7 @@ def _render(
             fbo.use()
             if bins.cell:
                 prog_row0.value = y0
-            screen.render(moderngl.TRIANGLES, vertices=3)
-            gl.ctx.finish()
+            _crack_pass(gl.ctx, fbo, screen, res, h)
             tb = time.perf_counter()
             for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
@@ -424,6 +421,25 @@ def _render(
         if with_normals:
             timings["normals"] = t_normals
     return images
+
+
+def _crack_pass(ctx, fbo, screen, res: int, rows: int) -> None:
+    """Run the crack pass over the band's first ``rows`` rows, in slices of at most
+    :data:`SLICE_TEXELS` texels, each finished before the next is drawn."""
+    import moderngl
+
+    step = max(1, SLICE_TEXELS // res)
+    if step >= rows:
+        screen.render(moderngl.TRIANGLES, vertices=3)
+        ctx.finish()
+        return
+    try:
+        for r0 in range(0, rows, step):
+            fbo.scissor = (0, r0, res, min(step, rows - r0))
+            screen.render(moderngl.TRIANGLES, vertices=3)
+            ctx.finish()
+    finally:
+        fbo.scissor = None
 
 
 def _max_distance(vertices: np.ndarray, segments: Segments, max_distance: float | None) -> float:
