@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -156,6 +157,7 @@ def bake_cracks(
     min_px: float = MIN_PX_DEFAULT,
     look=None,
     seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
 
@@ -208,6 +210,10 @@ def bake_cracks(
         None bakes the default look.  Kept on the maps for the written material.
     seed : int
         Seed of the chipping noise.
+    progress : callable, optional
+        Called as ``progress(rows_done, res)`` after each GL call of the crack pass (at most
+        :data:`SLICE_TEXELS` texels each), in the main thread: a long bake reports as it goes,
+        and a SIGINT/SIGTERM handler runs between two calls.
 
     Returns
     -------
@@ -242,7 +248,7 @@ def bake_cracks(
     images = _render(
         ctx, vertices, faces, uv, segments, res, tile, bins,
         float(max_distance), float(profile_shape), timings, frames, projection, float(min_px),
-        terms,
+        terms, progress,
     )  # fmt: skip
 
     maps = _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
@@ -361,6 +367,7 @@ def _render(
     projection: np.ndarray | None = None,
     min_px: float = 0.0,
     terms: dict | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, np.ndarray]:
     """Draw the faces at their placement band by band; the planar channel images (row 0 = top)."""
     import moderngl
@@ -403,7 +410,7 @@ def _render(
             fbo.use()
             if bins.cell:
                 prog_row0.value = y0
-            _crack_pass(gl.ctx, fbo, screen, res, h)
+            _crack_pass(gl.ctx, fbo, screen, res, h, y0, progress)
             tb = time.perf_counter()
             for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
@@ -423,23 +430,23 @@ def _render(
     return images
 
 
-def _crack_pass(ctx, fbo, screen, res: int, rows: int) -> None:
-    """Run the crack pass over the band's first ``rows`` rows, in slices of at most
-    :data:`SLICE_TEXELS` texels, each finished before the next is drawn."""
+def _crack_pass(ctx, fbo, screen, res: int, rows: int, y0: int = 0, progress=None) -> None:
+    """Run the crack pass over the band's first ``rows`` rows (image rows ``y0 ..``), in slices
+    of at most :data:`SLICE_TEXELS` texels, each finished before the next is drawn."""
     import moderngl
 
     step = max(1, SLICE_TEXELS // res)
-    if step >= rows:
-        screen.render(moderngl.TRIANGLES, vertices=3)
-        ctx.finish()
-        return
     try:
         for r0 in range(0, rows, step):
-            fbo.scissor = (0, r0, res, min(step, rows - r0))
+            if step < rows:
+                fbo.scissor = (0, r0, res, min(step, rows - r0))
             screen.render(moderngl.TRIANGLES, vertices=3)
             ctx.finish()
+            if progress is not None:
+                progress(y0 + min(r0 + step, rows), res)
     finally:
-        fbo.scissor = None
+        if step < rows:
+            fbo.scissor = None
 
 
 def _max_distance(vertices: np.ndarray, segments: Segments, max_distance: float | None) -> float:
