@@ -60,11 +60,12 @@ PER_DECAL_TEXEL = 115.0
 #: --frames: the frames are thresholded from the maps already baked and written a few at a time
 #: (whatever N): spot glass at --res 2048 with --frames 16 peaked 73 MB higher (17 B/texel).
 PER_FRAME_TEXEL = 20.0
-#: The xatlas child's peak RSS (benchmarks/bench_unwrap.py --memory: scan-like meshes of 20k to
-#: 270k faces, docs/memory.md), rounded up: its interpreter, numpy and xatlas, then the
-#: atlas's per-face data.
-XATLAS_BASE = 0.2 * GIB
-XATLAS_PER_FACE = 3000.0
+#: The unwrap's share (``benchmarks/bench_unwrap.py --memory``: scan-like meshes of 20k to 270k
+#: faces, docs/memory.md): the xatlas child's peak RSS fits 149 MB + 428 B a face (its
+#: interpreter, numpy and xatlas, then the atlas's per-face data), and the run's own pipe
+#: buffers and results grow by 196 B a face while it waits; rounded up.
+XATLAS_BASE = 0.17 * GIB
+XATLAS_PER_FACE = 700.0
 #: Address space beyond the resident set (shared libraries, LLVM, thread stacks, GL driver
 #: reservations): ``VmPeak - VmHWM`` was 1.07..1.33 GiB over the measured runs.  ``RLIMIT_AS``
 #: limits address space, so a cap is compared with ``rss + ADDRESS_OVERHEAD``.
