@@ -192,3 +192,26 @@ def test_run_sizes_count_the_unwrap_when_there_is_one():
     assert run_sizes(RunParams(mesh=Path("m.obj"), uv="unwrap"), with_uv)["unwrap_faces"] == 1
     assert run_sizes(RunParams(mesh=Path("m.obj"), uv="unwrap"), faces=7)["unwrap_faces"] == 7
     assert run_sizes(RunParams(mesh=Path("m.obj"), uv="keep"), without)["unwrap_faces"] == 0
+
+
+@pytest.mark.slow
+def test_the_xatlas_term_holds_a_real_worker():
+    """A real unwrap of a 40k-face scan-like mesh in a fresh process: its one child's peak RSS
+    (the xatlas worker) lies under the model's xatlas term, and not far under it."""
+    from crackbake.memory import XATLAS_BASE, XATLAS_PER_FACE
+
+    code = (
+        "import resource, warnings\n"
+        "from crackbake.bake.uv import unwrap\n"
+        "from crackbake.bake.uv.shapes import scan_blob\n"
+        "m = scan_blob(40000, 0.15)\n"
+        "warnings.simplefilter('ignore')\n"
+        "unwrap(m, 1024, cache=False, timeout=600)\n"
+        "print(len(m.faces), resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         timeout=900, check=True)  # fmt: skip
+    faces, kib = (int(x) for x in out.stdout.split())
+    measured, model = kib * 1024, XATLAS_BASE + XATLAS_PER_FACE * faces
+    assert 0.6 * model < measured < model, (measured / 2**20, model / 2**20)
