@@ -261,7 +261,7 @@ def bake_cracks(
 #: a second of llvmpipe even in a dense star's centre, so SIGINT/SIGTERM, which Python handles
 #: only between calls, stop a bake of any size promptly.  The bands themselves (and so the
 #: surface pass's rounding: the pixels) stay as ``tile`` makes them.
-SLICE_TEXELS = 1 << 18
+SLICE_TEXELS = 1 << 19
 
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 # width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
