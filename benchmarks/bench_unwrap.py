@@ -12,17 +12,25 @@ Two tables:
   (``examples/spot.obj``, its own UVs ignored, as ``--uv unwrap`` does) and the meshes in
   ``../shared/meshes`` when present.
 
+* memory (``--memory``): the xatlas worker's peak RSS against the face count (scan-like
+  meshes; each row in a fresh process, whose ``RUSAGE_CHILDREN`` peak is that one worker's),
+  with the parent's own peak beside it, for :mod:`crackbake.memory`'s xatlas term.
+
 Usage::
 
     python benchmarks/bench_unwrap.py [--faces 100000 270000] [--res 2048] [--skip-coverage]
     python benchmarks/bench_unwrap.py --faces [--meshes DIR]   # the coverage table only
+    python benchmarks/bench_unwrap.py --memory [--faces 20000 50000 100000 270000]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import resource
+import subprocess
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -87,13 +95,41 @@ def _row(name: str, m: dict) -> str:
             f"{m['wall_s']:.1f} | {m['cpu_s']:.1f} | {m['coverage']:.1%} |")  # fmt: skip
 
 
+def memory_row(n_faces: int, res: int) -> dict:
+    """One unwrap of a fresh scan-like mesh in this (fresh) process: the worker's peak RSS."""
+    from crackbake.memory import XATLAS_BASE, XATLAS_PER_FACE
+
+    mesh = scan_blob(n_faces, 0.15)
+    m = measure(mesh, res)
+    child = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+    return {"faces": m["faces"], "worker_peak_mb": child / 2**20,
+            "parent_peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "model_mb": (XATLAS_BASE + XATLAS_PER_FACE * m["faces"]) / 2**20,
+            "wall_s": m["wall_s"]}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--faces", type=int, nargs="*", default=[100_000, 270_000])
     ap.add_argument("--res", type=int, default=2048)
     ap.add_argument("--skip-coverage", action="store_true", help="only the speed table")
     ap.add_argument("--meshes", type=Path, default=SHARED, help="folder of extra .obj meshes")
+    ap.add_argument("--memory", action="store_true", help="the worker's peak RSS table only")
+    ap.add_argument("--memory-child", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.memory_child:
+        print(json.dumps(memory_row(args.memory_child, args.res)))
+        return
+    if args.memory:
+        print("| faces | worker peak RSS MB | model MB | parent peak RSS MB | wall s |\n"
+              "|---:|---:|---:|---:|---:|", flush=True)
+        for n in args.faces or [20_000, 50_000, 100_000, 270_000]:
+            out = subprocess.run([sys.executable, __file__, "--memory-child", str(n), "--res",
+                                  str(args.res)], capture_output=True, text=True, check=True)
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+            print(f"| {r['faces']:,} | {r['worker_peak_mb']:.0f} | {r['model_mb']:.0f} | "
+                  f"{r['parent_peak_mb']:.0f} | {r['wall_s']:.1f} |", flush=True)
+        return
 
     head = ("| mesh | faces | charts s | pack s | wall s | worker CPU s | coverage |\n"
             "|---|---:|---:|---:|---:|---:|---:|")  # fmt: skip

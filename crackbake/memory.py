@@ -9,6 +9,15 @@ time varies)::
            + PER_STRESS_TEXEL * stress_res**2 + PER_DECAL_TEXEL * decal_res**2
            + PER_FRAME_TEXEL * res**2 (with --frames)
 
+and, where the run unwraps with xatlas, the larger of that and the unwrap's own peak::
+
+    BASE + PER_FACE * faces + XATLAS_BASE + XATLAS_PER_FACE * faces
+
+xatlas runs in a child process (:mod:`crackbake.bake.xatlas_worker`) while the run waits for
+it, before the solver and the bake: the two processes' peaks add up (a cgroup or the physical
+memory holds both), but only with what the run holds at that point (the interpreter, the GL
+context, the mesh), not with the later stages, whose arrays do not exist yet.
+
 The crack-map terms are split because the bake draws in bands of at most ``tile**2`` texels: the
 GL targets (about 70 bytes a texel) stop growing at the tile while the maps in numpy keep
 growing with ``res**2``.  The stress bake's bands are small whatever the tile (measured: the
@@ -51,6 +60,12 @@ PER_DECAL_TEXEL = 115.0
 #: --frames: the frames are thresholded from the maps already baked and written a few at a time
 #: (whatever N): spot glass at --res 2048 with --frames 16 peaked 73 MB higher (17 B/texel).
 PER_FRAME_TEXEL = 20.0
+#: The unwrap's share (``benchmarks/bench_unwrap.py --memory``: scan-like meshes of 20k to 270k
+#: faces, docs/memory.md): the xatlas child's peak RSS fits 149 MB + 428 B a face (its
+#: interpreter, numpy and xatlas, then the atlas's per-face data), and the run's own pipe
+#: buffers and results grow by 196 B a face while it waits; rounded up.
+XATLAS_BASE = 0.17 * GIB
+XATLAS_PER_FACE = 700.0
 #: Address space beyond the resident set (shared libraries, LLVM, thread stacks, GL driver
 #: reservations): ``VmPeak - VmHWM`` was 1.07..1.33 GiB over the measured runs.  ``RLIMIT_AS``
 #: limits address space, so a cap is compared with ``rss + ADDRESS_OVERHEAD``.
@@ -68,10 +83,11 @@ class MemoryEstimate:
     Attributes
     ----------
     rss : int
-        Peak resident memory (what a cgroup limit or the physical memory must hold).
+        Peak resident memory (what a cgroup limit or the physical memory must hold): the run's
+        stages, or the xatlas unwrap (the run so far plus its child) where that is larger.
     parts : dict of str to int
         The terms of the model: ``base``, ``mesh``, ``sim``, ``bake``, ``stress``, ``decal``,
-        ``frames``.
+        ``frames``, ``xatlas`` (the child's peak; not part of the stages' sum).
     """
 
     rss: int
@@ -79,18 +95,33 @@ class MemoryEstimate:
 
     @property
     def address_space(self) -> int:
-        """Peak address space (what ``RLIMIT_AS`` must allow)."""
-        return int(self.rss + ADDRESS_OVERHEAD)
+        """Peak address space of one process (what ``RLIMIT_AS``, which each process has
+        alone, must allow): the run's, or the xatlas child's where larger."""
+        return int(max(self.stages, self.parts.get("xatlas", 0)) + ADDRESS_OVERHEAD)
+
+    @property
+    def stages(self) -> int:
+        """Peak of the run's own process: the stages' sum."""
+        return sum(v for k, v in self.parts.items() if k != "xatlas")
+
+    @property
+    def unwrap_peak(self) -> int:
+        """Run and xatlas child together while the unwrap runs (0 without an unwrap)."""
+        child = self.parts.get("xatlas", 0)
+        return self.parts.get("base", 0) + self.parts.get("mesh", 0) + child if child else 0
 
     @property
     def largest(self) -> str:
         """The part that weighs most: which option to lower."""
-        return max((k for k in self.parts if k != "base"), key=self.parts.__getitem__)
+        if self.unwrap_peak > self.stages:
+            return "xatlas"
+        return max((k for k in self.parts if k not in ("base", "xatlas")),
+                   key=self.parts.__getitem__)  # fmt: skip
 
 
 def estimate_peak(faces: int, sim_faces: int, res: int, stress_res: int | None = None,
                   tile: int = TILE_DEFAULT, decal_res: int | None = None,
-                  frames: int = 0) -> MemoryEstimate:
+                  frames: int = 0, unwrap_faces: int = 0) -> MemoryEstimate:
     """Estimated peak memory of a run from its sizes.
 
     Parameters
@@ -110,6 +141,8 @@ def estimate_peak(faces: int, sim_faces: int, res: int, stress_res: int | None =
         Texels per side of the projected decals (``--decal``); None when none is baked.
     frames : int
         ``--frames N``: the growth frames (their cost does not grow with N).
+    unwrap_faces : int
+        Faces xatlas unwraps (0: the run keeps the mesh's UVs).
 
     Returns
     -------
@@ -125,8 +158,11 @@ def estimate_peak(faces: int, sim_faces: int, res: int, stress_res: int | None =
         "decal": PER_DECAL_TEXEL * decal_res**2 if decal_res else 0.0,
         "frames": PER_FRAME_TEXEL * res * res if frames else 0.0,
     }
+    if unwrap_faces:
+        parts["xatlas"] = XATLAS_BASE + XATLAS_PER_FACE * unwrap_faces
     parts = {k: int(v) for k, v in parts.items()}
-    return MemoryEstimate(rss=sum(parts.values()), parts=parts)
+    est = MemoryEstimate(rss=0, parts=parts)
+    return MemoryEstimate(rss=max(est.stages, est.unwrap_peak), parts=parts)
 
 
 def run_sizes(params, mesh=None, faces: int | None = None) -> dict:
@@ -165,8 +201,13 @@ def run_sizes(params, mesh=None, faces: int | None = None) -> dict:
     decal = None
     if params.decal is not None:
         decal = params.decal_res or min(params.res, DECAL_RES_DEFAULT)
+    # --uv auto unwraps a mesh without UVs (and one whose UVs are unusable, which only the UV
+    # check finds: counted as kept).  A cached unwrap runs no child, but may be gone by then.
+    no_uv = mesh is not None and getattr(mesh, "uv", None) is None
+    unwrapping = params.uv == "unwrap" or (params.uv == "auto" and no_uv)
     return {"faces": faces, "sim_faces": sim, "res": params.res, "stress_res": stress,
-            "tile": params.tile, "decal_res": decal, "frames": int(params.frames or 0)}
+            "tile": params.tile, "decal_res": decal, "frames": int(params.frames or 0),
+            "unwrap_faces": faces if unwrapping else 0}
 
 
 def _read_int(path: str) -> int | None:
@@ -255,6 +296,8 @@ _LOWER = {
     "frames": "--res (the frames are --res wide)",
     "sim": "--sim-faces (or a larger --detail)",
     "mesh": "the mesh's face count (decimate it)",
+    "xatlas": "the mesh's face count (decimate it; xatlas unwraps in a second process), or keep "
+              "your own UVs (--uv keep)",
 }
 
 
@@ -284,6 +327,10 @@ def check_memory(estimate: MemoryEstimate, max_memory: float | None = None) -> N
     if need <= room:
         return
     shares = {**estimate.parts, **({"libraries": ADDRESS_OVERHEAD} if need > estimate.rss else {})}
+    if estimate.largest == "xatlas":  # the unwrap's peak: the run so far and its child
+        shares = {k: v for k, v in shares.items() if k in ("base", "mesh", "xatlas", "libraries")}
+    else:
+        shares.pop("xatlas", None)
     parts = ", ".join(f"{k} {v / GIB:.1f}" for k, v in shares.items() if v >= 0.05 * GIB)
     space = " of address space" if address else ""
     override = ("raise --max-memory" if max_memory is not None

@@ -19,6 +19,13 @@ layout(std430, binding = 0) readonly buffer Segments { Segment seg[]; };
 layout(std430, binding = 2) readonly buffer BinStart { uint bin_start[]; };
 layout(std430, binding = 3) readonly buffer Candidates { uint cand[]; };
 layout(std430, binding = 4) readonly buffer Bounds { float cand_bound[]; };  // ascending per bin
+#ifdef CRACK_CELLS
+// A camera's image (the decal bake, crackbake/bake/cells.py): the lists belong to square cells
+// of the image instead of the faces' bins.
+uniform int u_cell;      // cell edge, texels
+uniform int u_cells_x;   // cells per image row
+uniform int u_row0;      // image row of the band's first row (image rows run top-down)
+#endif
 
 uniform float u_max_distance;   // distance channel clamp, mesh units
 uniform float u_half_width;     // half the widest crack's width, mesh units
@@ -50,7 +57,11 @@ void main() {
         o_distance = 0.0; o_id = 0.0; o_inside = 0.0;
         return;
     }
+#ifdef CRACK_CELLS
+    uint bin = uint(((u_row0 + texel.y) / u_cell) * u_cells_x + texel.x / u_cell);
+#else
     uint bin = uint(point.w);
+#endif
     vec3 p = point.xyz;
     // World-space footprint of one texel; the surface is affine inside a face.
     vec3 dpx = gx.xyz;

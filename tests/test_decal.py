@@ -387,3 +387,39 @@ def test_decals_fade_with_the_angle_to_the_projector(gl_ctx):
     # Face on and at 40 degrees: untouched; at 85 degrees (the dashed streaks): gone.
     assert peak[0.0][0] == peak[0.0][1] > 0.5 and peak[40.0][0] == peak[40.0][1]
     assert peak[85.0][0] == 0.0 and peak[85.0][1] >= 0.3
+
+
+def test_sigterm_stops_a_decal_bake_between_two_gl_calls(gl_ctx, monkeypatch):
+    """The crack pass runs in scissored slices (one GL call each, SLICE_TEXELS texels at most):
+    SIGTERM sent while the first slice reports stops the bake before the second is drawn, the
+    context stays clean, and the slices draw exactly what one call draws."""
+    import signal
+
+    from crackbake.bake import raster
+    from crackbake.transaction.interrupt import Interrupt, interruptible
+
+    v, f, _ = half_cylinder()
+    seg = segments(cylinder_network(v, f))
+    proj = make_projector(v, f, np.array([0.0, 1.0, 1.2]), 0.8)
+    whole = bake_decal(v, f, seg, proj, 256, 0.05, ctx=gl_ctx)
+
+    monkeypatch.setattr(raster, "SLICE_TEXELS", 256 * 32)  # 8 slices of 32 rows
+    calls: list[int] = []
+
+    def stop_at_first(done: int, total: int) -> None:
+        calls.append(done)
+        if len(calls) == 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    with pytest.raises(Interrupt) as caught, interruptible():
+        bake_decal(v, f, seg, proj, 256, 0.05, ctx=gl_ctx, progress=stop_at_first)
+    assert caught.value.signum == signal.SIGTERM
+    assert calls == [32]
+
+    rows: list[int] = []
+    sliced = bake_decal(v, f, seg, proj, 256, 0.05, ctx=gl_ctx,
+                        progress=lambda done, total: rows.append(done))  # fmt: skip
+    assert rows == list(range(32, 257, 32))
+    assert (whole.mask > 0.5).sum() > 500
+    for name, img in whole.channels().items():
+        np.testing.assert_array_equal(sliced.channels()[name], img, err_msg=name)

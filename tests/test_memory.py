@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from crackbake.errors import CrackbakeError
@@ -67,7 +68,7 @@ def test_run_sizes_follow_the_options(tmp_path):
     p = RunParams(mesh=Path("m.obj"), res=4096, sim_faces=300_000)
     sizes = run_sizes(p, faces=5000)
     assert sizes == {"faces": 5000, "sim_faces": 300_000, "res": 4096, "stress_res": 1024,
-                     "tile": 4096, "decal_res": None, "frames": 0}
+                     "tile": 4096, "decal_res": None, "frames": 0, "unwrap_faces": 0}
     # An asset finer than wanted is its own sim mesh; far finer gets a proxy of the wanted size.
     assert run_sizes(p, faces=500_000)["sim_faces"] == 500_000
     assert run_sizes(p, faces=5_000_000)["sim_faces"] == 300_000
@@ -147,3 +148,70 @@ def test_frames_add_one_term_whatever_their_count():
     assert eight.rss > plain.rss and many.rss == eight.rss
     p = RunParams(mesh=Path("m.obj"), frames=12, res=2048)
     assert run_sizes(p, faces=10)["frames"] == 12
+
+
+def test_the_xatlas_child_adds_to_the_unwrap_not_to_the_later_stages():
+    """xatlas runs in a child while the run waits, before the solver and the bake: the peak is
+    the larger of the stages' sum and (base + mesh + child), never all of them at once."""
+    from crackbake.memory import ADDRESS_OVERHEAD, XATLAS_BASE, XATLAS_PER_FACE
+
+    sizes = {"faces": 100_000, "sim_faces": 100_000, "res": 4096}
+    kept = estimate_peak(**sizes)
+    unwrapped = estimate_peak(**sizes, unwrap_faces=100_000)
+    child = XATLAS_BASE + XATLAS_PER_FACE * 100_000
+    assert unwrapped.parts["xatlas"] == int(child)
+    assert unwrapped.rss == kept.rss  # the bake's peak is later and larger than the unwrap's
+    assert unwrapped.largest == kept.largest == "bake"
+
+    # A re-bake of a big scan at a small size: the unwrap is the peak.
+    big = estimate_peak(faces=3_000_000, sim_faces=0, res=256, unwrap_faces=3_000_000)
+    p = big.parts
+    assert big.rss == p["base"] + p["mesh"] + p["xatlas"] > big.stages
+    assert big.largest == "xatlas"
+    # Address space is each process's own: the larger of the two, plus the libraries.
+    assert big.address_space == int(max(big.stages, p["xatlas"]) + ADDRESS_OVERHEAD)
+    with pytest.raises(CrackbakeError) as info:
+        check_memory(big, max_memory=big.rss / GIB - 0.5)
+    text = str(info.value)
+    assert "decimate it" in text and "--uv keep" in text
+    assert "xatlas" in text and "bake" not in text
+
+
+def test_run_sizes_count_the_unwrap_when_there_is_one():
+    from crackbake.io.mesh import Mesh
+
+    def mesh(uv):
+        v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+        return Mesh(vertices=v, faces=np.array([[0, 1, 2]]), uv=uv, normals=None,
+                    source="t.obj", name="t")
+
+    with_uv, without = mesh(np.array([[0.0, 0], [1, 0], [0, 1]])), mesh(None)
+    auto = RunParams(mesh=Path("m.obj"))
+    assert run_sizes(auto, with_uv)["unwrap_faces"] == 0
+    assert run_sizes(auto, without)["unwrap_faces"] == 1
+    assert run_sizes(RunParams(mesh=Path("m.obj"), uv="unwrap"), with_uv)["unwrap_faces"] == 1
+    assert run_sizes(RunParams(mesh=Path("m.obj"), uv="unwrap"), faces=7)["unwrap_faces"] == 7
+    assert run_sizes(RunParams(mesh=Path("m.obj"), uv="keep"), without)["unwrap_faces"] == 0
+
+
+@pytest.mark.slow
+def test_the_xatlas_term_holds_a_real_worker():
+    """A real unwrap of a 40k-face scan-like mesh in a fresh process: its one child's peak RSS
+    (the xatlas worker) lies under the model's xatlas term, and not far under it."""
+    from crackbake.memory import XATLAS_BASE, XATLAS_PER_FACE
+
+    code = (
+        "import resource, warnings\n"
+        "from crackbake.bake.uv import unwrap\n"
+        "from crackbake.bake.uv.shapes import scan_blob\n"
+        "m = scan_blob(40000, 0.15)\n"
+        "warnings.simplefilter('ignore')\n"
+        "unwrap(m, 1024, cache=False, timeout=600)\n"
+        "print(len(m.faces), resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         timeout=900, check=True)  # fmt: skip
+    faces, kib = (int(x) for x in out.stdout.split())
+    measured, model = kib * 1024, XATLAS_BASE + XATLAS_PER_FACE * faces
+    assert 0.6 * model < measured < model, (measured / 2**20, model / 2**20)

@@ -163,6 +163,52 @@ def test_interrupt_without_previous_outputs_leaves_nothing(tmp_path):
     assert sorted(tmp_path.iterdir()) == []  # not even the parent folder it created
 
 
+def star_on_a_square(folder: Path, n_cracks: int = 150) -> tuple[Path, Path]:
+    """A unit square of two faces (plate_obj) and a sidecar of a dense glass-like star on it:
+    ``n_cracks`` radial cracks of 12 points from near (0.5, 0.5) out to 0.1-0.2."""
+    from crackbake.io.mesh import load_mesh
+    from crackbake.io.sidecar import write_sidecar
+    from crackbake.network import Crack, CrackNetwork, mesh_info
+    from crackbake.precompile import plate_obj
+
+    mesh_path = plate_obj(folder / "square.obj", 1, uv_margin=0.0)
+    rng = np.random.default_rng(3)
+    cracks = []
+    for k in range(n_cracks):
+        ang = 2 * np.pi * k / n_cracks
+        r = np.linspace(0.001 + 0.002 * rng.random(), rng.uniform(0.1, 0.2), 12)
+        p = np.c_[0.5 + r * np.cos(ang), 0.5 + r * np.sin(ang), np.zeros(12)]
+        w = np.linspace(0.003, 0.001, 12)
+        # plate_obj(n=1): face 0 holds x >= y, face 1 the rest.
+        cracks.append(Crack(id=k, points=p, faces=(p[:, 0] < p[:, 1]).astype(np.int64),
+                            time=np.linspace(0, 1, 12), width=w, depth=0.5 * w))  # fmt: skip
+    sidecar = folder / "star.json"
+    write_sidecar(CrackNetwork(cracks=cracks, mesh=mesh_info(load_mesh(mesh_path))), sidecar)
+    return mesh_path, sidecar
+
+
+def test_sigterm_during_a_decal_bake_stops_it_promptly(tmp_path):
+    """A 4096-texel decal over a dense star on two faces (each texel near hundreds of segments):
+    SIGTERM once the decal stage has started ends the run within seconds, exit 143, nothing
+    written, nothing staged.  (The crack pass runs in short GL calls; before, one call over the
+    whole decal walked every segment of the face at every texel and ignored signals for minutes.)"""
+    inputs = tmp_path / "inputs"
+    inputs.mkdir()
+    mesh, sidecar = star_on_a_square(inputs)
+    out = tmp_path / "new" / "square_cracks"
+    args = [str(mesh), "--cracks", str(sidecar), "--impact", "0.5,0.5,0", "--decal", "0.4",
+            "--decal-res", "4096", "--res", "64", "--formats", "exr"]
+    r = Run(args, out, tmp_path)
+    r.wait_for("decal(s)")
+    sent = time.monotonic()
+    r.proc.send_signal(signal.SIGTERM)
+    assert r.finish() == 143, r.lines
+    took = time.monotonic() - sent
+    assert r.lines[-1] == "error: interrupted; no outputs were written"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["inputs"]
+    assert took < 10.0, f"{took:.1f} s from SIGTERM to exit"
+
+
 @pytest.mark.slow
 def test_sigkill_while_writing_then_the_next_run_cleans_up(old_set, tmp_path):
     before = snapshot(old_set)

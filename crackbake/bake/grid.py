@@ -53,6 +53,10 @@ class FaceBins:
     bin_start: np.ndarray
     candidates: np.ndarray
     bounds: np.ndarray
+    #: Image cells instead of face bins (:func:`image_bins`): each cell's edge in texels (0:
+    #: the bins are face bins, ``face_bin`` says which) and the cells per image row.
+    cell: int = 0
+    cells_x: int = 0
 
 
 def face_reach(
@@ -68,6 +72,14 @@ def face_reach(
         Frobenius norm of the face's texel-to-world Jacobian (0 for faces of no UV area: they
         draw no texels), plus a small slack; ``min_px`` is the bake's least drawn width in texels.
     """
+    foot = face_footprint(vertices, faces, uv, res)
+    drawn = np.maximum(half_width, 0.5 * min_px * foot)
+    return np.maximum(max_distance, drawn + foot) * (1 + _SLACK)
+
+
+def face_footprint(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray, res: int) -> np.ndarray:
+    """The Frobenius norm of each face's texel-to-world Jacobian, (F,) float64, mesh units per
+    texel (0 for faces of no UV area: they draw no texels)."""
     # Corner columns, not (F, 3, 3) gathers: numpy reduces those slowly along the short axis.
     p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
     e1, e2 = p1 - p0, p2 - p0
@@ -81,9 +93,7 @@ def face_reach(
         dpy = (e2 * q1[:, 0:1] - e1 * q2[:, 0:1]) / det[:, None]
         foot = np.sqrt(np.einsum("ij,ij->i", dpx, dpx) + np.einsum("ij,ij->i", dpy, dpy))
     # A face with no UV area draws no texels: its reach never matters.
-    foot = np.where(np.isfinite(foot), foot, 0.0)
-    drawn = np.maximum(half_width, 0.5 * min_px * foot)
-    return np.maximum(max_distance, drawn + foot) * (1 + _SLACK)
+    return np.where(np.isfinite(foot), foot, 0.0)
 
 
 def bin_faces(lo: np.ndarray, hi: np.ndarray, cell: float, size: np.ndarray) -> np.ndarray:

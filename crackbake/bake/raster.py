@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from crackbake.bake.cells import image_bins
 from crackbake.bake.context import GLScope
 from crackbake.bake.dilation import dilate
 from crackbake.bake.grid import FaceBins, face_bins
@@ -155,6 +157,7 @@ def bake_cracks(
     min_px: float = MIN_PX_DEFAULT,
     look=None,
     seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
 
@@ -207,6 +210,10 @@ def bake_cracks(
         None bakes the default look.  Kept on the maps for the written material.
     seed : int
         Seed of the chipping noise.
+    progress : callable, optional
+        Called as ``progress(rows_done, res)`` after each GL call of the crack pass (at most
+        :data:`SLICE_TEXELS` texels each), in the main thread: a long bake reports as it goes,
+        and a SIGINT/SIGTERM handler runs between two calls.
 
     Returns
     -------
@@ -231,13 +238,17 @@ def bake_cracks(
     reached = segments
     if terms["reach"] != 1.0:  # chipped or curled cracks draw beyond their half width
         reached = replace(segments, width=segments.width * terms["reach"])
-    bins = face_bins(vertices, faces, uv, reached, res, max_distance, float(min_px))
+    if projection is None:
+        bins = face_bins(vertices, faces, uv, reached, res, max_distance, float(min_px))
+    else:  # a camera's image: lists per image cell (crackbake.bake.cells)
+        bins = image_bins(vertices, faces, uv, reached, res, max_distance, projection,
+                          float(min_px))  # fmt: skip
     timings["candidates"] = time.perf_counter() - t0
 
     images = _render(
         ctx, vertices, faces, uv, segments, res, tile, bins,
         float(max_distance), float(profile_shape), timings, frames, projection, float(min_px),
-        terms,
+        terms, progress,
     )  # fmt: skip
 
     maps = _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
@@ -245,6 +256,12 @@ def bake_cracks(
     maps.look = look
     return maps
 
+
+#: Most texels the crack pass measures in one GL call (rows of a band, scissored): a fraction of
+#: a second of llvmpipe even in a dense star's centre, so SIGINT/SIGTERM, which Python handles
+#: only between calls, stop a bake of any size promptly.  The bands themselves (and so the
+#: surface pass's rounding: the pixels) stay as ``tile`` makes them.
+SLICE_TEXELS = 1 << 19
 
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 # width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
@@ -266,7 +283,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     ctx = gl.ctx
     with_normals = frames is not None
     terms = terms or look_terms(None, segments)
-    defines = tuple(terms["defines"])
+    defines = tuple(terms["defines"]) + (("CRACK_CELLS",) if bins.cell else ())
     vertex = np.empty((len(vertices), 5), np.float32)
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
@@ -310,6 +327,9 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
             prog[name].value = value
     prog["u_shape"].value = profile_shape
     prog["u_min_px"].value = min_px
+    if bins.cell:
+        prog["u_cell"].value = bins.cell
+        prog["u_cells_x"].value = bins.cells_x
     return surface, vao, screen
 
 
@@ -347,6 +367,7 @@ def _render(
     projection: np.ndarray | None = None,
     min_px: float = 0.0,
     terms: dict | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> dict[str, np.ndarray]:
     """Draw the faces at their placement band by band; the planar channel images (row 0 = top)."""
     import moderngl
@@ -357,6 +378,7 @@ def _render(
         surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
                                          max_distance, profile_shape, frames, projection, min_px,
                                          terms)
+        prog_row0 = screen.program["u_row0"] if bins.cell else None
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
         # (69 bytes a texel: 48 for the surface pass, 21 for the maps; 72 with the normal map,
@@ -386,8 +408,9 @@ def _render(
             surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
             vao.render(moderngl.TRIANGLES)
             fbo.use()
-            screen.render(moderngl.TRIANGLES, vertices=3)
-            gl.ctx.finish()
+            if bins.cell:
+                prog_row0.value = y0
+            _crack_pass(gl.ctx, fbo, screen, res, h, y0, progress)
             tb = time.perf_counter()
             for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
@@ -405,6 +428,25 @@ def _render(
         if with_normals:
             timings["normals"] = t_normals
     return images
+
+
+def _crack_pass(ctx, fbo, screen, res: int, rows: int, y0: int = 0, progress=None) -> None:
+    """Run the crack pass over the band's first ``rows`` rows (image rows ``y0 ..``), in slices
+    of at most :data:`SLICE_TEXELS` texels, each finished before the next is drawn."""
+    import moderngl
+
+    step = max(1, SLICE_TEXELS // res)
+    try:
+        for r0 in range(0, rows, step):
+            if step < rows:
+                fbo.scissor = (0, r0, res, min(step, rows - r0))
+            screen.render(moderngl.TRIANGLES, vertices=3)
+            ctx.finish()
+            if progress is not None:
+                progress(y0 + min(r0 + step, rows), res)
+    finally:
+        if step < rows:
+            fbo.scissor = None
 
 
 def _max_distance(vertices: np.ndarray, segments: Segments, max_distance: float | None) -> float:

@@ -251,6 +251,7 @@ def bake_decal(
     ctx=None,
     min_px: float = MIN_PX_DEFAULT,
     angle_fade: tuple[float, float] | None = ANGLE_FADE_DEG,
+    progress=None,
 ) -> CrackMaps:
     """Bake the crack network as the projector sees it: the decal texture set.
 
@@ -275,6 +276,8 @@ def bake_decal(
     angle_fade : (float, float) or None
         Start and end of the angle fade, degrees between the surface normal and the
         projector's axis (:data:`ANGLE_FADE_DEG`; :func:`angle_fade_image`); None: no fade.
+    progress : callable, optional
+        ``progress(rows_done, res)`` after each GL call of the crack pass (``bake_cracks``).
 
     Returns
     -------
@@ -298,7 +301,7 @@ def bake_decal(
     maps = bake_cracks(
         vertices, sub, placement, segments, res, max_distance=max_distance,
         profile_shape=profile_shape, dilate_px=DECAL_DILATE_PX, ctx=ctx, normals=normals,
-        tangents=tangents, projection=clip, min_px=min_px, **extra,
+        tangents=tangents, projection=clip, min_px=min_px, progress=progress, **extra,
     )  # fmt: skip
     if angle_fade is not None:
         fade_maps(maps, angle_fade_image(vertices, sub, projector, res, angle_fade, ctx))
