@@ -58,12 +58,14 @@ def grain_angle(seed, x, y, z):
     The grain belongs to the material, not to the node: a pure function of where the node is, so
     a node made by a split gets the same grain whatever cracks grew before it (a node index
     would depend on them, and a later impact's star would drift from its lone twin), copies of a
-    split node share their point's grain, and nothing has to be stored.
+    split node share their point's grain, and nothing has to be stored.  The coordinates are
+    hashed as float32: a point made on edge (a, b) or (b, a) differs in the last float64 bit,
+    and that alone must not draw another grain.
     """
     h = _splitmix(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15)
-                  + np.float64(x).view(np.uint64))
-    h = _splitmix(h + np.float64(y).view(np.uint64))
-    h = _splitmix(h + np.float64(z).view(np.uint64))
+                  + np.uint64(np.float32(x).view(np.uint32)))
+    h = _splitmix(h + np.uint64(np.float32(y).view(np.uint32)))
+    h = _splitmix(h + np.uint64(np.float32(z).view(np.uint32)))
     return 2.0 * np.pi * float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
