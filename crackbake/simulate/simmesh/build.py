@@ -296,19 +296,26 @@ def _refine(wv: np.ndarray, wf: np.ndarray, keep: np.ndarray, h: float,
     corners, pt_edge, t_edge, l_face, l_xy = _layout(wv[wf], face_edge, n_e, h, rng, jitter)
     h_face = h
     if local is not None:
-        h_face = local.edge_at(wv[wf].mean(axis=1), h)
-        ball = local.ball_of(wv[wf].mean(axis=1), h)
+        centroid = wv[wf].mean(axis=1)
+        h_face = local.edge_at(centroid, h)
+        ball = local.ball_of(centroid, h)
         base = int(rng.integers(1 << 62)) if (ball >= 0).any() else 0
         for k in np.unique(ball[ball >= 0]):
             # Faces outside the balls keep exactly the points the uniform layout gives them
             # (same draws), so a star far from a refined ball sees the same sim mesh as
             # without it; each ball's faces and their edges draw from a stream of their own,
             # seeded by its centre, so a ball is meshed the same whatever other balls exist.
+            # The stream draws as if the ball were alone (every face in its sphere at its
+            # edge): where a neighbouring ball takes some of those faces, the draws of the
+            # faces after them in the stream must not shift (they did, and a star's sim mesh
+            # changed when a second impact's ball overlapped the rim of its own).
             fine = ball == k
+            alone = np.linalg.norm(centroid - local.centres[k], axis=1) <= local.radii[k]
+            h_alone = np.where(alone, min(float(local.edges[k]), h), h)
             key = np.ascontiguousarray(local.centres[k], np.float64).view(np.uint32)
             sub = np.random.default_rng([base, *(int(x) for x in key)])
             f_corners, f_edge, f_t, f_face, f_xy = _layout(
-                wv[wf], face_edge, n_e, np.where(fine, h_face, h), sub, jitter)
+                wv[wf], face_edge, n_e, h_alone, sub, jitter)
             touch = np.zeros(n_e, dtype=bool)
             touch[face_edge[fine].ravel()] = True
             corners = np.where(fine[:, None, None], f_corners, corners)

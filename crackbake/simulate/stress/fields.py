@@ -508,28 +508,33 @@ def _curvature_field(sim, mesh: Mesh, geo: _Geometry, src: CurvatureSource) -> n
 
 
 
-def _smooth_noise(points: np.ndarray, scale: float, rng: np.random.Generator, count: int):
+def _smooth_noise(points: np.ndarray, origin: np.ndarray, scale: float,
+                  rng: np.random.Generator, count: int):
     """``count`` smooth unit-variance random fields at (M, 3) points, (count, M).
 
     Each is a sum of :data:`NOISE_WAVES` plane waves of random direction, phase and wavelength
-    near ``scale`` (solid noise, so it is seamless across UV seams and thin walls alike).
+    near ``scale`` (solid noise, so it is seamless across UV seams and thin walls alike), with
+    phases relative to ``origin`` (3,): the asset's bounding-box centre, so that the noise at a
+    point does not depend on how the simulation mesh samples the surface elsewhere (the mean of
+    the sample points moved when another impact refined its ball, and shifted every star's noise).
     """
     k = rng.normal(size=(3, count * NOISE_WAVES))
     k /= np.linalg.norm(k, axis=0, keepdims=True)
     k *= (2 * np.pi / scale) * rng.uniform(0.7, 1.4, size=count * NOISE_WAVES)
     phase = rng.uniform(0, 2 * np.pi, size=count * NOISE_WAVES)
     # Phases in float64 (large coordinates), cosines in float32: it is only noise.
-    arg = ((points - points.mean(axis=0)) @ k + phase).astype(np.float32)
+    arg = ((points - origin) @ k + phase).astype(np.float32)
     np.cos(arg, out=arg)
     out = arg.reshape(len(points), count, NOISE_WAVES).sum(axis=2, dtype=np.float64).T
     return out * np.sqrt(2.0 / NOISE_WAVES)
 
 
 def _apply_noise(
-    stress: np.ndarray, geo: _Geometry, src: NoiseSource, scale: float, rng: np.random.Generator
+    stress: np.ndarray, geo: _Geometry, src: NoiseSource, scale: float, rng: np.random.Generator,
+    origin: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Noisy stress and the multiplier used (so growth can follow it)."""
-    fields = _smooth_noise(geo.centroid, scale, rng, 4)
+    fields = _smooth_noise(geo.centroid, origin, scale, rng, 4)
     factor = np.maximum(1.0 + src.amount * fields[0], 0.0)
     size = np.sqrt(np.einsum("eab,eab->e", stress, stress))
     if not size.any():
@@ -610,10 +615,11 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
              else None)
     stress *= weight[:, None, None]
     growth *= weight[:, None, None]
+    origin = 0.5 * (mesh.bbox_min + mesh.bbox_max)
     for i, src in enumerate(noises):
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), i]))
         scale = src.scale if src.scale is not None else NOISE_SCALE_DIAGONAL * mesh.diagonal
-        stress, factor = _apply_noise(stress, geo, src, scale, rng)
+        stress, factor = _apply_noise(stress, geo, src, scale, rng, origin)
         growth *= factor[:, None, None]
 
     # Exactly in-plane and symmetric whatever rounding did; degenerate faces carry nothing.
