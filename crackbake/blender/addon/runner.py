@@ -37,7 +37,7 @@ def check_command(command: str, timeout: float = 60.0) -> tuple[str | None, str 
         return None, (f"cannot run the crackbake command '{command}' ({exc}); set its path in "
                       "Preferences > Add-ons > Crackbake (crackbake blender-addon fills it in)")
     words = proc.stdout.split()
-    if proc.returncode != 0 or len(words) < 2 or words[0] != "crackbake":
+    if proc.returncode != 0 or len(words) < 2 or words[0].rstrip(",") != "crackbake":
         said = (proc.stderr or proc.stdout).strip().splitlines()
         return None, (f"'{command} --version' did not answer as crackbake does (exit "
                       f"{proc.returncode}{': ' + said[-1] if said else ''}); set the command in "

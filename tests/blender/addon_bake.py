@@ -1,0 +1,148 @@
+"""Install the crackbake extension zip into a clean user profile, bake spot through it, and
+report what the scene holds.  Run by tests/test_blender_addon.py under Blender's Python with
+BLENDER_USER_RESOURCES pointing at an empty folder.
+
+Arguments: ZIP SPOT OUT_DIR RES MODE, MODE one of
+``bake`` (transform spot, two impacts, a vertex group, bake, re-bake at another resolution),
+``cancel`` (bake in the background, poll as Blender's timer does, cancel mid-run),
+``errors`` (a non-mesh active object, a wrong crackbake command).
+"""
+
+import json
+import os
+import sys
+import time
+
+import bpy
+from mathutils import Matrix, Vector
+
+zip_path, spot, out_dir, res, mode = sys.argv[1:6]
+result = {}
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+installed = bpy.ops.extensions.package_install_files(
+    filepath=zip_path, repo="user_default", enable_on_install=True)
+result["installed"] = sorted(installed)
+module = "bl_ext.user_default.crackbake"
+result["enabled"] = module in bpy.context.preferences.addons
+ops_mod = sys.modules[module + ".ops"]
+prefs = bpy.context.preferences.addons[module].preferences
+result["command"] = prefs.command
+
+bpy.ops.wm.obj_import(filepath=spot, forward_axis="NEGATIVE_Z", up_axis="Y")
+obj = bpy.context.selected_objects[0]
+bpy.context.view_layer.objects.active = obj
+# the importer's axis change, then a rotation, a scale and a move
+obj.matrix_world = (Matrix.Translation((1.5, -2.0, 0.25)) @ Matrix.Rotation(0.7, 4, "Z")
+                    @ Matrix.Scale(2.0, 4) @ obj.matrix_world)
+bpy.context.view_layer.update()
+s = obj.crackbake
+s.output_dir = out_dir + os.sep
+s.res = int(res)
+s.preset = "glass"
+s.seed = 3
+
+# two impacts on the surface, clicked in world space: vertices of spot's flank and back
+local = [Vector((0.334, 0.044, 0.287)), Vector((-0.25, 0.35, -0.05))]
+me = obj.data
+picked = []
+for p in local:
+    v = min(me.vertices, key=lambda v: (v.co - p).length)
+    picked.append(v.co.copy())
+result["impacts_local"] = [list(p) for p in picked]
+for p in picked:
+    bpy.ops.crackbake.add_impact(location=obj.matrix_world @ p, radius=2.0 * 0.12, strength=1.0)
+result["stored"] = [list(i.location) for i in s.impacts]
+result["stored_radius"] = [i.radius for i in s.impacts]
+
+
+def material_state():
+    mat = obj.active_material
+    tree = mat.node_tree
+    node = tree.nodes.get("Crackbake Cracks")
+    bsdf = next(n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    linked = {sock: bsdf.inputs[sock].is_linked and
+              bsdf.inputs[sock].links[0].from_node == node for sock in
+              ("Base Color", "Roughness", "Normal")}
+    images = {n.name: {"image": n.image.name, "space": n.image.colorspace_settings.name,
+                       "file": os.path.basename(n.image.filepath),
+                       "size": list(n.image.size)}
+              for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image}
+    return {"material": mat.name, "group": node.node_tree.name if node else None,
+            "linked": linked, "images": images,
+            "groups": sorted(g.name for g in bpy.data.node_groups),
+            "all_images": sorted(i.name for i in bpy.data.images)}
+
+
+if mode == "bake":
+    group = obj.vertex_groups.new(name="stress")
+    group.add([v.index for v in me.vertices if v.co.z > 0], 1.0, "REPLACE")
+    s.weight_group = "stress"
+    t = time.perf_counter()
+    r = bpy.ops.crackbake.bake(wait=True)
+    result["bake"] = sorted(r)
+    result["bake_s"] = time.perf_counter() - t
+    result["status"] = s.status
+    result["out"] = s.last_out
+    result["first"] = material_state()
+    with open(os.path.join(s.last_out, "cracks.json")) as fh:
+        result["sidecar_impacts"] = json.load(fh)["impacts"]
+    with open(os.path.join(s.last_out, "manifest.json")) as fh:
+        result["params"] = json.load(fh)["params"]
+    # growth is animatable
+    node = obj.active_material.node_tree.nodes["Crackbake Cracks"]
+    result["keyframed"] = node.inputs["Growth"].keyframe_insert("default_value", frame=1)
+    # re-bake the same network at another resolution: the images are replaced in place
+    s.res = int(res) // 2
+    r = bpy.ops.crackbake.bake(wait=True, reuse=True)
+    result["rebake"] = sorted(r)
+    result["second"] = material_state()
+    with open(os.path.join(s.last_out, "manifest.json")) as fh:
+        result["rebake_params"] = json.load(fh)["params"]
+elif mode == "cancel":
+    s.res = 4096
+    r = bpy.ops.crackbake.bake()
+    result["bake"] = sorted(r)
+    job = ops_mod._State.job
+    result["workdir"] = job.workdir
+    polls, times = 0, []
+    cancelled_at = None
+    end = time.monotonic() + 240
+    while ops_mod._State.job is not None and time.monotonic() < end:
+        t = time.perf_counter()
+        again = ops_mod.poll_job()
+        times.append(time.perf_counter() - t)
+        polls += 1
+        if cancelled_at is None and job.message.startswith("growing cracks"):
+            cancelled_at = job.message
+            bpy.ops.crackbake.cancel()
+        if again is None:
+            break
+        time.sleep(0.05)
+    result["polls"] = polls
+    result["max_poll_s"] = max(times) if times else None
+    result["cancelled_at"] = cancelled_at
+    result["status"] = s.status
+    result["workdir_left"] = os.path.exists(result["workdir"])
+    result["state"] = material_state() if obj.active_material else None
+elif mode == "errors":
+    bpy.ops.object.camera_add()
+    camera = bpy.context.active_object
+    try:
+        bpy.ops.crackbake.bake(wait=True)
+        result["camera"] = "no error"
+    except RuntimeError as exc:
+        result["camera"] = str(exc)
+    bpy.context.view_layer.objects.active = obj
+    prefs.command = "/nonexistent/crackbake"
+    try:
+        bpy.ops.crackbake.bake(wait=True)
+        result["wrong_command"] = "no error"
+    except RuntimeError as exc:
+        result["wrong_command"] = str(exc)
+
+result["tmp_left"] = sorted(n for n in os.listdir(os.environ.get("TMPDIR", "/tmp"))
+                            if n.startswith("crackbake-"))
+print(json.dumps(result))
+sys.stdout.flush()
+os._exit(0)  # bpy's atexit handlers can hang a headless interpreter
