@@ -24,7 +24,7 @@ ADDON = Path(__file__).resolve().parent / "addon"
 MANIFEST = "blender_manifest.toml"
 #: The bake options whose help the extension shows (click parameter names).
 HELP_OPTIONS = ("preset", "method", "seed", "res", "min_px", "impacts", "weight_attribute",
-                "shrink", "noise", "spacing")
+                "shrink", "noise", "spacing", "sim_faces")
 
 
 def zip_name(version: str = __version__) -> str:
@@ -111,4 +111,4 @@ def blender_addon(out_dir: Path, command: str | None) -> None:
     from Preferences > Get Extensions > Install from Disk, or with
     `blender --command extension install-file -r user_default -e ZIP`."""
     path = reported(lambda: build_extension(out_dir, command), quiet=False)
-    click.echo(str(path))
+    click.echo(str(path.resolve()))

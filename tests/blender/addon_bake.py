@@ -41,6 +41,15 @@ s.output_dir = out_dir + os.sep
 s.res = int(res)
 s.preset = "glass"
 s.seed = 3
+s.sim_faces = int(os.environ.get("CRACKBAKE_TEST_SIM_FACES", "0"))
+# the artist's own material: a blue, fairly smooth Principled BSDF
+mat = bpy.data.materials.new("artist")
+mat.use_nodes = True
+bsdf = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+bsdf.inputs["Base Color"].default_value = (0.2, 0.4, 0.8, 1.0)
+bsdf.inputs["Roughness"].default_value = 0.35
+obj.data.materials.clear()
+obj.data.materials.append(mat)
 
 # two impacts on the surface, clicked in world space: vertices of spot's flank and back
 local = [Vector((0.334, 0.044, 0.287)), Vector((-0.25, 0.35, -0.05))]
@@ -68,7 +77,10 @@ def material_state():
                        "file": os.path.basename(n.image.filepath),
                        "size": list(n.image.size)}
               for n in tree.nodes if n.bl_idname == "ShaderNodeTexImage" and n.image}
+    kept = {k: list(node.inputs[k].default_value)[:3] if k == "Base Color"
+            else node.inputs[k].default_value for k in ("Base Color", "Roughness")}
     return {"material": mat.name, "group": node.node_tree.name if node else None,
+            "kept": kept, "materials": sorted(m.name for m in bpy.data.materials),
             "linked": linked, "images": images,
             "groups": sorted(g.name for g in bpy.data.node_groups),
             "all_images": sorted(i.name for i in bpy.data.images)}
@@ -99,32 +111,40 @@ if mode == "bake":
     result["second"] = material_state()
     with open(os.path.join(s.last_out, "manifest.json")) as fh:
         result["rebake_params"] = json.load(fh)["params"]
-elif mode == "cancel":
-    s.res = 4096
-    r = bpy.ops.crackbake.bake()
-    result["bake"] = sorted(r)
-    job = ops_mod._State.job
-    result["workdir"] = job.workdir
-    polls, times = 0, []
-    cancelled_at = None
-    end = time.monotonic() + 240
-    while ops_mod._State.job is not None and time.monotonic() < end:
+elif mode in ("cancel", "background"):
+    def poll_until_done(cancel_at=None):
+        """Call the extension's timer function as Blender's timer would, timing each call."""
+        job = ops_mod._State.job
+        times, cancelled_at = [], None
+        end = time.monotonic() + 500
+        while ops_mod._State.job is not None and time.monotonic() < end:
+            t = time.perf_counter()
+            again = ops_mod.poll_job()
+            times.append(time.perf_counter() - t)
+            if cancel_at and cancelled_at is None and job.message.startswith(cancel_at):
+                cancelled_at = job.message
+                bpy.ops.crackbake.cancel()
+            if again is None:
+                break
+            time.sleep(ops_mod.POLL_SECONDS)
+        return {"polls": len(times), "max_poll_s": max(times), "cancelled_at": cancelled_at,
+                "workdir_left": os.path.exists(job.workdir), "status": s.status}
+
+    if mode == "cancel":
+        result["first"] = sorted(bpy.ops.crackbake.bake(wait=True))
+        with open(os.path.join(s.last_out, "manifest.json")) as fh:
+            before = fh.read()
+        s.sim_faces, s.seed = 0, 4  # a longer solve, to cancel
+        result["bake"] = sorted(bpy.ops.crackbake.bake())
+        result["run"] = poll_until_done(cancel_at="growing cracks")
+        with open(os.path.join(s.last_out, "manifest.json")) as fh:
+            result["manifest_kept"] = fh.read() == before
+    else:
+        result["bake"] = sorted(bpy.ops.crackbake.bake())
         t = time.perf_counter()
-        again = ops_mod.poll_job()
-        times.append(time.perf_counter() - t)
-        polls += 1
-        if cancelled_at is None and job.message.startswith("growing cracks"):
-            cancelled_at = job.message
-            bpy.ops.crackbake.cancel()
-        if again is None:
-            break
-        time.sleep(0.05)
-    result["polls"] = polls
-    result["max_poll_s"] = max(times) if times else None
-    result["cancelled_at"] = cancelled_at
-    result["status"] = s.status
-    result["workdir_left"] = os.path.exists(result["workdir"])
-    result["state"] = material_state() if obj.active_material else None
+        result["run"] = poll_until_done()
+        result["bake_s"] = time.perf_counter() - t
+    result["state"] = material_state()
 elif mode == "errors":
     bpy.ops.object.camera_add()
     camera = bpy.context.active_object

@@ -153,8 +153,8 @@ def load_images(obj_name: str, out_dir: str, manifest: dict) -> dict[str, bpy.ty
     return images
 
 
-def _principled(material) -> list:
-    return [n for n in material.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"]
+def _principled(tree) -> list:
+    return [n for n in tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"]
 
 
 def materials_of(obj) -> list[bpy.types.Material]:

@@ -176,10 +176,12 @@ def command_line(command: str, obj, mesh_path: str, out_dir: str, cracks: str | 
     argv = [*runner.split_command(command), mesh_path, "-o", out_dir, "--target", "blender",
             "--formats", "png", "--res", str(s.res), "--seed", str(s.seed), "--min-px",
             repr(s.min_px), "--method", s.method, "--uv", "keep", "--progress", "jsonl"]
+    if s.preset:  # with --cracks too: the preset's look draws the cracks
+        argv += ["--preset", s.preset]
     if cracks:
         return [*argv, "--cracks", cracks]
-    if s.preset:
-        argv += ["--preset", s.preset]
+    if s.sim_faces > 0:
+        argv += ["--sim-faces", str(s.sim_faces)]
     for imp in s.impacts:
         argv += ["--impact", runner.impact_arg(imp.location, imp.radius, imp.strength)]
     if weight:
@@ -311,11 +313,18 @@ def finish() -> tuple[str, str]:
             if s is not None:
                 s.status, s.progress = what, 0.0
             return ("WARNING" if job.cancelled else "ERROR"), f"Crackbake: {what}"
-        with open(os.path.join(out_dir, "manifest.json"), encoding="utf-8") as fh:
-            manifest = json.load(fh)
-        images = nodes.load_images(obj.name, out_dir, manifest)
-        look = manifest.get("params", {}).get("look", {})
-        mats = nodes.apply(obj, images, look, _State.uv_name)
+        if obj is None:
+            return "ERROR", f"Crackbake: the object '{_State.obj_name}' is gone; the bake is " \
+                f"in {out_dir}"
+        try:
+            with open(os.path.join(out_dir, "manifest.json"), encoding="utf-8") as fh:
+                manifest = json.load(fh)
+            images = nodes.load_images(obj.name, out_dir, manifest)
+            look = manifest.get("params", {}).get("look", {})
+            mats = nodes.apply(obj, images, look, _State.uv_name)
+        except (OSError, ValueError, RuntimeError) as exc:
+            s.status = f"could not load the result: {exc}"
+            return "ERROR", f"Crackbake: could not load the result from {out_dir}: {exc}"
         cracks = job.summary.get("cracks", {}).get("cracks", 0)
         s.status, s.progress, s.last_out = f"{cracks} cracks", 1.0, out_dir
         warned = f"; {len(job.warnings)} warning(s): {job.warnings[0]}" if job.warnings else ""

@@ -68,6 +68,8 @@ class CrackbakeSettings(bpy.types.PropertyGroup):
     noise: FloatProperty(name="Noise", default=0.0, min=0.0, description=_help("noise"))
     spacing: FloatProperty(name="Spacing", default=0.0, min=0.0, max=1.0,
                            description=_help("spacing") + " (0: the preset's)")
+    sim_faces: IntProperty(name="Sim faces", default=0, min=0,
+                           description=_help("sim_faces") + " (0: the default)")
     output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//crackbake/",
                                description="Folder of the bakes; each object's go in a "
                                "sub-folder named after it")

@@ -74,7 +74,7 @@ class CRACKBAKE_PT_advanced(bpy.types.Panel):
     def draw(self, context):
         s = context.active_object.crackbake
         col = self.layout.column()
-        for name in ("shrink", "noise", "spacing"):
+        for name in ("shrink", "noise", "spacing", "sim_faces"):
             col.prop(s, name)
 
 
