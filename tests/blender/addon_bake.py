@@ -127,7 +127,9 @@ elif mode in ("cancel", "background"):
             if again is None:
                 break
             time.sleep(ops_mod.POLL_SECONDS)
-        return {"polls": len(times), "max_poll_s": max(times), "cancelled_at": cancelled_at,
+        # the last call loads the result (the bake has ended); the others ran beside it
+        return {"polls": len(times), "max_poll_s": max(times[:-1]), "finish_s": times[-1],
+                "slowest": sorted(times[:-1])[-5:], "cancelled_at": cancelled_at,
                 "workdir_left": os.path.exists(job.workdir), "status": s.status}
 
     if mode == "cancel":
