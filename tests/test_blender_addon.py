@@ -193,6 +193,13 @@ def test_install_bake_and_rebake_in_blender(addon_zip, tmp_path):
     assert spaces == {f"spot_{m}.png": ("Non-Color", [256, 256])
                       for m in ("data", "normal", "ao")}
     assert out["keyframed"]
+    # Cycles renders the spliced material: glass cracks (the preset's lighten look) lighter
+    # than the intact blue; at Growth 0 no crack shows
+    grown, ungrown = out["albedo_grown"], out["albedo_ungrown"]
+    assert grown["crack_texels"] > 10 and grown["intact_texels"] > 1000
+    assert grown["crack"] > grown["intact"] + 0.1, grown
+    assert np.allclose(grown["intact_rgb"], [0.2, 0.4, 0.8], atol=0.05)  # the artist's colour
+    assert ungrown["crack"] == pytest.approx(ungrown["intact"], abs=0.02), ungrown
     # re-bake of the same network at 128: the same images, reloaded; no duplicates
     second = out["second"]
     assert out["rebake"] == ["FINISHED"] and out["rebake_params"]["cracks"].endswith(
@@ -227,6 +234,6 @@ def test_the_timer_never_blocks_during_a_4096_bake(addon_zip, tmp_path):
 @pytest.mark.reference
 def test_clear_reports_for_a_camera_and_a_wrong_command(addon_zip, tmp_path):
     out = _in_blender(addon_zip, tmp_path, "errors", 256, 3000)
-    assert out["camera"].strip().endswith("Crackbake: the active object 'Camera' is a camera; select a "
-                                  "mesh object")
+    assert out["camera"].strip().endswith(
+        "Crackbake: the active object 'Camera' is a camera; select a mesh object")
     assert "cannot run the crackbake command '/nonexistent/crackbake'" in out["wrong_command"]

@@ -86,6 +86,38 @@ def material_state():
             "all_images": sorted(i.name for i in bpy.data.images)}
 
 
+def cycles_albedo(size):
+    """Mean albedo luminance Cycles bakes on the texels where the crack mask (box-filtered to
+    ``size``) is > 0.25 and where it is 0 (inside the UV islands)."""
+    import numpy as np
+
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = 1
+    tree = obj.active_material.node_tree
+    image = bpy.data.images.new("albedo check", size, size, float_buffer=True)
+    target = tree.nodes.new("ShaderNodeTexImage")
+    target.image = image
+    tree.nodes.active = target  # Cycles bakes into the material's active image node
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o == obj)
+    bpy.ops.object.bake(type="DIFFUSE", pass_filter={"COLOR"}, margin=0, use_clear=True)
+    albedo = np.array(image.pixels[:]).reshape(size, size, 4)
+    tree.nodes.remove(target)
+    bpy.data.images.remove(image)
+    data = tree.nodes["Crackbake Cracks data"].image
+    w, h = data.size
+    mask = np.array(data.pixels[:]).reshape(h, w, 4)[..., 0]
+    mask = mask.reshape(size, h // size, size, w // size).mean(axis=(1, 3))
+    lum = albedo[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    inside = albedo[..., :3].sum(axis=-1) > 0
+    crack, intact = inside & (mask > 0.25), inside & (mask == 0)
+    return {"crack": float(lum[crack].mean()), "intact": float(lum[intact].mean()),
+            "crack_texels": int(crack.sum()), "intact_texels": int(intact.sum()),
+            "intact_rgb": albedo[intact][:, :3].mean(axis=0).tolist()}
+
+
 if mode == "bake":
     group = obj.vertex_groups.new(name="stress")
     group.add([v.index for v in me.vertices if v.co.z > 0], 1.0, "REPLACE")
@@ -101,8 +133,14 @@ if mode == "bake":
         result["sidecar_impacts"] = json.load(fh)["impacts"]
     with open(os.path.join(s.last_out, "manifest.json")) as fh:
         result["params"] = json.load(fh)["params"]
-    # growth is animatable
+    # Cycles' own evaluation of the material: the albedo baked into a 128² image, compared on
+    # the mask's crack texels and off them, fully grown and at Growth 0
     node = obj.active_material.node_tree.nodes["Crackbake Cracks"]
+    result["albedo_grown"] = cycles_albedo(128)
+    node.inputs["Growth"].default_value = 0.0
+    result["albedo_ungrown"] = cycles_albedo(128)
+    node.inputs["Growth"].default_value = 1.0
+    # growth is animatable
     result["keyframed"] = node.inputs["Growth"].keyframe_insert("default_value", frame=1)
     # re-bake the same network at another resolution: the images are replaced in place
     s.res = int(res) // 2
