@@ -20,6 +20,8 @@ from .raycast import object_scale, surface_hit
 POLL_SECONDS = 0.1
 #: The longest poll so far (seconds), for the UI-responsiveness check.
 TIMER_STATS = {"calls": 0, "max_s": 0.0}
+#: Where the last bake's time went (seconds): export, the crackbake run, loading the result.
+LAST_TIMINGS: dict[str, float] = {}
 _VERSIONS: dict[str, str] = {}  # command -> version, checked once per session
 
 
@@ -218,6 +220,7 @@ class CRACKBAKE_OT_bake(bpy.types.Operator):
                 self.report({"ERROR"}, problem)
                 return {"CANCELLED"}
             _VERSIONS[command] = version
+        t0 = time.perf_counter()
         s = obj.crackbake
         out_dir = output_folder(obj)
         workdir = tempfile.mkdtemp(prefix="crackbake-")
@@ -235,6 +238,8 @@ class CRACKBAKE_OT_bake(bpy.types.Operator):
                     raise export.ExportError(f"no earlier bake in {out_dir} to re-bake")
                 cracks = shutil.copy(sidecar, os.path.join(workdir, "cracks.json"))
             argv = command_line(command, obj, mesh_path, out_dir, cracks, "weight" in arrays)
+            LAST_TIMINGS.clear()
+            LAST_TIMINGS["export"] = time.perf_counter() - t0
             job = runner.Job(argv, workdir).start()
         except (export.ExportError, OSError) as exc:
             shutil.rmtree(workdir, ignore_errors=True)
@@ -306,6 +311,7 @@ def finish() -> tuple[str, str]:
     case.  Returns a report level and line."""
     job, out_dir = _State.job, _State.out_dir
     _State.job = None
+    t0 = time.perf_counter()
     obj, s = _settings()
     try:
         if job.summary is None:
@@ -333,6 +339,8 @@ def finish() -> tuple[str, str]:
     finally:
         job.kill()
         job.cleanup()
+        LAST_TIMINGS["run"] = job.ended - job.started
+        LAST_TIMINGS["finish"] = time.perf_counter() - t0
 
 
 CLASSES = (CRACKBAKE_OT_check_command, CRACKBAKE_OT_add_impact, CRACKBAKE_OT_remove_impact,

@@ -14,6 +14,7 @@ import shutil
 import signal
 import subprocess
 import threading
+import time
 from dataclasses import dataclass, field
 
 
@@ -77,9 +78,12 @@ class Job:
     error: str | None = None
     cancelled: bool = False
     proc: subprocess.Popen | None = None
+    started: float = 0.0  # time.perf_counter() at the start and when the end was seen
+    ended: float = 0.0
     _threads: list[threading.Thread] = field(default_factory=list)
 
     def start(self) -> Job:
+        self.started = time.perf_counter()
         kw = {}
         if os.name == "nt":
             kw["creationflags"] = subprocess.CREATE_NEW_PROCESS_GROUP
@@ -118,6 +122,7 @@ class Job:
                 break
         if self.proc is None or self.proc.poll() is None:
             return False
+        self.ended = self.ended or time.perf_counter()
         if any(t.is_alive() for t in self._threads):
             return False
         self._drain()
@@ -126,6 +131,7 @@ class Job:
     def wait(self, timeout: float | None = None) -> None:
         """Block until the run ends (scripts: ``bpy.ops.crackbake.bake(wait=True)``)."""
         self.proc.wait(timeout)
+        self.ended = self.ended or time.perf_counter()
         for t in self._threads:
             t.join(timeout)
         self._drain()
