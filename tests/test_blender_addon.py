@@ -168,6 +168,10 @@ def test_the_ray_cast_helper_hits_misses_and_rejects_back_faces():
     assert np.allclose(hit["local"], [1.0, 0.0, 0.0], atol=1e-6)
     assert np.allclose(hit["normal"], out["expected_normal"], atol=1e-5)
     assert out["miss"] is None and out["inside"] is None
+    circle = out["circle"]
+    assert circle["count"] == 17 and circle["closed"] < 1e-6
+    assert np.allclose(circle["radii"], 0.3) and np.allclose(circle["along_normal"], 0.0,
+                                                             atol=1e-6)
 
 
 @pytest.mark.reference
@@ -177,6 +181,10 @@ def test_install_bake_and_rebake_in_blender(addon_zip, tmp_path):
     local = np.array(out["impacts_local"])
     assert np.allclose(out["stored"], local, atol=1e-5)
     assert np.allclose(out["stored_radius"], 0.12, rtol=1e-5)  # 0.24 world / scale 2
+    # each impact drawn as a circle of its world radius around its world point
+    for centre, circle in zip(out["impacts_world"], out["circles"], strict=True):
+        radii = np.linalg.norm(np.array(circle) - centre, axis=1)
+        assert np.allclose(radii, 0.24, rtol=2e-3)
     sidecar = np.array([i["point"] for i in out["sidecar_impacts"]])
     assert np.allclose(sidecar, local, atol=1e-5)
     assert out["params"]["weight_attribute"] == "weight" and out["params"]["uv"] == "keep"

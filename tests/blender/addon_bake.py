@@ -63,6 +63,8 @@ for p in picked:
     bpy.ops.crackbake.add_impact(location=obj.matrix_world @ p, radius=2.0 * 0.12, strength=1.0)
 result["stored"] = [list(i.location) for i in s.impacts]
 result["stored_radius"] = [i.radius for i in s.impacts]
+result["impacts_world"] = [list(obj.matrix_world @ p) for p in picked]
+result["circles"] = sys.modules[module + ".raycast"].impact_circles(obj)
 
 
 def material_state():

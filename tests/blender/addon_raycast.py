@@ -36,6 +36,12 @@ out["miss"] = raycast.surface_hit(obj, dg, origin + 10.0 * (obj.matrix_world.to_
                                   @ Vector((0.0, 0.0, 1.0))), -axis)
 # from the centre outwards: the first face is seen from inside (a back face)
 out["inside"] = raycast.surface_hit(obj, dg, centre, axis)
+# an impact's circle: every point at the radius from the centre, in the plane normal to n
+n = Vector((1.0, 2.0, 2.0)) / 3.0
+pts = [Vector(p) for p in raycast.circle_points((1.0, -1.0, 0.5), n, 0.3, segments=16)]
+out["circle"] = {"count": len(pts), "closed": (pts[0] - pts[-1]).length,
+                 "radii": [(p - Vector((1.0, -1.0, 0.5))).length for p in pts],
+                 "along_normal": [(p - Vector((1.0, -1.0, 0.5))).dot(n) for p in pts]}
 print(json.dumps(out, default=str))
 sys.stdout.flush()
 os._exit(0)

@@ -6,16 +6,18 @@ in :func:`register` only, so ``runner`` and ``raycast`` load (and are tested) wi
 
 
 def register() -> None:
-    from . import ops, props, ui
+    from . import draw, ops, props, ui
 
     props.register()
     ops.register()
     ui.register()
+    draw.register()
 
 
 def unregister() -> None:
-    from . import ops, props, ui
+    from . import draw, ops, props, ui
 
+    draw.unregister()
     ui.unregister()
     ops.unregister()
     props.unregister()
