@@ -245,3 +245,28 @@ def test_clear_reports_for_a_camera_and_a_wrong_command(addon_zip, tmp_path):
     assert out["camera"].strip().endswith(
         "Crackbake: the active object 'Camera' is a camera; select a mesh object")
     assert "cannot run the crackbake command '/nonexistent/crackbake'" in out["wrong_command"]
+
+
+@pytest.mark.reference
+def test_the_export_is_the_evaluated_mesh_crackbake_reads(tmp_path):
+    from crackbake.io.mesh import load_mesh
+    from crackbake.simulate.stress import vertex_weights
+
+    ply = tmp_path / "cube.ply"
+    out = run_blender("addon_export.py", ADDON / "export.py", ply)
+    mesh = load_mesh(ply)
+    # the subdivided cube (24 quads), in object space (not moved, not scaled), seams kept
+    assert out["triangles"] == len(mesh.faces) == 48
+    assert len(mesh.vertices) == out["written_vertices"] > out["vertices"]
+    assert sorted({tuple(np.round(v, 5)) for v in mesh.vertices}) == [tuple(c) for c in
+                                                                      out["co"]]
+    assert 0.5 < np.abs(mesh.vertices).max() < 1.0  # smoothed by the modifier, not scaled by 3
+    assert mesh.uv is not None and -1e-6 <= mesh.uv.min() and mesh.uv.max() <= 1.0 + 1e-6
+    # the vertex group, interpolated by the modifier: 1 on the top, 0 on the bottom
+    w = vertex_weights(mesh, "weight")
+    z = mesh.vertices[:, 2]
+    top, bottom = z > z.max() - 1e-6, z < z.min() + 1e-6
+    assert top.any() and bottom.any() and np.allclose(w[top], 1.0) and np.allclose(w[bottom], 0.0)
+    assert out["bad_uv"] == "'Cube' has no UV map 'no such map'; add one (UV > Unwrap) or pick " \
+        "another"
+    assert out["bad_group"] == "'Cube' has no vertex group 'no such group'"
