@@ -245,6 +245,18 @@ def test_clear_reports_for_a_camera_and_a_wrong_command(addon_zip, tmp_path):
     assert out["camera"].strip().endswith(
         "Crackbake: the active object 'Camera' is a camera; select a mesh object")
     assert "cannot run the crackbake command '/nonexistent/crackbake'" in out["wrong_command"]
+    # the panel's settings as crackbake parses them
+    from crackbake.cli.bake import bake
+
+    argv = out["argv"]
+    assert argv[:2] == ["crackbake", "m.ply"]
+    p = bake.make_context("crackbake", argv[1:]).params
+    assert p["preset"] == "glass" and p["method"] == "thesis" and p["seed"] == 3
+    assert p["res"] == 256 and p["target"] == "blender" and p["uv"] == "keep"
+    assert p["weight_attribute"] == "weight" and p["invert_weights"]
+    assert p["directions"] == ("0,1,0:1.5",) and p["curvature"] == "0.5"
+    assert (p["shrink"], p["noise"], p["spacing"], p["sim_faces"]) == (0.25, 0.1, 0.05, 5000)
+    assert len(p["impacts"]) == 2 and p["progress"] == "jsonl"
 
 
 @pytest.mark.reference

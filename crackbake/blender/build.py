@@ -24,7 +24,8 @@ ADDON = Path(__file__).resolve().parent / "addon"
 MANIFEST = "blender_manifest.toml"
 #: The bake options whose help the extension shows (click parameter names).
 HELP_OPTIONS = ("preset", "method", "seed", "res", "min_px", "impacts", "weight_attribute",
-                "shrink", "noise", "spacing", "sim_faces")
+                "shrink", "noise", "spacing", "sim_faces", "directions", "curvature",
+                "invert_weights")
 
 
 def zip_name(version: str = __version__) -> str:

@@ -196,6 +196,11 @@ elif mode == "errors":
     except RuntimeError as exc:
         result["camera"] = str(exc)
     bpy.context.view_layer.objects.active = obj
+    # every panel setting reaches the command line
+    s.weight_group, s.invert_weights = "", True
+    s.direction, s.direction_strength, s.curvature = (0.0, 1.0, 0.0), 1.5, 0.5
+    s.shrink, s.noise, s.spacing, s.sim_faces, s.method = 0.25, 0.1, 0.05, 5000, "thesis"
+    result["argv"] = ops_mod.command_line("crackbake", obj, "m.ply", "out", None, True)
     prefs.command = "/nonexistent/crackbake"
     try:
         bpy.ops.crackbake.bake(wait=True)

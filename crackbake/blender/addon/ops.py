@@ -172,12 +172,17 @@ def output_folder(obj) -> str:
     return os.path.join(bpy.path.abspath(base), bpy.path.clean_name(obj.name))
 
 
+def _num(value: float) -> str:
+    """A float property as typed (single precision: 0.1, not 0.10000000149011612)."""
+    return f"{float(value):.7g}"
+
+
 def command_line(command: str, obj, mesh_path: str, out_dir: str, cracks: str | None,
                  weight: bool) -> list[str]:
     s = obj.crackbake
     argv = [*runner.split_command(command), mesh_path, "-o", out_dir, "--target", "blender",
             "--formats", "png", "--res", str(s.res), "--seed", str(s.seed), "--min-px",
-            repr(s.min_px), "--method", s.method, "--uv", "keep", "--progress", "jsonl"]
+            _num(s.min_px), "--method", s.method, "--uv", "keep", "--progress", "jsonl"]
     if s.preset:  # with --cracks too: the preset's look draws the cracks
         argv += ["--preset", s.preset]
     if cracks:
@@ -188,9 +193,16 @@ def command_line(command: str, obj, mesh_path: str, out_dir: str, cracks: str | 
         argv += ["--impact", runner.impact_arg(imp.location, imp.radius, imp.strength)]
     if weight:
         argv += ["--weight-attribute", export.WEIGHT_ATTRIBUTE]
+        if s.invert_weights:
+            argv.append("--invert-weights")
+    if s.direction_strength > 0 and any(s.direction):
+        x, y, z = s.direction
+        argv += ["--direction", f"{_num(x)},{_num(y)},{_num(z)}:{_num(s.direction_strength)}"]
+    if s.curvature > 0:
+        argv += ["--curvature", _num(s.curvature)]
     for name in ("shrink", "noise", "spacing"):
         if getattr(s, name) > 0:
-            argv += [f"--{name}", repr(getattr(s, name))]
+            argv += [f"--{name}", _num(getattr(s, name))]
     return argv
 
 

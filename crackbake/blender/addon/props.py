@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import bpy
 from bpy.props import (
+    BoolProperty,
     CollectionProperty,
     EnumProperty,
     FloatProperty,
@@ -68,6 +69,16 @@ class CrackbakeSettings(bpy.types.PropertyGroup):
     noise: FloatProperty(name="Noise", default=0.0, min=0.0, description=_help("noise"))
     spacing: FloatProperty(name="Spacing", default=0.0, min=0.0, max=1.0,
                            description=_help("spacing") + " (0: the preset's)")
+    invert_weights: BoolProperty(name="Invert weights", default=False,
+                                 description=_help("invert_weights"))
+    direction: FloatVectorProperty(name="Direction", size=3, subtype="XYZ",
+                                   default=(0.0, 0.0, 1.0),
+                                   description=_help("directions") + " Object space")
+    direction_strength: FloatProperty(name="Direction strength", default=0.0, min=0.0,
+                                      description="Strength of the directional tension "
+                                      "(0: none)")
+    curvature: FloatProperty(name="Curvature bias", default=0.0, min=0.0,
+                             description=_help("curvature") + " (0: none)")
     sim_faces: IntProperty(name="Sim faces", default=0, min=0,
                            description=_help("sim_faces") + " (0: the default)")
     output_dir: StringProperty(name="Output", subtype="DIR_PATH", default="//crackbake/",

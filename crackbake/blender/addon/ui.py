@@ -74,7 +74,8 @@ class CRACKBAKE_PT_advanced(bpy.types.Panel):
     def draw(self, context):
         s = context.active_object.crackbake
         col = self.layout.column()
-        for name in ("shrink", "noise", "spacing", "sim_faces"):
+        for name in ("shrink", "noise", "spacing", "curvature", "direction",
+                     "direction_strength", "invert_weights", "sim_faces"):
             col.prop(s, name)
 
 
