@@ -57,6 +57,12 @@ def test_the_zip_is_a_blender_extension(addon_zip):
     assert space["HELP"]["seed"] == "Random seed."
 
 
+def test_the_zip_is_reproducible(addon_zip, tmp_path):
+    again = build_extension(tmp_path)
+    assert again.read_bytes() == addon_zip.read_bytes()
+    assert build_extension(tmp_path, "other").read_bytes() != addon_zip.read_bytes()
+
+
 def test_the_command_writes_the_zip_and_refuses_a_file(tmp_path):
     def cli(*args):
         return subprocess.run([sys.executable, "-m", "crackbake", "blender-addon", *args],

@@ -90,10 +90,15 @@ def build_extension(out_dir: str | Path, command: str | None = None) -> Path:
     manifest = (ADDON / MANIFEST).read_text(encoding="utf-8").replace("@VERSION@", __version__)
     try:
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
-            zf.writestr(MANIFEST, manifest)
-            zf.writestr("defaults.py", defaults_source(command or default_command()))
-            for path in sorted(ADDON.glob("*.py")):
-                zf.write(path, path.name)
+            entries = [(MANIFEST, manifest),
+                       ("defaults.py", defaults_source(command or default_command()))]
+            entries += [(p.name, p.read_text(encoding="utf-8"))
+                        for p in sorted(ADDON.glob("*.py"))]
+            for name, text in entries:
+                # a fixed date: the same sources and command give the same bytes
+                info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+                info.compress_type, info.external_attr = zipfile.ZIP_DEFLATED, 0o644 << 16
+                zf.writestr(info, text.encode("utf-8"))
         partial.replace(target)
     except OSError as exc:
         partial.unlink(missing_ok=True)

@@ -8,7 +8,8 @@ from .ops import _State
 
 
 class CRACKBAKE_UL_impacts(bpy.types.UIList):
-    def draw_item(self, context, layout, data, item, icon, active_data, active_prop, index=0):
+    def draw_item(self, context, layout, data, item, icon, active_data, active_prop, index=0,
+                  flt_flag=0):
         row = layout.row(align=True)
         row.label(text=f"{index + 1}: " + ", ".join(f"{c:.3g}" for c in item.location))
         row.prop(item, "radius", text="R")
