@@ -84,6 +84,9 @@ Examples:
   # a seamlessly tiling mud texture set (crackbake tile --help)
   crackbake tile --preset mud --size 2 --res 2048 -o mud_tile/
 \b
+  # the Blender 4.2+ extension: click impacts, bake into the material (docs/blender.md)
+  crackbake blender-addon -o dist/
+\b
 Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.<map>.V layers: mask,
 width, time, depth, distance, id, occlusion; crack.normal.NX/NY/NZ), <stem>_stress.exr, the
 --target PNGs (gltf: basecolor, normal, orm, data, mask, depth), <stem>.glb, preview.png,

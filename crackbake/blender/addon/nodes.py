@@ -180,7 +180,8 @@ def _source(tree, socket):
 
 def apply(obj, images: dict, look: dict, uv_name: str) -> list[str]:
     """Splice the group into every Principled BSDF of the object's materials (once: a later
-    call only updates the look and images); the names of the materials touched."""
+    call only updates the look and images); the names of the materials touched (one without a
+    Principled BSDF is left as it is)."""
     group = crack_group()
     colour = [srgb_to_linear(c / 255.0) for c in look.get("color", (40, 36, 32))] + [1.0]
     done = []
@@ -192,6 +193,8 @@ def apply(obj, images: dict, look: dict, uv_name: str) -> list[str]:
             suffix = "" if i == 0 else f".{i}"
             node = tree.nodes.get(NODE + suffix)
             if node is None:
+                for stale in [n for n in tree.nodes if n.name.startswith(f"{NODE}{suffix} ")]:
+                    tree.nodes.remove(stale)  # helpers left when the group node was deleted
                 node = _splice(tree, bsdf, group, NODE + suffix, uv_name)
             node.inputs["Crack Color"].default_value = colour
             node.inputs["Crack Roughness"].default_value = float(look.get("roughness", 1.0))
@@ -201,7 +204,8 @@ def apply(obj, images: dict, look: dict, uv_name: str) -> list[str]:
             uvmap = tree.nodes[f"{NODE}{suffix} uv"]
             uvmap.uv_map = uv_name
             tree.nodes[f"{NODE}{suffix} normal map"].uv_map = uv_name
-        done.append(mat.name)
+            if mat.name not in done:
+                done.append(mat.name)
     return done
 
 

@@ -343,6 +343,10 @@ def finish() -> tuple[str, str]:
         except (OSError, ValueError, RuntimeError) as exc:
             s.status = f"could not load the result: {exc}"
             return "ERROR", f"Crackbake: could not load the result from {out_dir}: {exc}"
+        if not mats:
+            s.status = "no Principled BSDF to add the cracks to"
+            return "WARNING", (f"Crackbake: the bake is in {out_dir}, but no material of "
+                               f"'{obj.name}' has a Principled BSDF to add the cracks to")
         cracks = job.summary.get("cracks", {}).get("cracks", 0)
         s.status, s.progress, s.last_out = f"{cracks} cracks", 1.0, out_dir
         warned = f"; {len(job.warnings)} warning(s): {job.warnings[0]}" if job.warnings else ""
@@ -366,8 +370,14 @@ def register() -> None:
 
 
 def unregister() -> None:
-    if _State.job is not None:
-        _State.job.cancel()
+    if _State.job is not None:  # Blender quits or the extension is disabled mid-bake
+        job, _State.job = _State.job, None
+        job.cancel()
+        try:
+            job.wait(10)
+        except Exception:  # still running after 10 s: stop it outright
+            job.kill()
+        job.cleanup()
     if bpy.app.timers.is_registered(poll_job):
         bpy.app.timers.unregister(poll_job)
     for cls in reversed(CLASSES):
