@@ -251,6 +251,10 @@ def test_clear_reports_for_a_camera_and_a_wrong_command(addon_zip, tmp_path):
     assert out["camera"].strip().endswith(
         "Crackbake: the active object 'Camera' is a camera; select a mesh object")
     assert "cannot run the crackbake command '/nonexistent/crackbake'" in out["wrong_command"]
+    assert "Crackbake: impact point (100, 100, 100) is" in out["crackbake_error"]
+    assert out["crackbake_error"].strip().endswith("give a point on or within 1 mesh diagonal "
+                                                   "of the surface")
+    assert out["groups_after_error"] == []
     # the panel's settings as crackbake parses them
     from crackbake.cli.bake import bake
 

@@ -196,6 +196,15 @@ elif mode == "errors":
     except RuntimeError as exc:
         result["camera"] = str(exc)
     bpy.context.view_layer.objects.active = obj
+    # crackbake's own one-line error, as the operator's report; the scene is left as it was
+    bpy.ops.crackbake.add_impact(location=obj.matrix_world @ Vector((100.0, 100.0, 100.0)))
+    try:
+        bpy.ops.crackbake.bake(wait=True)
+        result["crackbake_error"] = "no error"
+    except RuntimeError as exc:
+        result["crackbake_error"] = str(exc)
+    result["groups_after_error"] = sorted(g.name for g in bpy.data.node_groups)
+    s.impacts.remove(len(s.impacts) - 1)
     # every panel setting reaches the command line
     s.weight_group, s.invert_weights = "", True
     s.direction, s.direction_strength, s.curvature = (0.0, 1.0, 0.0), 1.5, 0.5
