@@ -246,6 +246,20 @@ def test_the_timer_never_blocks_during_a_4096_bake(addon_zip, tmp_path):
 
 
 @pytest.mark.reference
+def test_a_new_unwrap_is_stored_as_the_crackbake_uv_map(addon_zip, tmp_path):
+    out = _in_blender(addon_zip, tmp_path, "unwrap", 256, 3000)
+    assert "a new unwrap is stored on the mesh itself, and its modifiers change it" in \
+        out["modifier"]
+    assert out["bake"] == ["FINISHED"] and out["uv_layers"] == ["crackbake"]
+    assert out["uv_nodes"] == ["crackbake"]
+    # the sidecar's crack points fall on the mask through the stored UVs, not with v flipped
+    assert out["points"] >= 10, out
+    assert out["on_crack"] > 0.8 * out["points"], out
+    assert out["on_flipped"] < 0.3 * out["points"], out
+    assert all(v["space"] == "Non-Color" for v in out["state"]["images"].values())
+
+
+@pytest.mark.reference
 def test_clear_reports_for_a_camera_and_a_wrong_command(addon_zip, tmp_path):
     out = _in_blender(addon_zip, tmp_path, "errors", 256, 3000)
     assert out["camera"].strip().endswith(

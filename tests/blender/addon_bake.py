@@ -151,6 +151,49 @@ if mode == "bake":
     result["second"] = material_state()
     with open(os.path.join(s.last_out, "manifest.json")) as fh:
         result["rebake_params"] = json.load(fh)["params"]
+elif mode == "unwrap":
+    import numpy as np
+    from mathutils.geometry import barycentric_transform
+
+    s.uv_mode = "UNWRAP"
+    # a mesh with a subdivision modifier cannot keep a new unwrap: refused, with the fix
+    sub = obj.modifiers.new("subd", "SUBSURF")
+    try:
+        bpy.ops.crackbake.bake(wait=True)
+        result["modifier"] = "no error"
+    except RuntimeError as exc:
+        result["modifier"] = str(exc)
+    obj.modifiers.remove(sub)
+    while me.uv_layers:  # spot without UVs: unwrapped by crackbake
+        me.uv_layers.remove(me.uv_layers[0])
+    result["bake"] = sorted(bpy.ops.crackbake.bake(wait=True))
+    result["uv_layers"] = [layer.name for layer in me.uv_layers]
+    tree = obj.active_material.node_tree
+    result["uv_nodes"] = sorted({n.uv_map for n in tree.nodes
+                                 if n.bl_idname in ("ShaderNodeUVMap", "ShaderNodeNormalMap")})
+    # each crack point of the sidecar, through its face's "crackbake" UVs, onto the mask: it
+    # lands on a crack (and with v flipped it would not)
+    with open(os.path.join(s.last_out, "cracks.json")) as fh:
+        cracks = json.load(fh)["cracks"]
+    data = tree.nodes["Crackbake Cracks data"].image
+    w, h = data.size
+    mask = np.array(data.pixels[:]).reshape(h, w, 4)[..., 0]
+    layer = me.uv_layers["crackbake"]
+    me.calc_loop_triangles()
+    on, flipped, total = 0, 0, 0
+    for crack in cracks:
+        for point, face in zip(crack["points"], crack["faces"], strict=True):
+            tri = me.loop_triangles[face]
+            corners = [me.vertices[i].co for i in tri.vertices]
+            uvs = [Vector((*layer.uv[i].vector, 0.0)) for i in tri.loops]
+            uv = barycentric_transform(Vector(point), *corners, *uvs)
+            x = min(max(int(uv.x * w), 0), w - 1)
+            y = min(max(int(uv.y * h), 0), h - 1)
+            on += mask[y, x] > 0.1
+            flipped += mask[h - 1 - y, x] > 0.1
+            total += 1
+    result["on_crack"], result["on_flipped"], result["points"] = int(on), int(flipped), total
+    result["state"] = material_state()
 elif mode in ("cancel", "background"):
     def poll_until_done(cancel_at=None):
         """Call the extension's timer function as Blender's timer would, timing each call."""

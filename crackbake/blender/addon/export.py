@@ -7,16 +7,17 @@ from __future__ import annotations
 import numpy as np
 
 WEIGHT_ATTRIBUTE = "weight"
+UNWRAP_UV = "crackbake"  # the UV map a new unwrap is stored in
 
 
 class ExportError(Exception):
     """The object cannot be exported (no faces, no UV map); the message says the fix."""
 
 
-def mesh_arrays(obj, depsgraph, uv_name: str = "", group: str = "") -> dict:
+def mesh_arrays(obj, depsgraph, uv_name: str | None = "", group: str = "") -> dict:
     """Vertices (N, 3) float64, faces (M, 3) int32, uv (N, 2) float32 and optional weight (N,)
     of ``obj``'s evaluated mesh in object space, a vertex per distinct (vertex, UV) corner so
-    UV seams stay seams."""
+    UV seams stay seams.  ``uv_name`` None: no UVs (crackbake unwraps; uv is zero)."""
     evaluated = obj.evaluated_get(depsgraph)
     me = evaluated.to_mesh()
     try:
@@ -24,7 +25,7 @@ def mesh_arrays(obj, depsgraph, uv_name: str = "", group: str = "") -> dict:
         if not len(me.loop_triangles):
             raise ExportError(f"'{obj.name}' has no faces to crack")
         layer = me.uv_layers.get(uv_name) if uv_name else me.uv_layers.active
-        if layer is None:
+        if layer is None and uv_name is not None:
             raise ExportError(f"'{obj.name}' has no UV map{' ' + repr(uv_name) if uv_name else ''};"
                               " add one (UV > Unwrap) or pick another")
         n_loops, n_verts = len(me.loops), len(me.vertices)
@@ -34,8 +35,9 @@ def mesh_arrays(obj, depsgraph, uv_name: str = "", group: str = "") -> dict:
         me.loops.foreach_get("vertex_index", loop_vert)
         co = np.empty(n_verts * 3, np.float32)
         me.vertices.foreach_get("co", co)
-        uv = np.empty(n_loops * 2, np.float32)
-        layer.uv.foreach_get("vector", uv)
+        uv = np.zeros(n_loops * 2, np.float32)
+        if uv_name is not None:
+            layer.uv.foreach_get("vector", uv)
         uv = uv.reshape(-1, 2)
         weight = None
         if group:
@@ -58,6 +60,7 @@ def mesh_arrays(obj, depsgraph, uv_name: str = "", group: str = "") -> dict:
         "vertices": co.reshape(-1, 3)[loop_vert[first]].astype(np.float64),
         "faces": inverse[tri].reshape(-1, 3).astype(np.int32),
         "uv": uv[first],
+        "triangles": len(tri) // 3,
     }
     if weight is not None:
         out["weight"] = weight[loop_vert[first]]
@@ -85,3 +88,19 @@ def write_ply(path: str, arrays: dict) -> None:
         fh.write(("\n".join(header) + "\n").encode("ascii"))
         fh.write(rows.tobytes())
         fh.write(faces.tobytes())
+
+
+def store_unwrap(mesh, uv: np.ndarray, faces: np.ndarray, name: str = "crackbake") -> None:
+    """Write crackbake's unwrap (``uv`` (N, 2), ``faces`` (M, 3) in the mesh's loop-triangle
+    order) into the UV map ``name`` of ``mesh`` (made when missing)."""
+    mesh.calc_loop_triangles()
+    tri = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("loops", tri)
+    if len(tri) != faces.size:
+        raise ExportError(f"the unwrap has {len(faces)} triangles, the mesh "
+                          f"{len(tri) // 3}; bake again")
+    loop_uv = np.zeros((len(mesh.loops), 2), np.float32)
+    loop_uv[tri] = uv[faces.reshape(-1)]  # a loop in two triangles takes its last corner's UV
+    layer = mesh.uv_layers.get(name) or mesh.uv_layers.new(name=name)
+    layer.uv.foreach_set("vector", loop_uv.ravel())
+    mesh.update()

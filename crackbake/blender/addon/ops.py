@@ -13,7 +13,7 @@ import bpy
 from bpy.props import BoolProperty, FloatProperty, FloatVectorProperty, IntProperty
 from mathutils import Vector
 
-from . import export, nodes, runner
+from . import export, gltf, nodes, runner
 from .raycast import object_scale, surface_hit
 
 #: Seconds between two polls of a running bake.
@@ -30,6 +30,7 @@ class _State:
     obj_name = ""
     out_dir = ""
     uv_name = ""
+    unwrap = False
 
 
 def _prefs(context):
@@ -178,11 +179,12 @@ def _num(value: float) -> str:
 
 
 def command_line(command: str, obj, mesh_path: str, out_dir: str, cracks: str | None,
-                 weight: bool) -> list[str]:
+                 weight: bool, unwrap: bool = False) -> list[str]:
     s = obj.crackbake
     argv = [*runner.split_command(command), mesh_path, "-o", out_dir, "--target", "blender",
-            "--formats", "png", "--res", str(s.res), "--seed", str(s.seed), "--min-px",
-            _num(s.min_px), "--method", s.method, "--uv", "keep", "--progress", "jsonl"]
+            "--formats", "png,glb" if unwrap else "png", "--res", str(s.res), "--seed",
+            str(s.seed), "--min-px", _num(s.min_px), "--method", s.method,
+            "--uv", "unwrap" if unwrap else "keep", "--progress", "jsonl"]
     if s.preset:  # with --cracks too: the preset's look draws the cracks
         argv += ["--preset", s.preset]
     if cracks:
@@ -237,10 +239,22 @@ class CRACKBAKE_OT_bake(bpy.types.Operator):
         out_dir = output_folder(obj)
         workdir = tempfile.mkdtemp(prefix="crackbake-")
         try:
-            uv_name = s.uv_map or (obj.data.uv_layers.active.name if obj.data.uv_layers.active
-                                   else "")
-            arrays = export.mesh_arrays(obj, context.evaluated_depsgraph_get(), uv_name,
-                                        s.weight_group)
+            unwrap = s.uv_mode == "UNWRAP"
+            if unwrap:
+                uv_name = export.UNWRAP_UV
+            else:
+                uv_name = s.uv_map or (obj.data.uv_layers.active.name
+                                       if obj.data.uv_layers.active else "")
+            arrays = export.mesh_arrays(obj, context.evaluated_depsgraph_get(),
+                                        None if unwrap else uv_name, s.weight_group)
+            if unwrap:
+                obj.data.calc_loop_triangles()
+                base = len(obj.data.loop_triangles)
+                if base != arrays["triangles"]:
+                    raise export.ExportError(
+                        f"'{obj.name}': a new unwrap is stored on the mesh itself, and its "
+                        f"modifiers change it ({base} -> {arrays['triangles']} triangles); "
+                        "apply them, or bake with a UV map")
             mesh_path = os.path.join(workdir, bpy.path.clean_name(obj.name) + ".ply")
             export.write_ply(mesh_path, arrays)
             cracks = None
@@ -249,7 +263,8 @@ class CRACKBAKE_OT_bake(bpy.types.Operator):
                 if not os.path.isfile(sidecar):
                     raise export.ExportError(f"no earlier bake in {out_dir} to re-bake")
                 cracks = shutil.copy(sidecar, os.path.join(workdir, "cracks.json"))
-            argv = command_line(command, obj, mesh_path, out_dir, cracks, "weight" in arrays)
+            argv = command_line(command, obj, mesh_path, out_dir, cracks, "weight" in arrays,
+                                unwrap)
             LAST_TIMINGS.clear()
             LAST_TIMINGS["export"] = time.perf_counter() - t0
             job = runner.Job(argv, workdir).start()
@@ -259,6 +274,7 @@ class CRACKBAKE_OT_bake(bpy.types.Operator):
             return {"CANCELLED"}
         _State.job, _State.obj_name, _State.out_dir, _State.uv_name = job, obj.name, out_dir, \
             uv_name
+        _State.unwrap = unwrap
         s.status, s.progress = "starting", 0.0
         if self.wait:
             job.wait()
@@ -337,10 +353,14 @@ def finish() -> tuple[str, str]:
         try:
             with open(os.path.join(out_dir, "manifest.json"), encoding="utf-8") as fh:
                 manifest = json.load(fh)
+            if _State.unwrap:
+                glb = next(f for f in job.summary.get("files", []) if f.endswith(".glb"))
+                uv, faces = gltf.read_uv_triangles(os.path.join(out_dir, glb))
+                export.store_unwrap(obj.data, uv, faces, export.UNWRAP_UV)
             images = nodes.load_images(obj.name, out_dir, manifest)
             look = manifest.get("params", {}).get("look", {})
             mats = nodes.apply(obj, images, look, _State.uv_name)
-        except (OSError, ValueError, RuntimeError) as exc:
+        except (OSError, ValueError, RuntimeError, StopIteration, export.ExportError) as exc:
             s.status = f"could not load the result: {exc}"
             return "ERROR", f"Crackbake: could not load the result from {out_dir}: {exc}"
         if not mats:

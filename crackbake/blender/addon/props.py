@@ -61,6 +61,12 @@ class CrackbakeSettings(bpy.types.PropertyGroup):
     res: IntProperty(name="Resolution", default=2048, min=64, max=16384,
                      description=_help("res"))
     min_px: FloatProperty(name="Min px", default=1.0, min=0.0, description=_help("min_px"))
+    uv_mode: EnumProperty(name="UVs", items=[
+        ("ACTIVE", "UV map", "Bake for the object's UV map (the one named below, or the "
+         "active one)"),
+        ("UNWRAP", "New unwrap", "Unwrap with xatlas (crackbake --uv unwrap) and store the "
+         "result as the UV map 'crackbake'"),
+    ], default="ACTIVE")
     uv_map: StringProperty(name="UV map", description="UV map the maps are baked for (empty: "
                            "the active one)")
     weight_group: StringProperty(name="Weights", description="Vertex group multiplying the "

@@ -40,7 +40,9 @@ class CRACKBAKE_PT_panel(bpy.types.Panel):
         row.operator("crackbake.new_seed", text="", icon="FILE_REFRESH")
         col.prop(s, "res")
         col.prop(s, "min_px")
-        col.prop_search(s, "uv_map", obj.data, "uv_layers")
+        col.prop(s, "uv_mode")
+        if s.uv_mode == "ACTIVE":
+            col.prop_search(s, "uv_map", obj.data, "uv_layers")
         col.prop_search(s, "weight_group", obj, "vertex_groups")
         col.prop(s, "output_dir")
 
