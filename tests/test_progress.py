@@ -107,7 +107,10 @@ def test_a_signal_mid_solve_ends_with_a_cancelled_event(tmp_path, sig):
         [sys.executable, "-m", "crackbake", str(SPOT), "--preset", "mud", "--sim-faces", "20000",
          "--res", "256", "--formats", "exr", "-o", str(out), "--progress", "jsonl"],
         cwd=tmp_path, env=_env(tmp_path), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True)
+        text=True,
+        # a shell's background job ignores SIGINT and its children inherit that; the signal
+        # must reach crackbake as a terminal's Ctrl-C would
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     events = []
     try:
         for line in proc.stdout:
@@ -120,7 +123,7 @@ def test_a_signal_mid_solve_ends_with_a_cancelled_event(tmp_path, sig):
     finally:
         proc.kill()
         proc.wait()
-    assert code == 128 + sig
+    assert code == 128 + sig, (events, proc.stderr.read())
     last = events[-1]
     assert last == {**last, "event": "error", "exit_code": 128 + sig, "cancelled": True}
     assert last["message"] == "interrupted; no outputs were written"
