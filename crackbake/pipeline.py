@@ -2,7 +2,8 @@
 
 mesh -> crack network (sidecar, or the solver) -> UVs -> GPU bake -> files.  Each stage is its
 own module; this one only orders them, times them and hands one GL context to every GPU stage.
-Progress is reported through :mod:`logging` (logger ``"crackbake.pipeline"``).
+Progress is reported through :mod:`logging` (logger ``"crackbake.pipeline"``); the record that
+starts a stage carries its id (``extra={"stage": ...}``, one of :data:`crackbake.progress.STAGES`).
 """
 
 from __future__ import annotations
@@ -136,7 +137,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
 
-    logger.info("loading %s", params.mesh)
+    logger.info("loading %s", params.mesh, extra={"stage": "load"})
     t = time.perf_counter()
     mesh = load_mesh(params.mesh, params.object_name, params.allow_outside_textures)
     timings["load"] = time.perf_counter() - t
@@ -153,7 +154,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
                 CrackbakeWarning,
                 stacklevel=3,
             )
-        logger.info("reading crack network %s", params.cracks)
+        logger.info("reading crack network %s", params.cracks, extra={"stage": "cracks"})
         t = time.perf_counter()
         network = read_sidecar(params.cracks, mesh)
         timings["cracks"] = time.perf_counter() - t
@@ -170,7 +171,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
         maps = _bake(ctx, uvmesh, network, params, timings)
         stress = _bake_stress(ctx, uvmesh, solved, params, timings)
-        logger.info("writing %s", params.out_dir)
+        logger.info("writing %s", params.out_dir, extra={"stage": "write"})
         t = time.perf_counter()
         effective = effective_params(params, solver_stats, maps, uvmesh)
         write_outputs(
@@ -202,7 +203,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
 
 def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMesh:
     """The UV stage, timed as ``unwrap``."""
-    logger.info("preparing UVs")
+    logger.info("preparing UVs", extra={"stage": "unwrap"})
     t = time.perf_counter()
     uvmesh = prepare_uvs(
         mesh,
@@ -225,7 +226,7 @@ def _bake(
     ctx, uvmesh: UVMesh, network: CrackNetwork, params: RunParams, timings: dict[str, float]
 ) -> CrackMaps:
     """The GPU bake, timed as ``bake``."""
-    logger.info("baking %dx%d", params.res, params.res)
+    logger.info("baking %dx%d", params.res, params.res, extra={"stage": "bake"})
     t = time.perf_counter()
     # The faces plus the copies of faces straying past the page, wrapped where engines show them.
     arrays = bake_arrays(uvmesh)
@@ -258,7 +259,7 @@ def _decals(ctx, uvmesh, network, maps, params: RunParams, stage, timings) -> No
     from crackbake.decals.projector import bake_decals
     from crackbake.exchange.targets import normal_convention
 
-    logger.info("baking %d decal(s)", len(params.impacts))
+    logger.info("baking %d decal(s)", len(params.impacts), extra={"stage": "decals"})
     t = time.perf_counter()
     res = params.decal_res or min(params.res, DECAL_RES_DEFAULT)
     decals = bake_decals(uvmesh, segments(network), maps, params.impacts, params.decal, res,
@@ -274,7 +275,7 @@ def _bake_stress(
     if solved is None or "stress" not in params.formats:
         return None  # a --cracks re-bake has no stress field
     res = params.stress_res or min(params.res, STRESS_RES_DEFAULT)
-    logger.info("baking the stress field %dx%d", res, res)
+    logger.info("baking the stress field %dx%d", res, res, extra={"stage": "stress_bake"})
     t = time.perf_counter()
     stress = bake_stress(
         uvmesh,
@@ -315,7 +316,7 @@ def solve(
 
     if sources is None:
         sources = stress_sources(params, mesh, relative)
-    logger.info("building the simulation mesh")
+    logger.info("building the simulation mesh", extra={"stage": "simmesh"})
     t = time.perf_counter()
     # Held back until the sim mesh is final: a rebuild for a thin feature repeats them.
     first: list = []
@@ -325,7 +326,8 @@ def solve(
             sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces,
                                 seed=params.seed, proxy_above=params.proxy_above)
             timings["simmesh"] = time.perf_counter() - t
-            logger.info("stress field on %d simulation faces", len(sim.faces))
+            logger.info("stress field on %d simulation faces", len(sim.faces),
+                        extra={"stage": "stress"})
             t = time.perf_counter()
             field = stress_field(sim, mesh, sources, seed=params.seed)
         local = None if relative.get("sim_size_set") else impact_refinement(field, sim)
@@ -345,7 +347,7 @@ def solve(
     field = with_spacing(field, params, mesh.diagonal)
     timings["stress"] = time.perf_counter() - t
     sp = solver_params(params, mesh, relative)
-    logger.info("growing cracks (%s)", sp.method)
+    logger.info("growing cracks (%s)", sp.method, extra={"stage": "solve"})
     t = time.perf_counter()
     result = _grow(sim, field, sp)
     timings["solve"] = time.perf_counter() - t

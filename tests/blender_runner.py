@@ -36,10 +36,11 @@ def blender_python() -> str | None:
     return None
 
 
-def run_blender(script: str, *args: str, timeout: float = 600) -> dict:
+def run_blender(script: str, *args: str, timeout: float = 600, env: dict | None = None) -> dict:
     """Run ``tests/blender/<script>`` with ``args`` under Blender's Python; its JSON result.
 
-    Skips the calling test when no interpreter with ``bpy`` is available.
+    ``env`` adds to (or overrides) this process's environment.  Skips the calling test when no
+    interpreter with ``bpy`` is available.
     """
     exe = blender_python()
     if exe is None:
@@ -47,6 +48,7 @@ def run_blender(script: str, *args: str, timeout: float = 600) -> dict:
     proc = subprocess.run(
         [exe, str(SCRIPTS / script), *map(str, args)],
         capture_output=True, text=True, timeout=timeout,
+        env=None if env is None else {**os.environ, **env},
     )
     if proc.returncode != 0:
         raise AssertionError(f"{script} failed under Blender:\n{proc.stderr[-3000:]}")

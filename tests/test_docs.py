@@ -29,6 +29,7 @@ PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 PLACEHOLDER = re.compile(
     r"\b(MESH|FILE|OUT|DIR|IMG|NAME|SIZE|LIST|COMMAND|[A-Z])\b|\.\.\.|[\[<|]|X,Y,Z")
 SMALL = {"bake": 128, "decals": 64, "tile": 128}
+COMMANDS = ("inspect", "decals", "tile", "batch", "blender-addon")
 SIM_FACES = "4000"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -59,7 +60,7 @@ def documented() -> list[tuple[str, str]]:
             key = tuple(small(args)) if args else ()
             if key in seen:
                 continue
-            if len(args) == 1 and args[0] in ("inspect", "decals", "tile", "batch"):
+            if len(args) == 1 and args[0] in COMMANDS:
                 continue  # the command's name in a sentence
             seen.add(key)
             found.append((page.name, cmd))
@@ -81,8 +82,9 @@ def small(args: list[str]) -> list[str]:
     args = list(args)
     if any(a in ("--help", "-h", "--version", "-V") for a in args):
         return args
-    kind = args[0] if args[0] in ("inspect", "decals", "tile", "batch") else "bake"
-    if kind in ("inspect", "batch"):  # a batch's sizes are in its file (examples/batch.toml)
+    kind = args[0] if args[0] in COMMANDS else "bake"
+    # a batch's sizes are in its file (examples/batch.toml); blender-addon bakes nothing
+    if kind in ("inspect", "batch", "blender-addon"):
         return args
     args = _set(args, "--res", str(SMALL[kind]), only_lower=True)
     if kind == "decals":

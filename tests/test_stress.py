@@ -483,6 +483,20 @@ def test_vertex_weights_from_ply_and_glb(tmp_path):
     assert np.allclose(vertex_weights(ply, None), 1.0)
     with pytest.raises(CrackbakeError, match="available: .*wt"):
         vertex_weights(ply, "paint")
+    # the same in a binary PLY (as the Blender extension writes): trimesh keeps its rows as one
+    # structured array, not a dict of columns
+    rows = np.empty(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("wt", "<f4")])
+    for i, c in enumerate("xyz"):
+        rows[c] = box.vertices[:, i]
+    rows["wt"] = wt
+    faces = np.empty(len(box.faces), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    faces["n"], faces["i"] = 3, box.faces
+    header = "\n".join(["ply", "format binary_little_endian 1.0", f"element vertex {n}",
+                        *[f"property double {c}" for c in "xyz"], "property float wt",
+                        f"element face {len(box.faces)}", "property list uchar int vertex_indices",
+                        "end_header"]) + "\n"
+    (tmp_path / "b.ply").write_bytes(header.encode() + rows.tobytes() + faces.tobytes())
+    assert np.allclose(vertex_weights(load_mesh(tmp_path / "b.ply"), "wt"), wt, atol=1e-6)
 
     box.vertex_attributes["_paint"] = wt.astype(np.float32)
     box.export(tmp_path / "m.glb")

@@ -57,6 +57,7 @@ from crackbake.params import (
 from crackbake.params import (
     SOLVER_DEFAULTS as D,
 )
+from crackbake.transaction.interrupt import RunInterrupted
 
 EPILOG = """\b
 Examples:
@@ -85,6 +86,9 @@ Examples:
 \b
   # a seamlessly tiling mud texture set (crackbake tile --help)
   crackbake tile --preset mud --size 2 --res 2048 -o mud_tile/
+\b
+  # the Blender 4.2+ extension: click impacts, bake into the material (docs/blender.md)
+  crackbake blender-addon -o dist/
 \b
 Outputs (in ./<mesh-stem>_cracks/ unless -o): <stem>_cracks.exr (crack.<map>.V layers: mask,
 width, time, depth, distance, id, occlusion; crack.normal.NX/NY/NZ), <stem>_stress.exr, the
@@ -361,43 +365,54 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.option("-v", "--verbose", is_flag=True, help="Print stage timings and details.")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
+@click.option(
+    "--progress",
+    type=click.Choice(["jsonl"]),
+    help="Write the run's progress to stdout as one JSON object a line (stage, fraction, "
+    "warnings, then the summary or the error; docs/progress.md), for GUIs and pipelines.",
+)
 @click.version_option(__version__, "-V", "--version", prog_name="crackbake")
-def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> None:
+def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, progress: str | None,
+         **options) -> None:
     """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
     t0 = time.perf_counter()
     recorded: list[str] = []
     stderr = sys.stderr
     display = Display(stderr, display_mode(stderr, quiet, verbose), t0)
+    events = _progress(progress, as_json, t0)
 
     def show(message, category, *_args, **_kwargs) -> None:
         recorded.append(str(message))
         display.warn(str(message))
+        events.warn(str(message))
+
+    def fail(line: str, code: int, cancelled: bool = False) -> None:
+        err(line)
+        events.error(line.removeprefix("error: "), code, cancelled)
+        sys.exit(code)
 
     try:
         # Checked before the pipeline's heavy imports (GL, numba): a typo fails in 0.2 s.
         params = run_params(mesh, options).validate()
         from crackbake.pipeline import run
 
-        with warnings.catch_warnings(), display:
+        with warnings.catch_warnings(), display, events:
             warnings.simplefilter("always", CrackbakeWarning)
             warnings.showwarning = show
             result = run(params)
     except CrackbakeError as exc:
-        err(f"error: {exc}")
-        sys.exit(exc.exit_code)
+        fail(f"error: {exc}", exc.exit_code, cancelled=isinstance(exc, RunInterrupted))
     except KeyboardInterrupt:
-        err("interrupted; no outputs were written")
-        sys.exit(130)
+        fail("interrupted; no outputs were written", 130, cancelled=True)
     except MemoryError:  # past the estimate (--max-memory above the real limit, a busy machine)
-        err("error: ran out of memory; no outputs were written. Lower --res, --stress-res or "
-             "--sim-faces, or free memory (crackbake.memory estimates a run's peak)")
-        sys.exit(2)
+        fail("error: ran out of memory; no outputs were written. Lower --res, --stress-res or "
+             "--sim-faces, or free memory (crackbake.memory estimates a run's peak)", 2)
     except Exception as exc:  # a bug: say so, keep the traceback behind --verbose
         if verbose:
             raise
         text = " ".join(str(exc).split())[:200]
-        err(f"internal error: {type(exc).__name__}: {text} (rerun with --verbose for details)")
-        sys.exit(1)
+        fail(f"internal error: {type(exc).__name__}: {text} (rerun with --verbose for details)",
+             1)
 
     result.warnings = recorded
     # The output set is committed: a Ctrl-C now could only cut the summary short, or land in
@@ -405,6 +420,7 @@ def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
+        events.done(result.summary())
         if as_json:
             click.echo(json.dumps(result.summary(), indent=2))
             sys.stdout.flush()
@@ -416,6 +432,33 @@ def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, **options) -> No
         err(f"error: cannot write the {what} ({exc.strerror or exc}); the outputs are "
              f"complete in {result.out_dir}/")
         sys.exit(2)
+
+
+class _NoProgress:
+    """Stands in for :class:`crackbake.progress.JsonlProgress` without ``--progress``."""
+
+    def __getattr__(self, _name):
+        return lambda *_a, **_k: None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        pass
+
+
+def _progress(mode: str | None, as_json: bool, t0: float):
+    """The ``--progress`` writer on stdout (its ``start`` event written), or a no-op one."""
+    if mode is None:
+        return _NoProgress()
+    if as_json:
+        raise click.UsageError("--progress jsonl and --json both write to stdout: use one (the "
+                               "progress stream ends with the summary)")
+    from crackbake.progress import JsonlProgress
+
+    events = JsonlProgress(sys.stdout, t0)
+    events.start(__version__)
+    return events
 
 
 def run_params(mesh: Path, o: dict) -> RunParams:

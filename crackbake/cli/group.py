@@ -2,9 +2,10 @@
 
 ``crackbake MESH [OPTIONS]`` bakes (:mod:`crackbake.cli.bake`); a first argument that is a
 command's name runs that command instead: ``crackbake inspect FILE.exr``, ``crackbake decals``,
-``crackbake tile``, ``crackbake batch JOBS``.  The name wins over a file of the same name in
-the working folder: a mesh file named ``tile`` (or ``inspect``, ``decals``, ``batch``) is baked
-when given as a path, ``crackbake ./tile``.  ``crackbake --help`` and ``--version`` are the bake's.
+``crackbake tile``, ``crackbake batch JOBS``, ``crackbake blender-addon``.  The name wins over
+a file of the same name in the working folder: a mesh file named ``tile`` (or ``inspect``,
+``decals``, ``batch``) is baked when given as a path, ``crackbake ./tile``.
+``crackbake --help`` and ``--version`` are the bake's.
 
 The commands are imported when they run, so ``crackbake MESH`` loads none of them (and a bad
 option fails before any heavy import).
@@ -25,6 +26,7 @@ COMMANDS = {
     "decals": "crackbake.decals.command:decals",
     "tile": "crackbake.tile.command:tile",
     "batch": "crackbake.batch.command:batch",
+    "blender-addon": "crackbake.blender.build:blender_addon",
 }
 
 

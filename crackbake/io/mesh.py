@@ -433,6 +433,8 @@ def _vertex_attributes(geom) -> dict[str, np.ndarray]:
     n = len(geom.vertices)
     out: dict[str, np.ndarray] = {}
     raw = (geom.metadata or {}).get("_ply_raw", {}).get("vertex", {}).get("data", {})
+    if isinstance(raw, np.ndarray) and raw.dtype.names:  # a binary PLY's rows
+        raw = {name: raw[name] for name in raw.dtype.names}
     if isinstance(raw, dict):
         for key in set(raw) - _PLY_GEOMETRY:
             out[key] = np.asarray(raw[key])

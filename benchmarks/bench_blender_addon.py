@@ -1,0 +1,97 @@
+"""The Blender extension's overhead over the plain command (issue 22's floor: at most 1.5 s
+beyond the CLI run on spot at 2048²).
+
+Runs ``crackbake spot.obj --preset glass --impact ... --res 2048 --target blender --formats png``
+from a shell-like subprocess (after a warm-up run, so numba's kernels load from the cache), then
+the same bake through the extension under Blender's Python (installed into a temporary user
+profile): ``bpy.ops.crackbake.bake(wait=True)``.  Prints the operator's wall time split into
+export, crackbake's run and loading the result, and the overhead: operator time minus the CLI's
+wall time.
+
+Usage::
+
+    CRACKBAKE_BLENDER_PYTHON=.venv-blender/bin/python python benchmarks/bench_blender_addon.py \\
+        [--res 2048]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SPOT = ROOT / "examples" / "spot.obj"
+IMPACT = (0.334, 0.044, 0.287)  # on spot's flank
+
+CHILD = """
+import json, os, sys, time
+import bpy
+zip_path, spot, out, res = sys.argv[1:5]
+impact = [float(c) for c in sys.argv[5].split(",")]
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default",
+                                         enable_on_install=True)
+ops = sys.modules["bl_ext.user_default.crackbake.ops"]
+bpy.ops.wm.obj_import(filepath=spot, forward_axis="Y", up_axis="Z")  # OBJ coordinates kept
+obj = bpy.context.selected_objects[0]
+bpy.context.view_layer.objects.active = obj
+s = obj.crackbake
+s.output_dir, s.res, s.preset = out + os.sep, int(res), "glass"
+bpy.ops.crackbake.add_impact(location=impact)
+bpy.ops.crackbake.check_command()  # the one-off --version check, not part of a bake
+t = time.perf_counter()
+r = bpy.ops.crackbake.bake(wait=True)
+total = time.perf_counter() - t
+print(json.dumps({"result": sorted(r), "total": total, **ops.LAST_TIMINGS}))
+sys.stdout.flush()
+os._exit(0)
+"""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--res", type=int, default=2048)
+    args = parser.parse_args()
+    bpy_python = os.environ.get("CRACKBAKE_BLENDER_PYTHON") or str(
+        ROOT / ".venv-blender" / "bin" / "python")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    with tempfile.TemporaryDirectory(prefix="bench-addon-") as tmp:
+        tmp = Path(tmp)
+        from crackbake.blender.build import build_extension
+
+        zip_path = build_extension(tmp / "zip")
+        impact = ",".join(map(str, IMPACT))
+        cli = [sys.executable, "-m", "crackbake", str(SPOT), "--preset", "glass", "--impact",
+               impact, "--res", str(args.res), "--target", "blender", "--formats", "png",
+               "--uv", "keep", "-q"]
+        subprocess.run([*cli, "-o", str(tmp / "warm")], check=True, env=env)
+        t = time.perf_counter()
+        subprocess.run([*cli, "-o", str(tmp / "cli")], check=True, env=env)
+        cli_s = time.perf_counter() - t
+
+        (tmp / "user").mkdir()
+        (tmp / "child.py").write_text(CHILD)
+        proc = subprocess.run(
+            [bpy_python, str(tmp / "child.py"), str(zip_path), str(SPOT), str(tmp / "ext"),
+             str(args.res), impact],
+            env={**env, "BLENDER_USER_RESOURCES": str(tmp / "user")}, capture_output=True,
+            text=True, check=True)
+        ext = json.loads(proc.stdout.strip().splitlines()[-1])
+    print(f"spot, glass, one impact, {args.res}² (--target blender --formats png)\n")
+    print("| | seconds |\n|---|---|")
+    print(f"| CLI run (wall) | {cli_s:.2f} |")
+    print(f"| extension: bake operator (wait=True) | {ext['total']:.2f} |")
+    print(f"| - export (evaluated mesh to PLY) | {ext['export']:.2f} |")
+    print(f"| - crackbake run in the extension | {ext['run']:.2f} |")
+    print(f"| - load images, node group | {ext['finish']:.2f} |")
+    print(f"| **overhead** (operator - CLI) | {ext['total'] - cli_s:.2f} |")
+
+
+if __name__ == "__main__":
+    main()
