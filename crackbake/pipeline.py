@@ -14,16 +14,9 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from crackbake.bake.context import create_context, renderer_info
-from crackbake.bake.raster import CrackMaps, bake_cracks
-from crackbake.bake.stress import StressMaps, bake_stress
-from crackbake.bake.tangents import with_tangents
-from crackbake.bake.uv import UVMesh, prepare_uvs
-from crackbake.bake.uv.uvmesh import bake_arrays
 from crackbake.errors import CrackbakeWarning
-from crackbake.exchange.bundle import write_outputs
-from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.looks import WIDTH_NOISE_SCALE, vary_widths
@@ -37,9 +30,17 @@ from crackbake.simulate.setup import (
     stress_sources,
     with_spacing,
 )
-from crackbake.simulate.timing import grow_from_impacts
 from crackbake.transaction.interrupt import run_staged
 from crackbake.transaction.stage import OutputStage
+
+if TYPE_CHECKING:
+    from crackbake.bake.raster import CrackMaps
+    from crackbake.bake.stress import StressMaps
+    from crackbake.bake.uv import UVMesh
+
+# The stages' modules (GL, numba kernels, scipy, trimesh) are imported where a stage runs, not
+# here: a run refused by its cheap checks (the output folder, the mesh file, the sidecar, the
+# memory estimate) exits before paying for them, in a fraction of the start-up.
 
 logger = logging.getLogger(__name__)
 
@@ -162,6 +163,10 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         params, relative = params.resolved()
         sources = stress_sources(params, mesh, relative)  # weight maps, impacts: checked here
 
+    from crackbake.bake.context import create_context, renderer_info
+    from crackbake.exchange.bundle import write_outputs
+    from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
+
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     ctx = create_context()
@@ -203,6 +208,9 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
 
 def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMesh:
     """The UV stage, timed as ``unwrap``."""
+    from crackbake.bake.tangents import with_tangents
+    from crackbake.bake.uv import prepare_uvs
+
     logger.info("preparing UVs", extra={"stage": "unwrap"})
     t = time.perf_counter()
     uvmesh = prepare_uvs(
@@ -226,6 +234,9 @@ def _bake(
     ctx, uvmesh: UVMesh, network: CrackNetwork, params: RunParams, timings: dict[str, float]
 ) -> CrackMaps:
     """The GPU bake, timed as ``bake``."""
+    from crackbake.bake.raster import bake_cracks
+    from crackbake.bake.uv.uvmesh import bake_arrays
+
     logger.info("baking %dx%d", params.res, params.res, extra={"stage": "bake"})
     t = time.perf_counter()
     # The faces plus the copies of faces straying past the page, wrapped where engines show them.
@@ -274,6 +285,8 @@ def _bake_stress(
     """The stress-field maps, timed as ``stress_bake``; None when nothing was solved."""
     if solved is None or "stress" not in params.formats:
         return None  # a --cracks re-bake has no stress field
+    from crackbake.bake.stress import bake_stress
+
     res = params.stress_res or min(params.res, STRESS_RES_DEFAULT)
     logger.info("baking the stress field %dx%d", res, res, extra={"stage": "stress_bake"})
     t = time.perf_counter()
@@ -313,6 +326,7 @@ def solve(
     """
     from crackbake.simulate.simmesh import build_simmesh, onto_asset
     from crackbake.simulate.stress import impact_refinement, stress_field
+    from crackbake.simulate.timing import grow_from_impacts
 
     if sources is None:
         sources = stress_sources(params, mesh, relative)

@@ -255,9 +255,10 @@ def largest_eigen(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # ------------------------------------------------------------------ scheduling
 # ``make test`` hands whole files to its workers (pytest-xdist --dist loadfile) in collection
-# order.  The longest files (measured with --durations: a fresh numba cache compiled, about a
-# hundred CLI processes for the bad-input catalogue, the interrupted runs), then every file that
-# holds slow tests, go first, so no long file starts when the others are nearly done.
+# order.  The longest files (measured with --durations: the first runs after the precompile, or
+# run alone a fresh numba cache compiled; about a hundred CLI processes for the bad-input
+# catalogue; the interrupted runs), then every file that holds slow tests, go first, so no long
+# file starts when the others are nearly done.
 _LONGEST = ("test_precompile.py", "test_bad_inputs.py", "test_transaction.py")
 
 

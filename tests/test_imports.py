@@ -66,3 +66,29 @@ def test_no_private_names_cross_into_or_out_of_the_commands():
             if private and (node.module.startswith("crackbake.cli") or path in commands):
                 found.append(f"{path.relative_to(root)}: {node.module} {private}")
     assert not found, found
+
+
+# Runs the bake command on a mesh path that does not exist, then prints the heavy libraries
+# that were imported on the way to the refusal.
+_REFUSED = """
+import sys
+from crackbake.cli import main
+try:
+    main(sys.argv[1:], prog_name="crackbake")
+except SystemExit as exc:
+    code = exc.code
+heavy = ("numba", "scipy", "trimesh", "moderngl", "crackbake.bake", "crackbake.exchange")
+print(code, " ".join(sorted(h for h in heavy if h in sys.modules)))
+"""
+
+
+def test_a_run_refused_before_its_stages_imports_none_of_them(tmp_path):
+    """The pipeline imports each stage (GL, numba kernels, scipy, trimesh) where it runs, and
+    the mesh reader imports trimesh after the path checks: a wrong path is refused at once,
+    which a catalogue of bad inputs (and a user's typo) pays in every process."""
+    r = subprocess.run([sys.executable, "-c", _REFUSED, str(tmp_path / "missing.obj"),
+                        "--shrink", "1", "-o", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert "file not found" in r.stderr, r.stderr
+    code, _, loaded = r.stdout.strip().partition(" ")
+    assert code == "2" and loaded == "", r.stdout

@@ -300,7 +300,7 @@ def test_sigterm_leaves_no_folder(tmp_path):
 
 @pytest.mark.slow
 def test_sixteen_variants_at_256(tmp_path):
-    doc = build_library(LibraryParams(out=tmp_path / "l", n=16, res=256, seed=2))
+    doc = build_library(LibraryParams(out=tmp_path / "l", n=16, res=256, seed=2, sim_faces=SIM))
     assert doc["atlas"]["width"] == doc["atlas"]["height"] == 4 * 384
     assert all(d["cracks"] > 0 for d in doc["decals"])
     assert len({d["seed"] for d in doc["decals"]}) == 16

@@ -1,35 +1,47 @@
 """Files for other tools: one module per format (EXR, PNG, GLB), the run's set of files and its
-manifest.  The output folder they are written into is :mod:`crackbake.transaction`."""
+manifest.  The output folder they are written into is :mod:`crackbake.transaction`.
 
-from crackbake.exchange.bundle import write_outputs
-from crackbake.exchange.exr import (
-    LOSSLESS_COMPRESSIONS,
-    LOSSY_COMPRESSIONS,
-    read_exr,
-    write_exr,
-)
-from crackbake.exchange.glb import write_glb
-from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
-from crackbake.exchange.materials import CRACK_RGB, GLB_TEXTURE_MAX, SURFACE_RGB, base_color
-from crackbake.exchange.pngenc import png_bytes
-from crackbake.exchange.targets import TARGETS, describe, pack
+The names below are imported from their modules on first use (PEP 562): ``crackbake inspect``
+reads an EXR through :mod:`crackbake.exchange.inspect` without loading the bake that
+:mod:`crackbake.exchange.bundle` needs (GL, numba kernels, scipy).
+"""
 
-__all__ = [
-    "CRACK_RGB",
-    "GLB_TEXTURE_MAX",
-    "LOSSLESS_COMPRESSIONS",
-    "LOSSY_COMPRESSIONS",
-    "SURFACE_RGB",
-    "TARGETS",
-    "base_color",
-    "build_manifest",
-    "describe",
-    "effective_params",
-    "pack",
-    "png_bytes",
-    "read_exr",
-    "write_exr",
-    "write_glb",
-    "write_manifest",
-    "write_outputs",
-]
+from __future__ import annotations
+
+import importlib
+
+# name -> the module of this package that defines it
+_SOURCES = {
+    "write_outputs": "bundle",
+    "LOSSLESS_COMPRESSIONS": "exr",
+    "LOSSY_COMPRESSIONS": "exr",
+    "read_exr": "exr",
+    "write_exr": "exr",
+    "write_glb": "glb",
+    "build_manifest": "manifest",
+    "effective_params": "manifest",
+    "write_manifest": "manifest",
+    "CRACK_RGB": "materials",
+    "GLB_TEXTURE_MAX": "materials",
+    "SURFACE_RGB": "materials",
+    "base_color": "materials",
+    "png_bytes": "pngenc",
+    "TARGETS": "targets",
+    "describe": "targets",
+    "pack": "targets",
+}
+
+__all__ = sorted(_SOURCES)
+
+
+def __getattr__(name: str):
+    module = _SOURCES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -169,8 +169,6 @@ class _Refused(OSError):
 
 def _read_file(path: Path, allow_outside: bool = False):
     """The trimesh object of a mesh file, after the path and format checks."""
-    import trimesh
-
     if not path.exists():
         raise CrackbakeError(f"{path}: file not found; check the path")
     if path.is_dir():
@@ -196,6 +194,8 @@ def _read_file(path: Path, allow_outside: bool = False):
             head = fh.read(len(obj_checks.BOM))
         # A byte-order mark hides the first token of text formats from trimesh.
         source = io.BytesIO(_read_bytes(path)[len(head):]) if head == obj_checks.BOM else str(path)
+    import trimesh  # after the checks: a wrong path or a bad OBJ line fails before the import
+
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # numpy on corrupt numbers
@@ -287,14 +287,14 @@ def load_mesh(
     CrackbakeError
         Missing file, unsupported format, unreadable file, no triangles, non-finite vertices.
     """
-    import trimesh
-
     path = Path(path)
     # is_file() is true of regular files only: a FIFO or device goes on to _read_file's refusal.
     if path.suffix.lower() == ".ply" and path.is_file() and ply_strips.declares_strips(path):
         loaded, obj_text, short_faces = _strip_mesh(path), None, 0
     else:
         loaded, obj_text, short_faces = _read_file(path, allow_outside_textures)
+    import trimesh  # loaded by the reader by now
+
     if isinstance(loaded, trimesh.Scene):
         geoms = _scene_geometries(loaded, object_name, path)
     elif isinstance(loaded, trimesh.Trimesh):
