@@ -48,7 +48,7 @@ from crackbake.params import RunParams
 JOB_KEYS = ("mesh", "name", "seeds", "presets")
 #: Bake options a batch sets itself (the output folder) or that only shape the command's own
 #: console output.
-NOT_IN_BATCH = ("out", "quiet", "verbose", "as_json", "version", "help")
+NOT_IN_BATCH = ("out", "quiet", "verbose", "as_json", "progress", "version", "help")
 #: Files the batch writes into its output folder, so no job may take their names.
 SUMMARY_FILES = ("batch.json", "batch.csv", "batch_sheet.png")
 _GLOB = re.compile(r"[*?\[]")
@@ -181,12 +181,12 @@ def _key_of(message: str, keys: dict[str, str], where: str, defaults: dict[str, 
 
 def _parse_run(mesh: Path, words: list[str]) -> RunParams:
     """:class:`RunParams` as the bake command builds it from ``MESH words...``."""
-    from crackbake.cli.bake import bake, run_params
+    from crackbake.cli.bake import CONSOLE_OPTIONS, bake, run_params
 
     ctx = bake.make_context("bake", [str(mesh), *words])
     options = dict(ctx.params)
     mesh = options.pop("mesh")
-    for key in ("quiet", "verbose", "as_json", "out"):
+    for key in (*CONSOLE_OPTIONS, "out"):
         options.pop(key, None)
     options["out"] = None
     return run_params(mesh, options)

@@ -59,6 +59,10 @@ from crackbake.params import (
 )
 from crackbake.transaction.interrupt import RunInterrupted
 
+#: Options that shape only the command's own console output, not the run (:func:`run_params`
+#: never sees them; the batch command refuses them in a job).
+CONSOLE_OPTIONS = ("quiet", "verbose", "as_json", "progress")
+
 EPILOG = """\b
 Examples:
   # glass impact on the cow's flank, 4096x4096 maps on its own UVs

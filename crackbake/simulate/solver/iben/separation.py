@@ -51,21 +51,22 @@ def _splitmix(z):
 
 
 @njit(cache=True)
-def grain_angle(seed, x, y, z):
+def grain_angle(seed, x, y, z, q):
     """Seeded angle in [0, 2 pi) of the material grain at point ``(x, y, z)`` (splitmix64 of the
-    seed and the coordinates' bits).
+    seed and the point in whole units of ``q``, ``State.gq``).
 
     The grain belongs to the material, not to the node: a pure function of where the node is, so
     a node made by a split gets the same grain whatever cracks grew before it (a node index
     would depend on them, and a later impact's star would drift from its lone twin), copies of a
-    split node share their point's grain, and nothing has to be stored.  The coordinates are
-    hashed as float32: a point made on edge (a, b) or (b, a) differs in the last float64 bit,
-    and that alone must not draw another grain.
+    split node share their point's grain, and nothing has to be stored.  Positions are counted
+    in units of a fixed share of the mesh size, not hashed bit for bit: a point split on edge
+    (a, b) or (b, a) differs in the last bit, and a mesh scaled by 1e-6 in every bit, and
+    neither may draw another grain.
     """
     h = _splitmix(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15)
-                  + np.uint64(np.float32(x).view(np.uint32)))
-    h = _splitmix(h + np.uint64(np.float32(y).view(np.uint32)))
-    h = _splitmix(h + np.uint64(np.float32(z).view(np.uint32)))
+                  + np.uint64(np.int64(np.floor(x / q))))
+    h = _splitmix(h + np.uint64(np.int64(np.floor(y / q))))
+    h = _splitmix(h + np.uint64(np.int64(np.floor(z / q))))
     return 2.0 * np.pi * float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
@@ -202,7 +203,7 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
         y0 = vn1 * x2 - vn2 * x1
         y1 = vn2 * x0 - vn0 * x2
         y2 = vn0 * x1 - vn1 * x0
-        th = grain_angle(seed, s.X[n, 0], s.X[n, 1], s.X[n, 2])
+        th = grain_angle(seed, s.X[n, 0], s.X[n, 1], s.X[n, 2], s.gq)
         ct = np.cos(th)
         st = np.sin(th)
         d0 = ct * x0 + st * y0
