@@ -10,7 +10,9 @@
 // quadratically over CURL_REACH half widths: a negative depth in the depth channel
 // (crack_bake.frag) and its slope in the normal map (crack_normal.glsl), the same height field.
 
-const float CURL_REACH = 1.5;
+// A broad rim (3 half widths, was 1.5) is what reads under a grazing light: its slope faces the
+// sun on one side of the gap while the walls sit in the occlusion (docs/maps.md, measured).
+const float CURL_REACH = 3.0;
 
 // Thin grooves (drawn fewer than GROOVE_BOX_FULL footprints wide, sub-texel ones included): the depth is the groove's
 // profile averaged over one footprint fb across the crack, and the normal its slope, the

@@ -114,7 +114,7 @@ def _segment_buffer(segments: Segments) -> np.ndarray:
 
 
 #: Reach of a crack's curled rim beyond its half width, in half widths (shaders/crack_look.glsl).
-CURL_REACH = 1.5
+CURL_REACH = 3.0
 
 
 def look_terms(look, segments: Segments, seed: int = 0) -> dict:
