@@ -325,7 +325,7 @@ def solve(
         Sim mesh, stress field and the solver's full result.
     """
     from crackbake.simulate.simmesh import build_simmesh, onto_asset
-    from crackbake.simulate.stress import impact_refinement, stress_field
+    from crackbake.simulate.stress import impact_refinement, noise_origin, stress_field
     from crackbake.simulate.timing import grow_from_impacts
 
     if sources is None:
@@ -353,9 +353,10 @@ def solve(
                         sim.edge_length, ", ".join(f"{h:.4g}" for h in local.edges),
                         ", ".join(f"{r:.3g}" for r in local.radii))
             with warnings.catch_warnings(record=True) as second:
+                origin = noise_origin(sim)
                 sim = build_simmesh(mesh, detail=sim.edge_length, seed=params.seed,
                                     proxy=sim.proxy, proxy_above=params.proxy_above, local=local)
-                field = stress_field(sim, mesh, sources, seed=params.seed)
+                field = stress_field(sim, mesh, sources, seed=params.seed, noise_origin=origin)
     finally:
         _warn_once(first, second)
     field = with_spacing(field, params, mesh.diagonal)

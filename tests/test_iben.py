@@ -549,9 +549,8 @@ def _stops_short(r, rad: float) -> int:
 
 def test_arrested_tips_break_through_to_a_crack_ahead():
     """A tip that stops a few edges short of a crack it runs into breaks the ligament between
-    them: on 60-cell plates (3 seeds, glass and shrinkage) measured 1 to 3 such free ends in
-    all over three ways of drawing the grain, 13 to 19 with the ligament rule off
-    (LIGAMENT_REL = 0)."""
+    them: on 60-cell plates (3 seeds, glass and shrinkage) measured 1 such free end in all,
+    15 with the ligament rule off (LIGAMENT_REL = 0)."""
     from crackbake.simulate.solver import iben
 
     assert iben.LIGAMENT_REL == 0.25
@@ -563,7 +562,7 @@ def test_arrested_tips_break_through_to_a_crack_ahead():
             total += _stops_short(r, 0.25 * r.stats["shadow_radius"])
             broken += r.stats["ligaments_broken"]
     assert broken > 0
-    assert total <= 5
+    assert total <= 2
 
 
 def test_struct_fields_match_the_driver_state(sim60):

@@ -325,8 +325,9 @@ def run_attributes(version: str, params: Mapping[str, object] | None) -> dict[st
     Compositing tools show these two (OpenImageIO reads them as ``Copyright`` and
     ``ImageDescription``): ``owner`` is ``crackbake <version>``; ``comments`` the run as a short
     command line (mesh file name, preset, method, seed, resolution, target, impacts) and the
-    SHA-256 of the run's effective parameters, the ``params`` object of ``manifest.json``
-    serialised as ``json.dumps(params, sort_keys=True, separators=(",", ":"))``, so a file can be
+    SHA-256 of the run's effective parameters, the ``params`` object of ``manifest.json`` less
+    its ``out`` and ``solver`` (where, and timings), serialised as
+    ``json.dumps(params, sort_keys=True, separators=(",", ":"))``, so a file can be
     matched to its manifest.  No ``chromaticities``: every channel is data, not colour.
 
     Parameters
@@ -356,7 +357,10 @@ def run_attributes(version: str, params: Mapping[str, object] | None) -> dict[st
             words += ["--impact", ",".join(f"{float(x):.4g}" for x in pos)]
     if len(impacts) > 3:
         words.append(f"(+{len(impacts) - 3} impacts)")
-    text = json.dumps(params, sort_keys=True, separators=(",", ":"), default=str)
+    # Without the output folder and the solver's figures (they hold its timings): the same run
+    # again, or written elsewhere, gives byte-identical files.
+    what = {k: v for k, v in params.items() if k not in ("out", "solver")}
+    text = json.dumps(what, sort_keys=True, separators=(",", ":"), default=str)
     digest = hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
     out["comments"] = (
         f"{' '.join(words)} (crackbake {version}); parameters sha256 {digest}... "

@@ -16,6 +16,7 @@ from crackbake.simulate.stress.fields import (
     StressField,
     impact_detail,
     impact_refinement,
+    noise_origin,
     stress_field,
 )
 from crackbake.simulate.stress.geodesic import impact_distance, iso_length
@@ -44,6 +45,7 @@ __all__ = [
     "impact_detail",
     "impact_distance",
     "impact_refinement",
+    "noise_origin",
     "iso_length",
     "load_weight_map",
     "stress_field",

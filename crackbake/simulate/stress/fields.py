@@ -508,15 +508,20 @@ def _curvature_field(sim, mesh: Mesh, geo: _Geometry, src: CurvatureSource) -> n
 
 
 
+def noise_origin(sim) -> np.ndarray:
+    """The point the stress noise's phases are measured from on ``sim``: the mean of its face
+    centroids, (3,)."""
+    v = np.asarray(sim.vertices, dtype=np.float64)
+    return v[np.asarray(sim.faces, dtype=np.int64)].mean(axis=1).mean(axis=0)
+
+
 def _smooth_noise(points: np.ndarray, origin: np.ndarray, scale: float,
                   rng: np.random.Generator, count: int):
     """``count`` smooth unit-variance random fields at (M, 3) points, (count, M).
 
     Each is a sum of :data:`NOISE_WAVES` plane waves of random direction, phase and wavelength
     near ``scale`` (solid noise, so it is seamless across UV seams and thin walls alike), with
-    phases relative to ``origin`` (3,): the asset's bounding-box centre, so that the noise at a
-    point does not depend on how the simulation mesh samples the surface elsewhere (the mean of
-    the sample points moved when another impact refined its ball, and shifted every star's noise).
+    phases relative to ``origin`` (3,) (:func:`stress_field`'s ``noise_origin``).
     """
     k = rng.normal(size=(3, count * NOISE_WAVES))
     k /= np.linalg.norm(k, axis=0, keepdims=True)
@@ -551,7 +556,8 @@ def _apply_noise(
 # --------------------------------------------------------------------------------------------
 
 
-def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressField:
+def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0,
+                 noise_origin: np.ndarray | None = None) -> StressField:
     """Sum the stress sources into the initial field on the simulation mesh.
 
     Parameters
@@ -567,6 +573,11 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
         the result.  An empty sequence gives a zero field.
     seed : int
         Seeds the noise; the field is otherwise deterministic.
+    noise_origin : (3,) float, optional
+        Where the noise's phases are measured from; default :func:`noise_origin` of ``sim``.
+        A sim mesh rebuilt finer round thin-feature impacts passes the origin of the uniform one
+        it replaces, so the noise at a point does not depend on which other impacts refined
+        their balls (docs/solver.md, "Several impacts").
 
     Returns
     -------
@@ -615,7 +626,7 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0) -> StressFie
              else None)
     stress *= weight[:, None, None]
     growth *= weight[:, None, None]
-    origin = 0.5 * (mesh.bbox_min + mesh.bbox_max)
+    origin = geo.centroid.mean(axis=0) if noise_origin is None else np.asarray(noise_origin)
     for i, src in enumerate(noises):
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), i]))
         scale = src.scale if src.scale is not None else NOISE_SCALE_DIAGONAL * mesh.diagonal

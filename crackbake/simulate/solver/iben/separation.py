@@ -43,31 +43,18 @@ def _iso_m(p, q):
 
 
 @njit(cache=True)
-def _splitmix(z):
-    z = z + np.uint64(0x9E3779B97F4A7C15)
+def grain_angle(seed, n):
+    """Seeded angle in [0, 2 pi) of node ``n``'s material grain (splitmix64 of seed and id).
+
+    A pure function of the pair, so runs are reproducible and nothing has to be stored or
+    carried over when nodes are created.
+    """
+    z = np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(n)
+    z = z + np.uint64(0x632BE59BD9B4E019)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
-
-
-@njit(cache=True)
-def grain_angle(seed, x, y, z, q):
-    """Seeded angle in [0, 2 pi) of the material grain at point ``(x, y, z)`` (splitmix64 of the
-    seed and the point in whole units of ``q``, ``State.gq``).
-
-    The grain belongs to the material, not to the node: a pure function of where the node is, so
-    a node made by a split gets the same grain whatever cracks grew before it (a node index
-    would depend on them, and a later impact's star would drift from its lone twin), copies of a
-    split node share their point's grain, and nothing has to be stored.  Positions are counted
-    in units of a fixed share of the mesh size, not hashed bit for bit: a point split on edge
-    (a, b) or (b, a) differs in the last bit, and a mesh scaled by 1e-6 in every bit, and
-    neither may draw another grain.
-    """
-    h = _splitmix(np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15)
-                  + np.uint64(np.int64(np.floor(x / q))))
-    h = _splitmix(h + np.uint64(np.int64(np.floor(y / q))))
-    h = _splitmix(h + np.uint64(np.int64(np.floor(z / q))))
-    return 2.0 * np.pi * float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+    z = z ^ (z >> np.uint64(31))
+    return 2.0 * np.pi * float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
 @njit(cache=True)
@@ -203,7 +190,7 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
         y0 = vn1 * x2 - vn2 * x1
         y1 = vn2 * x0 - vn0 * x2
         y2 = vn0 * x1 - vn1 * x0
-        th = grain_angle(seed, s.X[n, 0], s.X[n, 1], s.X[n, 2], s.gq)
+        th = grain_angle(seed, n)
         ct = np.cos(th)
         st = np.sin(th)
         d0 = ct * x0 + st * y0

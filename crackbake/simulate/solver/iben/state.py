@@ -94,7 +94,6 @@ class State(NamedTuple):
     G: F4  #: (nx, ny, nz, 6) shadow grid (or (1, 1, 1, 6) without)
     gp: F1  #: (5,) shadow grid origin (3), cell size, kernel radius; + impacts (shadow.py)
     period: float  #: tile period in x and y (plate [0, period)²), 0: not periodic
-    gq: float  #: grain quantum: positions are hashed in whole units of it (separation.py)
     cnt: I1  #: (N_COUNTERS,) int64 counters, slots above
 
 
