@@ -63,8 +63,10 @@ PER_FRAME_TEXEL = 20.0
 #: The unwrap's share (``benchmarks/bench_unwrap.py --memory``: scan-like meshes of 20k to 270k
 #: faces, docs/memory.md): the xatlas child's peak RSS fits 149 MB + 428 B a face (its
 #: interpreter, numpy and xatlas, then the atlas's per-face data), and the run's own pipe
-#: buffers and results grow by 196 B a face while it waits; rounded up.
-XATLAS_BASE = 0.17 * GIB
+#: buffers and results grow by 196 B a face while it waits; rounded up.  Under ``make test``
+#: (another numba cache, more imports warm) a 40k-face child peaked at 216 MB, above the fit's
+#: 166 MB: the base is 0.21 GiB so that the model stays an upper bound.
+XATLAS_BASE = 0.21 * GIB
 XATLAS_PER_FACE = 700.0
 #: Address space beyond the resident set (shared libraries, LLVM, thread stacks, GL driver
 #: reservations): ``VmPeak - VmHWM`` was 1.07..1.33 GiB over the measured runs.  ``RLIMIT_AS``
