@@ -234,7 +234,9 @@ def test_v_groove_normals_through_png_match_the_analytic_surface(gl_ctx, tmp_pat
         # Flat texels (no crack within a texel) decode to the surface normal.
         flat = (which >= 0) & (d > HW + 1.5 * texel)
         assert float(err[flat].max()) < (0.5 if name == "png8" else 0.01), name
-    assert errors["float"] < 0.05 and errors["png16"] < 0.05
+    # Measured: 0.010 degree on llvmpipe, 0.080 on an NVIDIA H100 (its varyings interpolate with
+    # coarser float rounding); an 8-bit PNG's quantisation alone is ~0.45 degree.
+    assert errors["float"] < 0.1 and errors["png16"] < 0.1
     # Flat texels hold exactly (0, 0, 1) in the float map.
     flat = maps.inside & (maps.depth == 0)
     assert (maps.normal[flat] == [0, 0, 1]).all()
@@ -438,11 +440,12 @@ def test_normals_leave_the_other_channels_bit_identical_and_tile(gl_ctx, monkeyp
     # Bands (tile 128 -> 64-row bands) give the same normal map, up to float32 rounding of the
     # interpolated positions (as for the mask: tie-breaks may move).  Grooves drawn under four
     # texels wide are box-averaged, so their slope varies along the distance (a point-sampled V's
-    # is constant on each wall): a rounding of 1e-4 texel turns them by up to ~0.03 degree.
+    # is constant on each wall): a rounding of 1e-4 texel turns them by a few hundredths of a
+    # degree (99th percentile measured: 0.012 on llvmpipe, 0.033 on an NVIDIA H100).
     tiled = bake_cracks(v, f, uv, segs, RES, max_distance=0.1, normals=n, tangents=tan,
                         tile=128, ctx=gl_ctx)  # fmt: skip
     diff = angle_deg(tiled.normal.astype(float), full.normal.astype(float))
-    assert float(np.percentile(diff, 99)) < 0.03 and float(diff.max()) < 0.5
+    assert float(np.percentile(diff, 99)) < 0.05 and float(diff.max()) < 0.5
     np.testing.assert_allclose(tiled.occlusion.astype(float), full.occlusion.astype(float),
                                atol=1e-3)  # fmt: skip
     # Compute dispatches split in parts (as beyond 65535 groups) give the same result.
