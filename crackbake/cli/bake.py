@@ -141,7 +141,9 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     multiple=True,
     metavar="X,Y,Z[:R[:S]]",
     help="Impact point, optional radius (mesh units, or a fraction of the bounding-box diagonal "
-    "with a d suffix: 0.2d) and strength. Repeatable.",
+    "with a d suffix: 0.2d) and strength; X,Y,Z[:R]:speed=V instead gives the impact speed in "
+    "m/s, and the star's radial crack count follows the measured law (--thickness, "
+    "--material). Repeatable.",
 )
 @click.option(
     "--cracks",
@@ -195,6 +197,16 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option("--invert-weights", is_flag=True, help="Use 1 - weight.")
 @click.option("--noise", type=float, help="Seeded random perturbation of the field (0.1 = 10%).")
+@click.option(
+    "--thickness",
+    type=float,
+    help="Plate thickness in mm for impacts given a speed (N grows as its cube root) [1].",
+)
+@click.option(
+    "--material",
+    type=click.Choice(("glass", "plexiglas")),
+    help="Plate material for impacts given a speed: glass (annealed) or plexiglas [glass].",
+)
 @click.option("--hoop", type=float, help=f"Impact hoop/radial tension ratio [{D['hoop']}].")
 @click.option(
     "--spacing",
