@@ -113,10 +113,11 @@ def main() -> None:
                   f"({row['sim_faces']} sim faces)", flush=True)
     sp = np.array([r["speed"] for r in rows])
     means = np.array([r["mean"] for r in rows])
-    f = fit(sp, means)
-    print(f"{args.material} {args.thickness:g} mm, seeds {seeds}: fitted exponent "
-          f"{f['exponent']:.3f} (law 0.5); N = {f['a']:.3f} sqrt(V), largest deviation of a "
-          f"mean {f['max_dev']:.2f} arms")
+    f = fit(sp, means) if len(set(speeds)) > 1 else {}
+    if f:
+        print(f"{args.material} {args.thickness:g} mm, seeds {seeds}: fitted exponent "
+              f"{f['exponent']:.3f} (law 0.5); N = {f['a']:.3f} sqrt(V), largest deviation of "
+              f"a mean {f['max_dev']:.2f} arms")
     if sp.max() / sp.min() == 16.0:
         print(f"N(16V)/N(V) = {means[np.argmax(sp)] / means[np.argmin(sp)]:.2f} (law 4)")
     if pictures:
