@@ -10,7 +10,10 @@ speeds span 16x.  Usage::
 
     python benchmarks/bench_speed_law.py [--speeds 10,25,63,160] [--seeds 0,1,2]
         [--thickness 3] [--material plexiglas] [--sim-faces N] [--json out.json]
-        [--picture docs/glass_speeds.png]
+        [--picture docs/glass_speeds.png] [--mesh examples/spot.obj --point X,Y,Z]
+
+``--mesh`` runs on a mesh instead of the plate, the impact at ``--point`` (arms over geodesic
+distances on the sim mesh).
 
 ``--picture`` draws the first seed's star at each speed side by side (the cracks in red, the
 0.3-reach circle in blue, the reach in green; bench_glass.py's drawing).
@@ -43,10 +46,11 @@ CENTRE = (0.5, 0.5, 0.0)
 
 
 def solve_speed(path: Path, speed: float, seed: int, thickness: float | None = None,
-                material: str | None = None, sim_faces: int | None = None):
-    """Solve the plate at ``path`` with one speed impact at its centre; return
-    ``(network, sim mesh, seconds)``."""
-    params = RunParams(mesh=path, preset="glass", impacts=(Impact(CENTRE, speed=speed),),
+                material: str | None = None, sim_faces: int | None = None,
+                point: tuple[float, float, float] = CENTRE):
+    """Solve the mesh at ``path`` (the plate) with one speed impact at ``point`` (its centre);
+    return ``(network, sim mesh, seconds)``."""
+    params = RunParams(mesh=path, preset="glass", impacts=(Impact(point, speed=speed),),
                        seed=seed, sim_faces=sim_faces, thickness=thickness,
                        material=material).validate()
     resolved, relative = params.resolved()
@@ -59,10 +63,12 @@ def solve_speed(path: Path, speed: float, seed: int, thickness: float | None = N
     return network, solved.sim, seconds
 
 
-def arms_of(network) -> int:
-    """Radial arms at 0.3 reach of the network's first impact (straight distances: a plate)."""
+def arms_of(network, sim=None) -> int:
+    """Radial arms at 0.3 reach of the network's first impact (straight distances on a plate,
+    geodesic over ``sim`` when given)."""
     imp = network.impacts[0]
-    return int(star_metrics(network, imp["point"], impact_reach(imp["radius"]))["arms"])
+    v, f = (None, None) if sim is None else (sim.vertices, sim.faces)
+    return int(star_metrics(network, imp["point"], impact_reach(imp["radius"]), v, f)["arms"])
 
 
 def fit(speeds: np.ndarray, means: np.ndarray) -> dict:
@@ -83,19 +89,22 @@ def main() -> None:
     ap.add_argument("--sim-faces", type=int, default=None)
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--picture", type=Path, default=None)
+    ap.add_argument("--mesh", type=Path, default=None)
+    ap.add_argument("--point", default=None)
     args = ap.parse_args()
+    point = CENTRE if args.point is None else tuple(float(c) for c in args.point.split(","))
     speeds = [float(v) for v in args.speeds.split(",")]
     seeds = [int(s) for s in args.seeds.split(",")]
     rows, pictures = [], []
     with tempfile.TemporaryDirectory() as tmp:
-        path = plate_obj(Path(tmp) / "plate.obj", 4, uv_margin=0.0)
+        path = args.mesh or plate_obj(Path(tmp) / "plate.obj", 4, uv_margin=0.0)
         for v in speeds:
             law = radial_cracks(v, args.thickness, args.material)
             arms, secs = [], []
             for s in seeds:
                 network, sim, seconds = solve_speed(path, v, s, args.thickness, args.material,
-                                                    args.sim_faces)
-                arms.append(arms_of(network))
+                                                    args.sim_faces, point)
+                arms.append(arms_of(network, sim if args.mesh else None))
                 secs.append(seconds)
                 if args.picture is not None and s == seeds[0]:
                     from bench_glass import draw

@@ -57,6 +57,7 @@ from crackbake.params import (
 from crackbake.params import (
     SOLVER_DEFAULTS as D,
 )
+from crackbake.params.speed import MATERIAL_DEFAULT, MATERIALS, THICKNESS_DEFAULT
 from crackbake.transaction.interrupt import RunInterrupted
 
 #: Options that shape only the command's own console output, not the run (:func:`run_params`
@@ -200,12 +201,14 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--thickness",
     type=float,
-    help="Plate thickness in mm for impacts given a speed (N grows as its cube root) [1].",
+    help="Plate thickness in mm for impacts given a speed (the crack count grows as its cube "
+    f"root) [{THICKNESS_DEFAULT:g}].",
 )
 @click.option(
     "--material",
-    type=click.Choice(("glass", "plexiglas")),
-    help="Plate material for impacts given a speed: glass (annealed) or plexiglas [glass].",
+    type=click.Choice(tuple(MATERIALS)),
+    help="Plate material for impacts given a speed: glass (annealed) or plexiglas "
+    f"[{MATERIAL_DEFAULT}].",
 )
 @click.option("--hoop", type=float, help=f"Impact hoop/radial tension ratio [{D['hoop']}].")
 @click.option(
