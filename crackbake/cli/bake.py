@@ -57,6 +57,7 @@ from crackbake.params import (
 from crackbake.params import (
     SOLVER_DEFAULTS as D,
 )
+from crackbake.params.speed import MATERIAL_DEFAULT, MATERIALS, THICKNESS_DEFAULT
 from crackbake.transaction.interrupt import RunInterrupted
 
 #: Options that shape only the command's own console output, not the run (:func:`run_params`
@@ -141,7 +142,9 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     multiple=True,
     metavar="X,Y,Z[:R[:S]]",
     help="Impact point, optional radius (mesh units, or a fraction of the bounding-box diagonal "
-    "with a d suffix: 0.2d) and strength. Repeatable.",
+    "with a d suffix: 0.2d) and strength; X,Y,Z[:R]:speed=V instead gives the impact speed in "
+    "m/s, and the star's radial crack count follows the measured law (--thickness, "
+    "--material). Repeatable.",
 )
 @click.option(
     "--cracks",
@@ -195,6 +198,18 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 )
 @click.option("--invert-weights", is_flag=True, help="Use 1 - weight.")
 @click.option("--noise", type=float, help="Seeded random perturbation of the field (0.1 = 10%).")
+@click.option(
+    "--thickness",
+    type=float,
+    help="Plate thickness in mm for impacts given a speed (the crack count grows as its cube "
+    f"root) [{THICKNESS_DEFAULT:g}].",
+)
+@click.option(
+    "--material",
+    type=click.Choice(tuple(MATERIALS)),
+    help="Plate material for impacts given a speed: glass (annealed) or plexiglas "
+    f"[{MATERIAL_DEFAULT}].",
+)
 @click.option("--hoop", type=float, help=f"Impact hoop/radial tension ratio [{D['hoop']}].")
 @click.option(
     "--spacing",

@@ -24,12 +24,17 @@ class Impact:
     radius_rel : float or None
         The radius as a fraction of the mesh's bounding-box diagonal (``--impact X,Y,Z:0.2d``),
         instead of ``radius``.
+    speed : float or None
+        Impact speed, m/s (``--impact X,Y,Z:speed=V``): the star's radial arm count follows
+        the star-crack law (:func:`crackbake.params.speed.radial_cracks`, with the run's
+        ``thickness`` and ``material``).  None: the preset's star.
     """
 
     point: tuple[float, float, float]
     radius: float | None = None
     strength: float = 1.0
     radius_rel: float | None = None
+    speed: float | None = None
 
     def resolved_radius(self, diagonal: float, default_rel: float) -> float:
         """The radius in mesh units on a mesh of bounding-box ``diagonal``.
@@ -46,6 +51,8 @@ class Impact:
         d = {"point": list(self.point), "radius": self.radius, "strength": self.strength}
         if self.radius_rel is not None:
             d["radius_rel"] = self.radius_rel
+        if self.speed is not None:
+            d["speed"] = self.speed
         return d
 
 
@@ -72,7 +79,8 @@ def parse_direction(text: str) -> tuple[float, float, float, float]:
 
 def parse_impact(text: str) -> Impact:
     """Parse ``X,Y,Z[:RADIUS[:STRENGTH]]``; ``RADIUS`` in mesh units, or with a ``d`` suffix
-    (``0.2d``) as a fraction of the mesh's bounding-box diagonal.
+    (``0.2d``) as a fraction of the mesh's bounding-box diagonal.  ``X,Y,Z[:RADIUS]:speed=V``
+    gives an impact speed (m/s) in place of the strength (:attr:`Impact.speed`).
 
     Raises
     ------
@@ -80,8 +88,24 @@ def parse_impact(text: str) -> Impact:
         Malformed text, with the expected syntax.
     """
     syntax = ("expected X,Y,Z[:RADIUS[:STRENGTH]] with RADIUS in mesh units or a fraction of "
-              "the bounding-box diagonal (0.2d), e.g. --impact 0.1,0.2,0.9:0.3:1.5")
+              "the bounding-box diagonal (0.2d), e.g. --impact 0.1,0.2,0.9:0.3:1.5, or "
+              "X,Y,Z[:RADIUS]:speed=V with V in m/s, e.g. --impact 0.1,0.2,0.9:speed=30")
     parts = text.strip().split(":")
+    speed = None
+    if len(parts) > 1 and parts[-1].strip().lower().startswith("speed="):
+        from crackbake.params.speed import SPEED_MAX
+
+        raw_speed = parts.pop().strip()[len("speed="):]
+        try:
+            speed = float(raw_speed)
+        except ValueError:
+            raise CrackbakeError(f"--impact '{text}': {syntax}") from None
+        if not (math.isfinite(speed) and 0 < speed <= SPEED_MAX):
+            raise CrackbakeError(
+                f"--impact '{text}': the speed must be a number above 0 up to {SPEED_MAX:g} m/s"
+            )
+        if len(parts) > 2:
+            raise CrackbakeError(f"--impact '{text}': a speed replaces the strength; {syntax}")
     if not 1 <= len(parts) <= 3:
         raise CrackbakeError(f"--impact '{text}': {syntax}")
     raw = parts[1].strip() if len(parts) > 1 else ""
@@ -106,8 +130,9 @@ def parse_impact(text: str) -> Impact:
             "(1 = the preset's own)"
         )
     if relative:
-        return Impact(point=xyz, strength=strength, radius_rel=radius)  # type: ignore[arg-type]
-    return Impact(point=xyz, radius=radius, strength=strength)  # type: ignore[arg-type]
+        return Impact(point=xyz, strength=strength, radius_rel=radius,  # type: ignore[arg-type]
+                      speed=speed)
+    return Impact(point=xyz, radius=radius, strength=strength, speed=speed)  # type: ignore[arg-type]
 
 
 def check_impact(imp: Impact) -> None:
@@ -128,3 +153,7 @@ def check_impact(imp: Impact) -> None:
             "diagonal (radius_rel), not both"
         )
     check_range("impact strength", imp.strength, 0.0, STRESS_MAX, "", True)
+    if imp.speed is not None:
+        from crackbake.params.speed import SPEED_MAX
+
+        check_range("impact speed", imp.speed, 0.0, SPEED_MAX, " m/s", True)

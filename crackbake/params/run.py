@@ -142,6 +142,11 @@ class RunParams:
         Radius of each crack's stress shadow, a fraction of the bounding-box diagonal (the
         solver's own 0.1 when unset): how close parallel cracks may run, so smaller gives
         smaller cells.  Impacts narrow it further near their star.
+    thickness : float or None
+        Plate thickness, mm, for impacts given a speed (:attr:`Impact.speed`); None: 1 mm.
+    material : str or None
+        The plate's material for impacts given a speed: ``glass`` or ``plexiglas``
+        (:data:`crackbake.params.speed.MATERIALS`); None: glass.
     look : dict
         Overrides of the preset's ``[look]`` table (``--look KEY=VALUE``): crack colour and
         composite mode, roughness, normal strength, width variation, chipping, curl
@@ -203,6 +208,8 @@ class RunParams:
     noise: float | None = None
     hoop: float | None = None
     spacing: float | None = None
+    thickness: float | None = None
+    material: str | None = None
     look: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
 
@@ -283,6 +290,7 @@ class RunParams:
             check_range("--" + name.replace("_", "-"), getattr(self, name), *bounds)
         for imp in self.impacts:
             check_impact(imp)
+        self._check_speed_options()
         self.crack_look()
         for d in self.directions:
             check_range("--direction strength", d[3], -STRESS_MAX, STRESS_MAX)
@@ -294,6 +302,20 @@ class RunParams:
             if not Path(self.weight_map).exists():
                 raise CrackbakeError(f"--weight-map {self.weight_map}: file not found")
         return self
+
+    def _check_speed_options(self) -> None:
+        """``thickness`` and ``material`` act on impacts given a speed only."""
+        from crackbake.params.speed import THICKNESS_MAX, check_material
+
+        check_material(self.material)
+        check_range("--thickness", self.thickness, 0.0, THICKNESS_MAX, " mm", True)
+        if (self.thickness is not None or self.material is not None) and not any(
+                i.speed is not None for i in self.impacts):
+            given = "--thickness" if self.thickness is not None else "--material"
+            raise CrackbakeError(
+                f"{given} sets the plate an impact speed breaks; give an impact as "
+                "--impact X,Y,Z:speed=V (m/s) or drop it"
+            )
 
     def resolved(self) -> tuple[RunParams, dict]:
         """Fill unset solver options from the preset, then from :data:`SOLVER_DEFAULTS`.
@@ -341,6 +363,10 @@ class RunParams:
         d["weight_map"] = str(self.weight_map) if self.weight_map is not None else None
         d["directions"] = [list(x) for x in self.directions]
         d["look"] = self.crack_look().to_dict()
+        # Only runs with a speed impact name the plate (older sidecars stay as they were).
+        if not any(i.speed is not None for i in self.impacts):
+            d.pop("thickness")
+            d.pop("material")
         extra = d.pop("extra")
         d.update(extra)
         return d

@@ -6,7 +6,9 @@ widths, impact radii that may be unset); the stress field and the solvers take a
 
 from __future__ import annotations
 
-from crackbake.errors import CrackbakeError
+import warnings
+
+from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh
 from crackbake.io.sidecar import jsonable
 from crackbake.params import (
@@ -65,7 +67,8 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
             diagonal, relative.get("impact_radius_rel", IMPACT_RADIUS_REL_DEFAULT))
         # A radius the user did not give is fitted to a thin feature (issue 18 §3).
         fit = imp.radius is None and imp.radius_rel is None
-        sources.append(ImpactSource(imp.point, radius, imp.strength, hoop=params.hoop, fit=fit))
+        sources.append(ImpactSource(imp.point, radius, imp.strength, hoop=params.hoop, fit=fit,
+                                    arms=speed_arms(imp, params)))
     if params.shrink:
         sources.append(ShrinkSource(params.shrink, params.shrink_rate or 0.0))
     for x, y, z, strength in params.directions:
@@ -90,6 +93,34 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
     if params.noise:
         sources.append(NoiseSource(params.noise))
     return sources
+
+
+def speed_arms(imp, params: RunParams) -> float | None:
+    """The radial arm count of an impact given a speed (the star-crack law with the run's
+    plate), with a warning where the law is extrapolated; None for a strength impact."""
+    if imp.speed is None:
+        return None
+    from crackbake.params.speed import (
+        ARMS_FEWEST_DRAWN,
+        MATERIAL_DEFAULT,
+        THICKNESS_DEFAULT,
+        extrapolation_note,
+        radial_cracks,
+    )
+
+    thickness = params.thickness if params.thickness is not None else THICKNESS_DEFAULT
+    note = extrapolation_note(imp.speed, thickness)
+    if note:
+        warnings.warn(f"impact at speed={imp.speed:g}: {note}", CrackbakeWarning, stacklevel=2)
+    arms = radial_cracks(imp.speed, thickness, params.material or MATERIAL_DEFAULT)
+    if arms < ARMS_FEWEST_DRAWN - 0.5:
+        warnings.warn(
+            f"impact at speed={imp.speed:g}: the star-crack law gives {arms:.1f} radial cracks, "
+            f"but the solver's stars keep about {ARMS_FEWEST_DRAWN:g}, so this one gets about "
+            f"{ARMS_FEWEST_DRAWN:g} (speeds that the law gives at least {ARMS_FEWEST_DRAWN:g} for "
+            "follow it)",
+            CrackbakeWarning, stacklevel=2)
+    return arms
 
 
 def solver_params(params: RunParams, mesh: Mesh, relative: dict) -> SolverParams:

@@ -49,6 +49,18 @@ IMPACT_SHADOW_REACH = 0.12
 #: leaves :data:`IMPACT_SHADOW_REACH` in charge (0.126 reach), while round a thin feature (spot's
 #: horn: 0.4 of the flat length) the spacing shrinks with the circumference and as many arms fit.
 IMPACT_SHADOW_ARMS = 15.0
+#: An impact given a speed asks for ``N`` radial arms (:func:`speed_shadow`); its shadow radius
+#: is ``SPEED_SHADOW_SCALE * circle * N ** -SPEED_SHADOW_POWER`` with ``circle`` the geodesic
+#: circle at 0.3 reach.  A shadow of ``circle / N`` alone gave too many arms to slow impacts
+#: and too few to fast ones (the arms crossing 0.3 reach grew as about N ** 0.7: branches and
+#: arms started off the impact fill a wide wedge), so the power undoes that response
+#: (calibrated on plates over speeds and seeds: benchmarks/bench_speed_law.py).
+SPEED_SHADOW_SCALE = 3.16
+SPEED_SHADOW_POWER = 1.414
+#: The largest shadow radius of a run with a speed impact, a fraction of the bounding-box
+#: diagonal (the solver's own cap is 0.1: at the default radius that allows no fewer than
+#: about 5 arms; 0.3 allows about 2).
+SPEED_SHADOW_MAX = 0.3
 #: ... and at least this many sim edge lengths (a finer shadow than the mesh resolves only
 #: splits one crack's release into grid noise).
 IMPACT_SHADOW_EDGES = 2.0
@@ -94,6 +106,10 @@ class StressField:
         raw tensor norm over the sum of all additive contributions' norms): the solver loads
         the impacts one after the other in this order (a later star's cracks stop at an
         earlier star's, as in real glass).  None with fewer than two impacts.
+    shadow_max : float or None
+        The largest shadow radius the solver may use, mesh units; None: its own
+        (``SHADOW_REL`` x the bounding-box diagonal).  Set to :data:`SPEED_SHADOW_MAX` x the
+        diagonal when an impact has a speed: a slow one's few arms need wider wedges.
     """
 
     stress: np.ndarray
@@ -103,6 +119,7 @@ class StressField:
     shadow_radius: float | None = None
     impact_shadows: list[float] = field(default_factory=list)
     impact_share: np.ndarray | None = None
+    shadow_max: float | None = None
 
 
 
@@ -254,11 +271,25 @@ def _edge_at(sim, point) -> float:
     return float(getattr(sim, "edge_length", 0.0) or 0.0)
 
 
-def _impact_shadow(geo: _Geometry, dist: np.ndarray, radius: float, edge: float) -> float:
+def speed_shadow(circle: float, arms: float, edge: float) -> float:
+    """The shadow radius that grows ``arms`` radial arms (a mean over seeds) across a circle of
+    length ``circle`` (the geodesic circle at 0.3 reach, mesh units):
+    ``SPEED_SHADOW_SCALE circle arms ** -SPEED_SHADOW_POWER``, and at least
+    :data:`IMPACT_SHADOW_EDGES` sim edges ``edge`` (the mesh resolves no finer)."""
+    return max(SPEED_SHADOW_SCALE * circle * float(arms) ** -SPEED_SHADOW_POWER,
+               IMPACT_SHADOW_EDGES * edge)
+
+
+def _impact_shadow(geo: _Geometry, dist: np.ndarray, radius: float, edge: float,
+                   arms: float | None = None) -> float:
     """The shadow radius an impact of ``radius`` asks for (``StressField.shadow_radius``), mesh
-    units; ``dist`` (N,) its geodesic distance, ``edge`` the sim edge length."""
+    units; ``dist`` (N,) its geodesic distance, ``edge`` the sim edge length; ``arms`` the
+    radial arm count a speed impact asks for (:func:`speed_shadow`), None for the preset's."""
     flat = IMPACT_SHADOW_REACH * 0.5 * np.pi * radius
     circle = iso_length(geo.vertices, geo.faces, dist, 0.3 * 0.5 * np.pi * radius)
+    if arms is not None:
+        return speed_shadow(circle if circle > 0.0 else 0.6 * np.pi * 0.5 * np.pi * radius,
+                            arms, edge)
     # No circle at all: the source face's own neighbourhood holds it, and the flat value stands.
     if circle <= 0.0:
         return flat
@@ -331,7 +362,27 @@ def _impact_field(
         "radius": float(radius),
         "strength": float(src.strength),
     }
-    return stress, info, _impact_shadow(geo, dist, radius, edge)
+    if src.arms is not None:
+        info["arms"] = float(src.arms)
+    shadow = _impact_shadow(geo, dist, radius, edge, src.arms)
+    if src.arms is not None and shadow <= IMPACT_SHADOW_EDGES * edge:
+        most = speed_arms_resolved(shadow, geo, dist, radius)
+        if most < src.arms - 1.0:
+            warnings.warn(
+                f"the impact at {tuple(round(float(x), 6) for x in snapped)} asks for "
+                f"{src.arms:.1f} radial cracks but the sim mesh resolves about {most:.0f} there; "
+                "raise --sim-faces or --detail, or give it a larger radius",
+                CrackbakeWarning, stacklevel=3)
+    return stress, info, shadow
+
+
+def speed_arms_resolved(shadow: float, geo: _Geometry, dist: np.ndarray, radius: float) -> float:
+    """The arm count a speed impact's star gets with ``shadow`` (mesh units): the inverse of
+    :func:`speed_shadow` on its circle at 0.3 reach."""
+    circle = iso_length(geo.vertices, geo.faces, dist, 0.3 * 0.5 * np.pi * radius)
+    if circle <= 0.0:
+        circle = 0.6 * np.pi * 0.5 * np.pi * radius
+    return float((SPEED_SHADOW_SCALE * circle / shadow) ** (1.0 / SPEED_SHADOW_POWER))
 
 
 def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray,
@@ -640,9 +691,11 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0,
         growth = _project(growth, normal)
     stress[flat] = 0.0
     growth[flat] = 0.0
+    speed = any("arms" in info for info in impacts)
     return StressField(stress=stress, growth=growth, weight=weight, impacts=impacts,
                        shadow_radius=min(shadows) if shadows else None,
-                       impact_shadows=shadows, impact_share=share)
+                       impact_shadows=shadows, impact_share=share,
+                       shadow_max=SPEED_SHADOW_MAX * mesh.diagonal if speed else None)
 
 
 def _impact_share(rest: np.ndarray, norms: list[np.ndarray]) -> np.ndarray:

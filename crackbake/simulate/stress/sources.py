@@ -74,9 +74,12 @@ class ImpactSource:
     strength: float = 1.0
     hoop: float = 1.25
     fit: bool | None = False
+    arms: float | None = None
 
     def __post_init__(self) -> None:
         _finite_vector(self.point, "impact point")
+        if self.arms is not None:
+            _finite_number(self.arms, "impact arm count", positive=True)
         if self.radius is not None:
             _finite_number(self.radius, "impact radius", positive=True)
         _finite_number(self.strength, "impact strength")

@@ -104,14 +104,16 @@ def percentile_ref(norm_sep: np.ndarray, bnd: np.ndarray) -> float:
 
 
 def shadow_grid(
-    X0: np.ndarray, period: float = 0.0, radius: float | None = None
+    X0: np.ndarray, period: float = 0.0, radius: float | None = None,
+    largest: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Empty shadow grid over the bounding box and its parameters ``origin (3), cell, radius``
     (5,).
 
     ``radius`` (mesh units) is the shadow radius a localized field asks for (an impact's
     star scales with the impact, not with the mesh: ``StressField.shadow_radius``); ``None``
-    or a larger value gives ``SHADOW_REL`` x the bounding-box diagonal.
+    or a larger value gives ``SHADOW_REL`` x the bounding-box diagonal, or ``largest`` (mesh
+    units) where given (``StressField.shadow_max``: a slow speed impact's few wide wedges).
 
     With ``period`` > 0 (a square periodic plate ``[0, period)²``, docs/solver.md "Periodic
     plates") the grid spans exactly one period in x and y, so its cells wrap around.
@@ -120,7 +122,8 @@ def shadow_grid(
         return _periodic_grid(X0, period, radius)
     lo, hi = X0.min(0), X0.max(0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
-    radius = SHADOW_REL * diag if radius is None else min(float(radius), SHADOW_REL * diag)
+    cap = SHADOW_REL * diag if largest is None else float(largest)
+    radius = SHADOW_REL * diag if radius is None else min(float(radius), cap)
     cell = radius / 3.0
     pad = 2
     while True:

@@ -126,7 +126,8 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     hcnt = np.bincount(edge.ravel(), minlength=n0)
     h_node = hsum / np.maximum(hcnt, 1)
     width = int(np.bincount(F0.ravel(), minlength=n0).max()) + C.EXTRA_DEGREE
-    G, gp = shadow_grid(X0, period, getattr(field, "shadow_radius", None))
+    G, gp = shadow_grid(X0, period, getattr(field, "shadow_radius", None),
+                        getattr(field, "shadow_max", None))
     G, gp = _impact_grids(G, gp, X0, field, period)
     clen = np.zeros(min(1024, room))
     cnt = np.zeros(N_COUNTERS, np.int64)
@@ -301,7 +302,9 @@ def _impact_grids(G: np.ndarray, gp: np.ndarray, X0: np.ndarray, field,
     if period > 0.0 or len(shadows) < 2 or len(shadows) != len(impacts) or G.shape[0] < 2:
         return G, gp
     diag = float(np.linalg.norm(X0.max(0) - X0.min(0))) or 1.0
-    radii = [min(float(r), C.SHADOW_REL * diag) for r in shadows]
+    cap = getattr(field, "shadow_max", None)
+    cap = C.SHADOW_REL * diag if cap is None else float(cap)
+    radii = [min(float(r), cap) for r in shadows]
     if max(radii) == min(radii):
         return G, gp
     blocks: dict[float, tuple] = {}  # radius -> (block, grid, its gp)
@@ -310,7 +313,7 @@ def _impact_grids(G: np.ndarray, gp: np.ndarray, X0: np.ndarray, field,
         block = -1
         if r > gp[4]:
             if r not in blocks:
-                Gk, gpk = shadow_grid(X0, 0.0, r)
+                Gk, gpk = shadow_grid(X0, 0.0, r, cap)
                 if Gk.shape[1] <= G.shape[1] and Gk.shape[2] <= G.shape[2]:
                     blocks[r] = (len(blocks), Gk, gpk)
             if r in blocks:
