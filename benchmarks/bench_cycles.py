@@ -127,8 +127,13 @@ def picture(rows: dict, path: Path, panel: int = 420) -> None:
             x0, y0 = j * panel, i * panel
             sheet.paste(img, (x0 + 4, y0 + 4))
             label = f"{name} N={n}: {r['angles'][n]:.0f} deg"
-            ImageDraw.Draw(sheet).text((x0 + 12, y0 + 8), label, fill=(235, 235, 235), font=font)
-    sheet.save(path, optimize=True)
+            draw = ImageDraw.Draw(sheet)
+            box = draw.textbbox((x0 + 12, y0 + 8), label, font=font)
+            draw.rectangle((box[0] - 6, box[1] - 4, box[2] + 6, box[3] + 4), fill=(41, 42, 50))
+            draw.text((x0 + 12, y0 + 8), label, fill=(235, 235, 235), font=font)
+    # A palette keeps the sheet small without visible banding (as bench_presets does).
+    sheet.quantize(colors=96, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE).save(
+        path, optimize=True)
 
 
 def main() -> None:
