@@ -146,6 +146,11 @@ def _check_mud(net, mesh, seed):
     assert means[-1] <= 135.0
     assert 2.0 <= relaxation_time(ns, means) <= 8.0
     assert components(nets[-1]) == components(net)
+    # The growth map reveals the evolved network as it revealed the first (same times, same
+    # graph; only the geometry moved).
+    before, after = growth_curve(net), growth_curve(nets[-1])
+    assert after.weighted_mean == pytest.approx(before.weighted_mean, abs=0.02)
+    assert after.min_after(0.1) == pytest.approx(before.min_after(0.1), abs=0.05)
     return nets
 
 
@@ -190,3 +195,16 @@ def test_bad_cycles_are_refused_in_one_line(tmp_path, args, says):
     assert r.exit_code == 2, r.output
     assert says in r.output and len(r.output.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_cycles_with_a_given_network_are_refused(tmp_path):
+    from crackbake.errors import CrackbakeError
+    from crackbake.params import RunParams
+
+    side = tmp_path / "cracks.json"
+    side.write_text("{}")
+    with pytest.raises(CrackbakeError, match="drop --cycles"):
+        RunParams(mesh=tmp_path / "m.obj", cracks=side, cycles=4).validate()
+    with pytest.raises(CrackbakeError, match="not a whole number"):
+        RunParams(mesh=tmp_path / "m.obj", preset="mud", cycles=2.5).validate()
+    RunParams(mesh=tmp_path / "m.obj", cracks=side, cycles=1).validate()  # the default passes
