@@ -114,6 +114,16 @@ def test_cycles_keep_cells_points_attributes_and_surface(brick, plate):
     assert components(out) == components(brick) == 1
 
 
+def test_a_network_without_junctions_warns_and_stays(plate):
+    from crackbake.errors import CrackbakeWarning
+
+    surface = SurfaceIndex(plate.vertices, plate.faces)
+    t = np.linspace(0.1, 0.9, 30)
+    lone = CrackNetwork(cracks=[_crack(0, np.c_[t, t], surface)], mesh={})
+    with pytest.warns(CrackbakeWarning, match="--cycles 4 changed nothing"):
+        assert redry(lone, plate.vertices, plate.faces, 4) is lone
+
+
 def test_cycles_are_deterministic_and_seeded(brick, plate):
     a = redry(brick, plate.vertices, plate.faces, 4, seed=1)
     b = redry(brick, plate.vertices, plate.faces, 4, seed=1)

@@ -32,8 +32,11 @@ below one solve.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
+from crackbake.errors import CrackbakeWarning
 from crackbake.graph import network_graph, node_chains
 from crackbake.network import Crack, CrackNetwork
 from crackbake.params.ranges import CYCLES_MAX
@@ -128,6 +131,13 @@ def redry(
     chains, degree = node_chains(g)
     arms = _arms(chains, degree)
     if not arms:
+        warnings.warn(
+            f"--cycles {cycles} changed nothing: the network has no junction where three cracks "
+            "meet (its cracks close no cells); give more cracks (a lower --toughness or a higher "
+            "--max-cracks) or drop --cycles",
+            CrackbakeWarning,
+            stacklevel=2,
+        )
         return network
     pos = g.positions.copy()
     lengths = [float(np.linalg.norm(np.diff(pos[c], axis=0), axis=1).sum()) for c in chains]
