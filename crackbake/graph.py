@@ -15,7 +15,8 @@ import numpy as np
 
 from crackbake.network import CrackNetwork
 
-__all__ = ["MERGE_REL", "NetworkGraph", "impact_sources", "network_graph", "source_nodes"]
+__all__ = ["MERGE_REL", "NetworkGraph", "impact_sources", "network_graph", "node_chains",
+           "source_nodes"]
 
 #: Points closer than this fraction of the network's bounding-box diagonal are one node.
 MERGE_REL = 1e-9
@@ -122,3 +123,44 @@ def impact_sources(graph: NetworkGraph, impacts: list[dict]) -> np.ndarray:
         return np.zeros(0, np.int64)
     return source_nodes(graph, [i["point"] for i in impacts],
                         [float(i.get("radius", 0.0)) for i in impacts])
+
+
+def node_chains(graph: NetworkGraph) -> tuple[list[np.ndarray], np.ndarray]:
+    """The network's edges between junctions: maximal runs of nodes of degree 2.
+
+    Each chain starts and ends at a node whose degree (distinct neighbours) is not 2: a junction,
+    a free tip or a crack ending on the mesh boundary.  Loops made only of degree-2 nodes (a
+    closed crack with no junction) are left out.
+
+    Returns
+    -------
+    chains : list of (K_i,) int64
+        Node indices along each chain, K_i >= 2, each chain listed once (from its lower-numbered
+        end, a loop from a junction back to itself once in either direction).
+    degree : (N,) int64
+        Distinct neighbours of every node.
+    """
+    n = len(graph.positions)
+    e = np.sort(graph.seg_node, axis=1)
+    e = e[e[:, 0] != e[:, 1]]
+    e = np.unique(e, axis=0) if len(e) else e.reshape(0, 2)
+    degree = np.bincount(e.ravel(), minlength=n).astype(np.int64)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    order = np.argsort(src, kind="stable")
+    dst = dst[order]
+    ptr = np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))]).astype(np.int64)
+    used = set()
+    chains = []
+    for start in np.flatnonzero(degree != 2):  # junctions and tips: a few per cell
+        for first in dst[ptr[start]:ptr[start + 1]]:
+            if (int(start), int(first)) in used:
+                continue
+            walk = [int(start), int(first)]
+            while degree[walk[-1]] == 2:
+                a, b = dst[ptr[walk[-1]]:ptr[walk[-1] + 1]]
+                walk.append(int(b if a == walk[-2] else a))
+            used.add((walk[-1], walk[-2]))  # the same chain walked from its other end
+            used.add((walk[0], walk[1]))
+            chains.append(np.array(walk, np.int64))
+    return chains, degree

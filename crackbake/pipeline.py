@@ -389,6 +389,13 @@ def solve(
         impacts=field.impacts,
         solver_steps=result.steps,
     )
+    if params.cycles > 1:
+        from crackbake.simulate.cycles import redry
+
+        logger.info("%d drying cycles", params.cycles)
+        t = time.perf_counter()
+        network = redry(network, mesh.vertices, mesh.faces, params.cycles, params.seed)
+        timings["cycles"] = time.perf_counter() - t
     network = grow_from_impacts(network)  # crack.time grows out of the impact (timing.py)
     _warn_no_star(network, sim, sources)
     look = params.crack_look()

@@ -218,6 +218,15 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     f"diagonal; smaller gives smaller cells [{_spacing_defaults()}].",
 )
 @click.option(
+    "--cycles",
+    type=int,
+    default=1,
+    show_default=True,
+    help="Wetting and drying cycles of a shrinkage network (mud, crackle, concrete): each new "
+    "drying re-cracks along the old cracks and the junctions drift from T (90 degrees) toward Y "
+    "(120), over about 4 cycles.",
+)
+@click.option(
     "--toughness", type=float, help=f"Failure threshold relative to the field [{D['toughness']}]."
 )
 @click.option(

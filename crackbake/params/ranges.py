@@ -46,6 +46,9 @@ STRESS_MAX = 1e6
 #: Largest simulation mesh (the same bound the sim mesh builder enforces).
 SIM_FACES_MAX = 20_000_000
 UNWRAP_TIMEOUT_RANGE = (1e-3, 1e6)
+#: Most ``--cycles`` (wetting and drying cycles; the experiment ran 25 and by 50 the pattern has
+#: long stopped changing).
+CYCLES_MAX = 100
 #: Largest ``--max-memory``, GiB (a petabyte: any real machine).
 MAX_MEMORY_GIB = 1e6
 #: Range of every bounded option: name -> (low, high, unit shown in messages, low excluded).

@@ -6,6 +6,7 @@ the same clear errors as the command line) and the manifest records it.
 
 from __future__ import annotations
 
+import numbers
 import sys
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
@@ -26,6 +27,7 @@ from crackbake.params.defaults import (
 from crackbake.params.impacts import Impact, check_impact
 from crackbake.params.presets import load_preset
 from crackbake.params.ranges import (
+    CYCLES_MAX,
     EXR_COMPRESSION_DEFAULT,
     EXR_COMPRESSIONS,
     FORMATS,
@@ -147,6 +149,10 @@ class RunParams:
     material : str or None
         The plate's material for impacts given a speed: ``glass`` or ``plexiglas``
         (:data:`crackbake.params.speed.MATERIALS`); None: glass.
+    cycles : int
+        Dryings of a shrinkage network, 1..:data:`crackbake.params.ranges.CYCLES_MAX`; each
+        after the first re-cracks along the previous pattern and moves its junctions toward
+        120 degrees (:mod:`crackbake.simulate.cycles`).  1: the solved network as it is.
     look : dict
         Overrides of the preset's ``[look]`` table (``--look KEY=VALUE``): crack colour and
         composite mode, roughness, normal strength, width variation, chipping, curl
@@ -210,6 +216,7 @@ class RunParams:
     spacing: float | None = None
     thickness: float | None = None
     material: str | None = None
+    cycles: int = 1
     look: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
 
@@ -275,6 +282,12 @@ class RunParams:
             raise CrackbakeError(f"--up '{self.up}' is unknown; use one of {', '.join(UP_AXES)}")
         check_range("--unwrap-timeout", self.unwrap_timeout, *UNWRAP_TIMEOUT_RANGE, " s")
         check_range("--max-memory", self.max_memory, 0.0, MAX_MEMORY_GIB, " GiB", True)
+        if isinstance(self.cycles, bool) or not isinstance(self.cycles, numbers.Integral):
+            raise CrackbakeError(f"--cycles '{self.cycles}' is not a whole number; give 1 or more")
+        check_range("--cycles", self.cycles, 1, CYCLES_MAX, " dryings")
+        if self.cycles > 1 and self.cracks is not None:
+            raise CrackbakeError("--cycles re-cracks a solved network; with --cracks the network "
+                                 "is baked as given: drop --cycles (or --cracks)")
         if not TILE_MIN <= self.tile <= TILE_MAX:
             raise CrackbakeError(
                 f"tile size {self.tile} is out of range; use {TILE_MIN}..{TILE_MAX}"

@@ -71,6 +71,12 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
                                     arms=speed_arms(imp, params)))
     if params.shrink:
         sources.append(ShrinkSource(params.shrink, params.shrink_rate or 0.0))
+    elif params.cycles > 1:
+        raise CrackbakeError(
+            f"--cycles {params.cycles} re-dries a shrinkage network, and this run has no "
+            "shrinkage: use a shrinkage preset (--preset mud, crackle or concrete) or --shrink S, "
+            "or drop --cycles"
+        )
     for x, y, z, strength in params.directions:
         sources.append(DirectionalSource((x, y, z), strength))
     if params.curvature_bias or params.curvature_density:
