@@ -467,17 +467,16 @@ def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
     edge = float(sim.edge_length)
     spans = 0.3 * impact_reach(radius) / max(edge, 1e-300)
     if spans < STAR_MIN_EDGES:  # the sim mesh cannot resolve the arms
-        why = (f"the 0.3-reach circle spans only {spans:.1f} sim edges: give a finer --detail "
-               f"(about {0.3 * impact_reach(radius) / (2 * STAR_MIN_EDGES):.3g}) or a larger "
-               "radius")
+        why = (f"the sim mesh is too coarse ({spans:.1f} edges across that circle): give a finer "
+               f"--detail (about {0.3 * impact_reach(radius) / (2 * STAR_MIN_EDGES):.3g}) or a "
+               "larger radius")
     else:
-        why = (f"the surface there (a thin feature, a small lobe or piece) is likely narrower "
-               f"than the star, or the sim mesh too coarse ({spans:.1f} sim edges across the "
-               f"0.3-reach circle): give a smaller radius (--impact X,Y,Z:{0.5 * radius:.3g}), a "
-               f"point on a broader area, or a finer --detail (sim edge now {edge:.3g})")
+        why = (f"the surface there is likely narrower than the star: give a smaller radius "
+               f"(--impact X,Y,Z:{0.5 * radius:.3g}), a broader point, or a finer --detail "
+               f"(now {edge:.3g})")
     warnings.warn(
-        f"no star formed at {len(missing)} impact(s): radial arms crossing the circle at 0.3 of "
-        f"the reach, at least {STAR_MIN_ARMS} in a star, measured: {said}; {why}",
+        f"no star formed at {len(missing)} impact(s) (radial arms at 0.3 reach, a star has "
+        f"{STAR_MIN_ARMS} or more): {said}; {why}",
         CrackbakeWarning,
         stacklevel=3,
     )

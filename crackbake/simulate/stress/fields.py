@@ -405,23 +405,20 @@ def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray
         return radius, ""
     at = ", ".join(f"{float(x):.4g}" for x in snapped)
     xyz = at.replace(" ", "")  # as --impact takes it
-    wraps = (f"{share0:.0%} of the surface within {BACK_BALL_REACH:g} of its reach faces away "
-             "from it (a thin feature or a sharp corner smaller than its star)")
+    wraps = f"{share0:.0%} of its star would face away"
     if not fit:
         return radius, (
-            f"the impact at ({at}) wraps round the surface: {wraps}, so its cracks will likely "
-            f"grow as a web of cells, not a star; give a smaller radius (--impact {xyz}:{r:.3g} "
-            f"{'fits it' if share < BACK_SHARE_MAX else 'wraps less'}) or a point on a broader "
-            "area")
+            f"the impact at ({at}) wraps round a thin feature or corner ({wraps}): expect a web "
+            f"of cells, not a star; give a smaller radius (--impact {xyz}:{r:.3g} "
+            f"{'fits' if share < BACK_SHARE_MAX else 'wraps less'}) or a broader point")
     if share < BACK_SHARE_MAX:
-        said = f"radius {r:.3g} used, whose star fits it ({share:.0%})"
+        said = f"radius {r:.3g} used instead of {radius:.3g} (it fits: {share:.0%})"
     else:
-        said = (f"radius {r:.3g} used, the smallest tried ({share:.0%}, as on a sheet's rim): "
-                "its cracks may still grow as a web; a point on a broader area gives a star")
+        said = (f"radius {r:.3g} used, the smallest tried, still wraps ({share:.0%}): a broader "
+                "point gives a star")
     warnings.warn(
-        f"the impact at ({at}) lies on a thin feature: {wraps}, so a star of the default radius "
-        f"{radius:.3g} would wrap round it as a web of cells; {said}; give --impact "
-        f"{xyz}:RADIUS to choose",
+        f"the impact at ({at}) lies on a thin feature ({wraps}): {said}; --impact "
+        f"{xyz}:RADIUS chooses",
         CrackbakeWarning,
         stacklevel=4,
     )
