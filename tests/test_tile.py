@@ -39,9 +39,22 @@ def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
 def mud_tile(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("tile")
     r = _cli("--preset", "mud", "--size", str(SIZE), "--res", "512", "--sim-faces", "20000",
-             "--seed", "4", "-o", "mud_tile", cwd=tmp)
+             "--seed", "4", "--exr-compression", "piz", "-o", "mud_tile", cwd=tmp)
     assert r.returncode == 0, r.stderr
     return tmp / "mud_tile"
+
+
+def test_the_exr_has_the_compression_asked_and_names_the_run(mud_tile):
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageInput.open(str(mud_tile / "tile_cracks.exr")).spec()
+    assert spec.getattribute("compression") == "piz"
+    assert spec.getattribute("Copyright").startswith("crackbake ")  # the EXR owner attribute
+    comments = spec.getattribute("ImageDescription")
+    assert comments.startswith("crackbake tile --preset mud --seed 4 --res 512")
+    assert "sha256" in comments
+    man = json.loads((mud_tile / "manifest.json").read_text())
+    assert man["params"]["exr_compression"] == "piz"
 
 
 def test_periodic_simmesh_is_a_closed_torus():

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from crackbake.cli.common import CONTEXT, Command, err, reported
-from crackbake.params import METHODS, preset_names
+from crackbake.params import EXR_COMPRESSION_DEFAULT, EXR_COMPRESSIONS, METHODS, preset_names
 from crackbake.params import TILE_DEFAULTS as TD
 
 EPILOG = """\b
@@ -39,6 +39,9 @@ pieces and the period), manifest.json.
 @click.option("--sim-faces", type=int, help=f"Simulation mesh size, in faces [{TD['sim_faces']}].")
 @click.option("--method", type=click.Choice(METHODS),
               help="Crack method (only iben runs on a periodic tile).")
+@click.option("--exr-compression", type=click.Choice(EXR_COMPRESSIONS),
+              default=EXR_COMPRESSION_DEFAULT, show_default=True,
+              help="Lossless compression of tile_cracks.exr (as the bake's option).")
 @click.option("-o", "--out", type=click.Path(path_type=Path), default=Path(TD["out"]),
               show_default=True, help="Output folder (replaced as a whole).")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")

@@ -17,7 +17,7 @@ import numpy as np
 
 from crackbake import __version__
 from crackbake.exchange.exr import write_exr
-from crackbake.exchange.layers import crack_attributes, crack_planes
+from crackbake.exchange.layers import crack_attributes, crack_planes, run_attributes
 from crackbake.exchange.materials import base_color, downsample
 from crackbake.exchange.pngenc import png_bytes, write_bytes
 from crackbake.exchange.targets import TARGETS, pack, quantise
@@ -106,6 +106,9 @@ def write_tile(stage, params, maps, pieces: list, stats: dict, timings: dict, t0
     """Write the PNG set, ``tile_cracks.exr``, ``tile_3x3.png``, ``cracks.json`` and
     ``manifest.json`` into the open :class:`~crackbake.transaction.stage.OutputStage`."""
     t = time.perf_counter()
+    run = {"mesh": "tile", "preset": params.preset, "size": params.size, "res": params.res,
+           "seed": params.seed, "impacts": params.impacts, "sim_faces": params.sim_faces,
+           "exr_compression": params.exr_compression}
     base = base_color(maps.mask, occlusion=maps.occlusion, look=getattr(maps, "look", None))
     depth_scale = max(float(np.max(maps.depth)), 1e-12)
     jobs = []
@@ -130,7 +133,10 @@ def write_tile(stage, params, maps, pieces: list, stats: dict, timings: dict, t0
         attrs = crack_attributes(__version__, maps.max_distance, maps.profile_shape,
                                  channels=planes)
         attrs["crackbake:tilePeriod"] = float(params.size)
-        write_exr(stage.path(f"{STEM}_cracks.exr"), planes, attributes=attrs)
+        # owner and comments name the run, as the bake's EXRs do
+        attrs.update(run_attributes(__version__, run))
+        write_exr(stage.path(f"{STEM}_cracks.exr"), planes, attributes=attrs,
+                  compression=params.exr_compression)
 
     with ThreadPoolExecutor(max_workers=4) as pool:
         futures = [pool.submit(exr)] + [pool.submit(encode, n) for n in images]
@@ -144,9 +150,7 @@ def write_tile(stage, params, maps, pieces: list, stats: dict, timings: dict, t0
         "crackbake": __version__,
         "kind": "tile",
         "period": [params.size, params.size],
-        "params": {"preset": params.preset, "size": params.size, "res": params.res,
-                   "seed": params.seed, "impacts": params.impacts,
-                   "sim_faces": params.sim_faces},
+        "params": {k: v for k, v in run.items() if k != "mesh"},
         "depth_scale": depth_scale,
         "normal_y": "gl",
         "solver": {k: v for k, v in stats.items() if isinstance(v, (int, float, str))},

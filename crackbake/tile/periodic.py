@@ -25,6 +25,8 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError
 from crackbake.params import (
+    EXR_COMPRESSION_DEFAULT,
+    EXR_COMPRESSIONS,
     LENGTH_MAX,
     RES_MIN,
     TILE_DEFAULTS,
@@ -68,6 +70,9 @@ class TileParams:
         Simulation mesh size; ``None`` = :data:`TILE_SIM_FACES`.
     method : str or None
         ``iben`` (the only method on a periodic plate) or ``None`` (the preset's).
+    exr_compression : str
+        Lossless compression of ``tile_cracks.exr``, one of
+        :data:`~crackbake.params.EXR_COMPRESSIONS` (as the bake's ``--exr-compression``).
     """
 
     out: Path
@@ -78,6 +83,7 @@ class TileParams:
     impacts: int | None = None
     sim_faces: int | None = None
     method: str | None = None
+    exr_compression: str = EXR_COMPRESSION_DEFAULT
 
     def validate(self) -> TileParams:
         """Check every value (one-line :class:`CrackbakeError`); return self."""
@@ -105,6 +111,11 @@ class TileParams:
         if self.impacts is not None and not preset.get("needs_impact", False):
             raise CrackbakeError(
                 f"--impacts is for impact presets (glass); preset {self.preset} has none"
+            )
+        if self.exr_compression not in EXR_COMPRESSIONS:
+            raise CrackbakeError(
+                f"--exr-compression {self.exr_compression} is not one of "
+                f"{', '.join(EXR_COMPRESSIONS)}; use one of those (all lossless)"
             )
         check_sim_faces(self.sim_faces)
         check_seed(self.seed)
