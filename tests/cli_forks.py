@@ -9,11 +9,14 @@ stdout and stderr on files and stdin on /dev/null; its exit status is the comman
 fork does not show, a fresh interpreter's imports, the callers check with real subprocesses.
 
 Run as a script it is the server: a JSON list of commands on stdin, a JSON list of results on
-stdout.  Tests call :func:`run_commands`.
+stdout; with ``--stream``, one command per stdin line and its result as one stdout line, until
+stdin closes.  Tests call :func:`run_commands` for a catalogue run at once, :func:`run` in place
+of ``subprocess.run([sys.executable, "-m", "crackbake", ...])`` (one server per test process).
 """
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import resource
@@ -22,6 +25,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -70,7 +74,6 @@ def run_commands(commands: list[dict], workers: int = 4, timeout: float = 600) -
 
 def _child(command: dict, out: str, err: str) -> None:
     """In the forked child: become the command, run it, exit with its status."""
-    import atexit
     import logging
 
     # The server's exit handlers are not the command's (a fresh process has its own).
@@ -114,11 +117,14 @@ def _child(command: dict, out: str, err: str) -> None:
             os._exit(code & 0xFF)
 
 
-def serve(commands: list[dict], workers: int) -> list[dict]:
+def _preload() -> None:
     import importlib
 
     for name in PRELOAD:
         importlib.import_module(name)
+
+
+def serve(commands: list[dict], workers: int) -> list[dict]:
     results: list[dict | None] = [None] * len(commands)
     pending = list(enumerate(commands))
     running: dict[int, tuple[int, float, float, str, str]] = {}
@@ -157,6 +163,55 @@ def serve(commands: list[dict], workers: int) -> list[dict]:
     return results  # type: ignore[return-value]
 
 
+_SERVER: subprocess.Popen | None = None
+_LOCK = threading.Lock()
+
+
+def _stop(server: subprocess.Popen) -> None:
+    """End the server with this process and wait for it (its children's CPU counts here)."""
+    server.stdin.close()
+    server.wait(60)
+
+
+def run(args: list, *, cwd: str | Path | None = None, env: dict | None = None,
+        timeout: float = 300) -> subprocess.CompletedProcess:
+    """``crackbake *args`` in a fork of this test process's server, as ``subprocess.run`` with
+    ``capture_output=True, text=True`` would run ``python -m crackbake *args``.
+
+    Parameters
+    ----------
+    args : list
+        The command line after ``crackbake`` (items turned into str).
+    cwd, env : the working directory and the whole environment (default: this process's).
+    timeout : float
+        Seconds; past them the child is killed and :class:`subprocess.TimeoutExpired` raised.
+    """
+    global _SERVER
+    command = {"args": [str(a) for a in args], "cwd": str(cwd or os.getcwd()),
+               "env": dict(os.environ if env is None else env), "timeout": timeout}
+    with _LOCK:
+        if _SERVER is None or _SERVER.poll() is not None:
+            # lives as long as this process: its stdin closes with it, and it ends
+            _SERVER = subprocess.Popen(
+                [sys.executable, __file__, "--stream"], stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+            atexit.register(_stop, _SERVER)
+        _SERVER.stdin.write(json.dumps(command) + "\n")
+        _SERVER.stdin.flush()
+        line = _SERVER.stdout.readline()
+    if not line:
+        raise RuntimeError("the cli_forks server ended")
+    r = json.loads(line)
+    argv = ["crackbake", *command["args"]]
+    if r["rc"] == "timed out":
+        raise subprocess.TimeoutExpired(argv, timeout)
+    return subprocess.CompletedProcess(argv, r["rc"], r["stdout"], r["stderr"])
+
+
 if __name__ == "__main__":
-    jobs = json.loads(sys.stdin.read())
-    print(json.dumps(serve(jobs, int(sys.argv[1]))))
+    _preload()
+    if sys.argv[1] == "--stream":
+        for text in sys.stdin:
+            print(json.dumps(serve([json.loads(text)], 1)[0]), flush=True)
+    else:
+        print(json.dumps(serve(json.loads(sys.stdin.read()), int(sys.argv[1]))))
