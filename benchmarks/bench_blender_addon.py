@@ -8,10 +8,16 @@ profile): ``bpy.ops.crackbake.bake(wait=True)``.  Prints the operator's wall tim
 export, crackbake's run and loading the result, and the overhead: operator time minus the CLI's
 wall time.
 
+``--timer`` instead bakes spot in the background at ``--res`` (4096 by default) and calls the
+extension's timer function as Blender's timer does (tests/blender/addon_bake.py, mode
+``background``): each call must return within 0.05 s while crackbake runs beside it, so the
+interface never stalls during a large bake.  It prints the calls and the slowest ones, and exits
+1 above that floor.  (This was a test; a wall-clock floor is a benchmark's to measure.)
+
 Usage::
 
     CRACKBAKE_BLENDER_PYTHON=.venv-blender/bin/python python benchmarks/bench_blender_addon.py \\
-        [--res 2048]
+        [--res 2048] [--timer]
 """
 
 from __future__ import annotations
@@ -56,8 +62,13 @@ os._exit(0)
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--res", type=int, default=2048)
+    parser.add_argument("--res", type=int, default=None, help="2048, or 4096 with --timer")
+    parser.add_argument("--timer", action="store_true",
+                        help="time the extension's timer calls during a background bake")
     args = parser.parse_args()
+    if args.timer:
+        return timer(args.res or 4096)
+    args.res = args.res or 2048
     bpy_python = os.environ.get("CRACKBAKE_BLENDER_PYTHON") or str(
         ROOT / ".venv-blender" / "bin" / "python")
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -91,6 +102,39 @@ def main() -> None:
     print(f"| - crackbake run in the extension | {ext['run']:.2f} |")
     print(f"| - load images, node group | {ext['finish']:.2f} |")
     print(f"| **overhead** (operator - CLI) | {ext['total'] - cli_s:.2f} |")
+
+
+TIMER_FLOOR_S = 0.05  # one timer call may hold Blender's interface this long at most
+
+
+def timer(res: int) -> None:
+    """Bake spot at ``res`` in the background through the extension; time each timer call."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from blender_runner import run_blender
+
+    with tempfile.TemporaryDirectory(prefix="bench-addon-timer-") as tmp:
+        tmp = Path(tmp)
+        from crackbake.blender.build import build_extension
+
+        zip_path = build_extension(tmp / "zip")
+        (tmp / "user").mkdir()
+        (tmp / "tmp").mkdir()
+        env = {"BLENDER_USER_RESOURCES": str(tmp / "user"), "TMPDIR": str(tmp / "tmp"),
+               "PYTHONPATH": str(ROOT), "CRACKBAKE_CACHE_DIR": str(tmp / "c"),
+               "CRACKBAKE_TEST_SIM_FACES": "3000"}
+        out = run_blender("addon_bake.py", zip_path, SPOT, tmp / "out", res, "background",
+                          env=env)
+    run = out["run"]
+    sizes = sorted({v["size"][0] for v in out["state"]["images"].values()})
+    print(f"spot, glass, background bake at {res}² through the extension ({out['bake_s']:.1f} s)")
+    print(f"status: {run['status']}; images loaded at {sizes}")
+    print(f"timer calls during the run: {run['polls'] - 1}, slowest {run['max_poll_s']:.4f} s "
+          f"(floor {TIMER_FLOOR_S} s); five slowest {[round(t, 4) for t in run['slowest']]}")
+    print(f"last call (loads the result): {run['finish_s']:.2f} s")
+    ok = (run["status"].endswith("cracks") and run["polls"] > 10 and sizes == [res]
+          and run["max_poll_s"] < TIMER_FLOOR_S)
+    if not ok:
+        raise SystemExit(f"FAILED: the timer blocked or the bake did not finish: {run}")
 
 
 if __name__ == "__main__":

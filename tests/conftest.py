@@ -254,15 +254,28 @@ def largest_eigen(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------ scheduling
-# ``make test`` hands whole files to its workers (pytest-xdist --dist loadfile) in collection
-# order.  The longest files (measured with --durations: the first runs after the precompile, or
-# run alone a fresh numba cache compiled; about a hundred CLI processes for the bad-input
-# catalogue; the interrupted runs), then every file that holds slow tests, go first, so no long
-# file starts when the others are nearly done.
-_LONGEST = ("test_precompile.py", "test_bad_inputs.py", "test_transaction.py")
+# ``make test`` hands whole files to its 2 workers (pytest-xdist --dist loadfile) in collection
+# order, longest first, so that no long file starts when the other worker is nearly done and the
+# run ends on short files (longest-processing-time-first).  The longest files, by the seconds of
+# their tests in a whole ``make test`` (--durations, under load; re-rank them with
+# benchmarks/bench_tests.py), then every other file holding slow tests, then the rest.  A file
+# missing here costs only time, never a result.
+_LONGEST = ("test_open_meshes.py", "test_transaction.py", "test_golden.py", "test_looks.py",
+            "test_batch.py", "test_proxy.py", "test_bad_inputs.py", "test_blender_addon.py",
+            "test_docs.py", "test_fuzz.py", "test_precompile.py", "test_bake.py",
+            "test_sidecar.py", "test_units.py", "test_spacing.py", "test_decal.py",
+            "test_progress.py", "test_impacts.py")
+
+
+def pytest_configure(config):
+    # xdist's loadfile would sort the files by their number of tests instead, which put the
+    # long files with few tests (golden runs, the precompile check) last.
+    if getattr(config.option, "loadscopereorder", None):
+        config.option.loadscopereorder = False
 
 
 def pytest_collection_modifyitems(config, items):
     slow = {item.path for item in items if item.get_closest_marker("slow")}
+    rank = {name: i for i, name in enumerate(_LONGEST)}
     # stable: the order within a file is kept
-    items.sort(key=lambda item: (item.path.name not in _LONGEST, item.path not in slow))
+    items.sort(key=lambda item: (rank.get(item.path.name, len(rank)), item.path not in slow))

@@ -2,8 +2,11 @@
 
 Each case must exit with code 2, print exactly one line on stderr (``error: ...``, no traceback,
 no numpy repr), and leave nothing behind: no output folder, no staging folder, no stray file.
-The cases run concurrently in a module fixture (one process each, a few at a time) so the whole
-catalogue costs a few seconds of wall clock; each case is still its own test.
+The cases run concurrently in a module fixture (one process each, a few at a time); each case is
+still its own test.  Most run in forks of one process that imported crackbake once
+(tests/cli_forks.py: the same entry point, exit status and output as ``python -m crackbake``,
+without its 2-3 CPU seconds of imports each); a few, listed in ``SUBPROCESS``, run as
+``python -m crackbake`` in a fresh interpreter.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_forks import run_commands
 
 from crackbake.params import Impact
 
@@ -386,38 +390,55 @@ RLIMIT_AS = {"res 8192 under a 3 GB address-space cap": 3 * 10**9,
              "res 4096 unwrap under a 2 GB address-space cap": 2 * 10**9}
 
 
-def _run_case(root: Path, case: tuple[str, list[str], str]) -> dict:
+# Cases run as ``python -m crackbake`` in a fresh interpreter, the way a user runs it: the
+# command line's own errors, the checks made before any heavy import, the address-space caps
+# (the cap covers the interpreter's imports too) and the environment a process starts with.
+# Every other case runs in a fork of one process that imported crackbake once
+# (tests/cli_forks.py): the same entry point, exit status and output, without 2-3 CPU seconds of
+# imports each.
+SUBPROCESS = ("no arguments", "unknown option", "nothing to crack", "mesh fifo", "egl device abc",
+              "home missing", *RLIMIT_AS)
+
+
+def _command(root: Path, case: tuple[str, list[str], str]) -> dict:
+    """The case's folder (inputs copied, FIFOs made) and its command for cli_forks."""
     name, args, _ = case
     folder = root / name.replace(" ", "_")
     shutil.copytree(root / "_inputs", folder)
     _specials(folder)
-    before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
-    t0 = time.perf_counter()
     env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(folder / ".cache")}
     for key, value in ENVIRON.get(name, {}).items():  # None removes the variable
         if value is None:
             env.pop(key, None)
         else:
             env[key] = value.format(d=folder)
-    cap = RLIMIT_AS.get(name)
+    common = [] if args[:1] == ["inspect"] else ["--res", "64", "-o", "out"]
+    # A read that blocks (a FIFO) must fail the case, not hang the catalogue.
+    return {"args": [*common, *args], "cwd": str(folder), "env": env,
+            "rlimit_as": RLIMIT_AS.get(name), "timeout": 60 if "fifo" in name else 300}
+
+
+def _subprocess(command: dict) -> dict:
+    cap = command["rlimit_as"]
 
     def limit() -> None:  # in the child, before exec: the cap covers the whole run
         resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 
-    common = [] if args[:1] == ["inspect"] else ["--res", "64", "-o", "out"]
+    t0 = time.perf_counter()
     try:
-        # A read that blocks (a FIFO) must fail the case, not hang the catalogue.
         r = subprocess.run(
-            [sys.executable, "-m", "crackbake", *common, *args],
-            cwd=folder, capture_output=True, text=True, env=env,
-            timeout=60 if "fifo" in name else 300, preexec_fn=limit if cap else None,
+            [sys.executable, "-m", "crackbake", *command["args"]], cwd=command["cwd"],
+            capture_output=True, text=True, env=command["env"], timeout=command["timeout"],
+            preexec_fn=limit if cap else None,
         )
         rc, stderr, stdout = r.returncode, r.stderr, r.stdout
     except subprocess.TimeoutExpired as exc:
         rc, stderr, stdout = "timed out", str(exc), ""
-    after = sorted(p.relative_to(folder) for p in folder.rglob("*"))
-    return {"secs": time.perf_counter() - t0, "rc": rc, "stderr": stderr,
-            "stdout": stdout, "new": [str(p) for p in after if p not in before]}
+    return {"secs": time.perf_counter() - t0, "rc": rc, "stderr": stderr, "stdout": stdout}
+
+
+def _listing(folder: str) -> list[Path]:
+    return sorted(p.relative_to(folder) for p in Path(folder).rglob("*"))
 
 
 @pytest.fixture(scope="module")
@@ -425,10 +446,17 @@ def results(tmp_path_factory) -> dict:
     root = tmp_path_factory.mktemp("bad_inputs")
     (root / "_inputs").mkdir()
     _inputs(root / "_inputs")
-    cases = CASES + WARN_CASES
-    with ThreadPoolExecutor(max_workers=4) as pool:
-        done = pool.map(lambda c: _run_case(root, c), cases)
-        return {case[0]: res for case, res in zip(cases, done, strict=True)}
+    commands = {case[0]: _command(root, case) for case in CASES + WARN_CASES}
+    before = {name: _listing(c["cwd"]) for name, c in commands.items()}
+    forked = [name for name in commands if name not in SUBPROCESS]
+    with ThreadPoolExecutor(max_workers=1) as pool:  # one beside the forks, 4 at a time in all
+        alone = pool.map(_subprocess, [commands[n] for n in SUBPROCESS])
+        done = dict(zip(forked, run_commands([commands[n] for n in forked], workers=3),
+                        strict=True))
+        done.update(zip(SUBPROCESS, alone, strict=True))
+    for name, r in done.items():
+        r["new"] = [str(p) for p in _listing(commands[name]["cwd"]) if p not in before[name]]
+    return done
 
 
 def test_catalogue_is_large_and_unique():
@@ -548,34 +576,35 @@ TEXTURE_CASES = [
 ]
 
 
-def _bake_textured(root: Path, meshes: dict, case: tuple) -> dict:
+def _bake_command(root: Path, meshes: dict, case: tuple) -> dict:
     stem, _, allow = case
-    out = root / f"out_{stem}_{allow}"
-    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(root / ".cache")}
     mesh = meshes[stem]
+    env = {**os.environ, "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(root / ".cache")}
     args = [str(mesh), "--cracks", str(mesh.with_suffix(".json")), "--res", "64",
-            "--formats", "png", "-o", str(out), *(["--allow-outside-textures"] * allow)]
-    try:  # a FIFO must not hang the test
-        r = subprocess.run([sys.executable, "-m", "crackbake", *args], capture_output=True,
-                           text=True, env=env, timeout=120)
-    except subprocess.TimeoutExpired as exc:
-        return {"rc": "timed out", "stderr": str(exc), "colour": None}
+            "--formats", "png", "-o", str(root / f"out_{stem}_{allow}"),
+            *(["--allow-outside-textures"] * allow)]
+    return {"args": args, "cwd": str(root), "env": env, "timeout": 120}  # a FIFO must not hang
+
+
+def _colour(root: Path, case: tuple, r: dict) -> dict:
+    stem, _, allow = case
     colour = None
-    if r.returncode == 0:
+    if r["rc"] == 0:
         from PIL import Image
 
-        with Image.open(out / f"{stem}_basecolor.png") as im:
+        with Image.open(root / f"out_{stem}_{allow}" / f"{stem}_basecolor.png") as im:
             colour = np.median(np.asarray(im.convert("RGB")).reshape(-1, 3), axis=0)
-    return {"rc": r.returncode, "stderr": r.stderr, "colour": colour}
+    return {**r, "colour": colour}
 
 
 @pytest.fixture(scope="module")
 def textured(tmp_path_factory) -> tuple[Path, dict]:
+    """The bakes run in forks of one process (tests/cli_forks.py), as the catalogue's do."""
     root = tmp_path_factory.mktemp("textures")
     meshes = _textured(root)
-    with ThreadPoolExecutor(max_workers=4) as pool:
-        done = pool.map(lambda c: _bake_textured(root, meshes, c), TEXTURE_CASES)
-        return root, dict(zip(((c[0], c[2]) for c in TEXTURE_CASES), done, strict=True))
+    done = run_commands([_bake_command(root, meshes, c) for c in TEXTURE_CASES], workers=4)
+    return root, {(c[0], c[2]): _colour(root, c, r)
+                  for c, r in zip(TEXTURE_CASES, done, strict=True)}
 
 
 @pytest.mark.parametrize(("stem", "named", "allow"), TEXTURE_CASES,

@@ -235,14 +235,8 @@ def test_cancel_keeps_the_previous_result(addon_zip, tmp_path):
     assert {v["size"][0] for v in out["state"]["images"].values()} == {256}
 
 
-@pytest.mark.reference
-@pytest.mark.slow
-def test_the_timer_never_blocks_during_a_4096_bake(addon_zip, tmp_path):
-    out = _in_blender(addon_zip, tmp_path, "background", 4096, 3000)
-    run = out["run"]
-    assert run["status"].endswith("cracks") and run["polls"] > 10
-    assert run["max_poll_s"] < 0.05, run
-    assert {v["size"][0] for v in out["state"]["images"].values()} == {4096}
+# The timer's floor during a 4096² background bake (each call under 0.05 s) is a wall-clock
+# measurement: benchmarks/bench_blender_addon.py --timer.
 
 
 @pytest.mark.reference

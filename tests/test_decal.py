@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
+import cli_forks
 import numpy as np
 import pytest
 from PIL import Image
@@ -209,8 +208,7 @@ def test_engine_blocks_place_an_f_as_the_projector_does(normal):
 
 def _cli(*args, cwd=None):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run([sys.executable, "-m", "crackbake", *args], capture_output=True,
-                          text=True, env=env, cwd=cwd, timeout=300)
+    return cli_forks.run(list(args), env=env, cwd=cwd, timeout=300)
 
 
 def test_decal_needs_an_impact():

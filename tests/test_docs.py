@@ -3,7 +3,9 @@
 Commands are taken from shell code blocks (lines starting ``crackbake`` or
 ``.venv/bin/crackbake``) and from inline code spans; ones with placeholders (``MESH``,
 ``FILE.exr``, ``X,Y,Z``, ``[...]``) and bare command names (``crackbake tile``) are syntax, not
-commands, and are left out.  Each runs as ``python -m crackbake`` in a scratch folder holding
+commands, and are left out.  Each runs as ``crackbake`` (the entry point of ``python -m
+crackbake``, forked from one process that imported it: tests/cli_forks.py; ``batch`` in a fresh
+interpreter) in a scratch folder holding
 ``examples/`` (so the documented paths work), made small: ``--res`` lowered, a small
 simulation mesh and few decal variants, since the check is that the command as written is
 accepted and completes, not the picture.  An input a command names that the docs produced in
@@ -22,6 +24,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cli_forks
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,8 +98,10 @@ def small(args: list[str]) -> list[str]:
 
 
 def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "crackbake", *args], cwd=cwd, env=ENV,
-                          capture_output=True, text=True, timeout=600)
+    if args[:1] == ["batch"]:  # a batch starts Ray's own processes: a fresh interpreter
+        return subprocess.run([sys.executable, "-m", "crackbake", *args], cwd=cwd, env=ENV,
+                              capture_output=True, text=True, timeout=600)
+    return cli_forks.run(args, cwd=cwd, env=ENV, timeout=600)
 
 
 def _inputs(args: list[str], cwd: Path) -> None:

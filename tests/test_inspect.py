@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
+import cli_forks
 import numpy as np
 import pytest
 from PIL import Image
@@ -27,10 +27,7 @@ H, W = 96, 160  # pictures of maps under 512 px are enlarged by an integer facto
 
 def cli(*args: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run(
-        [sys.executable, "-m", "crackbake", "inspect", *args],
-        capture_output=True, text=True, env=env, timeout=120,
-    )  # fmt: skip
+    return cli_forks.run(["inspect", *args], env=env, timeout=120)
 
 
 def _uniform_field(p1: float, p2: float, angle: float) -> dict[str, np.ndarray]:

@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import cli_forks
 import numpy as np
 import pytest
 from conftest import wait_for_staging
@@ -38,10 +39,7 @@ SIM = 5000  # small simulation meshes: the tests check plumbing and conventions,
 
 def cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    return subprocess.run(
-        [sys.executable, "-m", "crackbake", *args],
-        capture_output=True, text=True, env=env, timeout=timeout,
-    )  # fmt: skip
+    return cli_forks.run(list(args), env=env, timeout=timeout)
 
 
 def read(path: Path) -> np.ndarray:

@@ -1,6 +1,7 @@
 """Open and non-manifold meshes users actually have (issue 9): spot with holes, half of spot,
 spot with duplicated faces and spot with a fin (three faces on one edge) all give valid crack
-networks through the real command, for glass impacts and shrinkage.
+networks through the real command, for glass impacts and shrinkage (its entry point run in forks
+of one process that imported crackbake once, tests/cli_forks.py).
 
 The meshes are made from examples/spot.obj by filtering its face lines, so UVs are kept.
 """
@@ -8,12 +9,11 @@ The meshes are made from examples/spot.obj by filtering its face lines, so UVs a
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_forks import run_commands
 
 from crackbake.geometry import barycentric
 from crackbake.io.mesh import load_mesh
@@ -59,13 +59,10 @@ def variants(tmp_path_factory) -> dict[str, Path]:
     return out
 
 
-def _run(mesh: Path, out: Path, seed: int, preset_args: list[str]) -> subprocess.CompletedProcess:
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run(
-        [sys.executable, "-m", "crackbake", str(mesh), *preset_args, "--sim-faces", "20000",
-         "--res", "256", "--formats", "png", "--seed", str(seed), "-o", str(out)],
-        capture_output=True, text=True, env=env, timeout=300,
-    )
+def _command(mesh: Path, out: Path, seed: int, preset_args: list[str]) -> dict:
+    return {"args": [str(mesh), *preset_args, "--sim-faces", "20000", "--res", "256",
+                     "--formats", "png", "--seed", str(seed), "-o", str(out)],
+            "cwd": str(out.parent), "env": dict(os.environ, PYTHONPATH=str(ROOT)), "timeout": 300}
 
 
 def _assert_valid_network(mesh_path: Path, out: Path) -> int:
@@ -86,19 +83,32 @@ def _assert_valid_network(mesh_path: Path, out: Path) -> int:
 PRESETS = {"glass": ["--preset", "glass", "--impact", IMPACT], "crackle": ["--preset", "crackle"]}
 
 
+SEEDS = {"glass": 3, "crackle": 4}  # one seed per preset
+
+
+@pytest.fixture(scope="module")
+def runs(variants, tmp_path_factory) -> dict[tuple[str, str], tuple[dict, Path]]:
+    """Every (mesh, preset) run of the command, in forks of one process that imported crackbake
+    once (tests/cli_forks.py: the command's entry point, exit status and stderr)."""
+    folder = tmp_path_factory.mktemp("runs")
+    keys = [(kind, preset) for kind in KINDS for preset in sorted(PRESETS)]
+    outs = {key: folder / f"{key[0]}_{key[1]}" for key in keys}
+    done = run_commands([_command(variants[k[0]], outs[k], SEEDS[k[1]], PRESETS[k[1]])
+                         for k in keys], workers=2)
+    return {key: (r, outs[key]) for key, r in zip(keys, done, strict=True)}
+
+
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("preset", sorted(PRESETS))
-def test_open_and_non_manifold_meshes_give_valid_networks(variants, tmp_path, kind, preset):
+def test_open_and_non_manifold_meshes_give_valid_networks(variants, runs, kind, preset):
     """One seed per preset (before the fix these two gave face -1 on the duplicated mesh)."""
-    for seed in ((3,) if preset == "glass" else (4,)):
-        out = tmp_path / f"out{seed}"
-        res = _run(variants[kind], out, seed, PRESETS[preset])
-        assert res.returncode == 0, res.stderr
-        _assert_valid_network(variants[kind], out)
-        if kind in ("duplicated", "fin"):
-            assert "duplicated face" in res.stderr or "not manifold" in res.stderr
-        else:
-            assert "not manifold" not in res.stderr and "edge paths" not in res.stderr
+    res, out = runs[kind, preset]
+    assert res["rc"] == 0, res["stderr"]
+    _assert_valid_network(variants[kind], out)
+    if kind in ("duplicated", "fin"):
+        assert "duplicated face" in res["stderr"] or "not manifold" in res["stderr"]
+    else:
+        assert "not manifold" not in res["stderr"] and "edge paths" not in res["stderr"]
 
 
 @pytest.mark.slow

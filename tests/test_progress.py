@@ -11,6 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cli_forks
 import pytest
 
 from crackbake.progress import STAGES, JsonlProgress, stage_start
@@ -26,8 +27,7 @@ def _env(tmp_path: Path) -> dict:
 
 def crackbake(args: list[str], cwd: Path) -> tuple[int, list[dict], str]:
     """Run the command; its exit code, the stdout events (every line must parse) and stderr."""
-    proc = subprocess.run([sys.executable, "-m", "crackbake", *args], cwd=cwd, env=_env(cwd),
-                          capture_output=True, text=True, timeout=300)
+    proc = cli_forks.run(args, cwd=cwd, env=_env(cwd), timeout=300)
     return proc.returncode, [json.loads(line) for line in proc.stdout.splitlines()], proc.stderr
 
 

@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
+import cli_forks
 import numpy as np
 import pytest
 from PIL import Image
@@ -31,10 +30,10 @@ def _scaled(path: Path, scale: float, offset: float = 0.0) -> None:
 def _run(mesh: Path, out: Path, scale: float, offset: float = 0.0):
     impact = ",".join(repr(v * scale + offset) for v in IMPACT)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run(
-        [sys.executable, "-m", "crackbake", str(mesh), "--preset", "glass", "--impact", impact,
+    return cli_forks.run(
+        [str(mesh), "--preset", "glass", "--impact", impact,
          "--sim-faces", "20000", "--res", "256", "--formats", "png", "-o", str(out)],
-        capture_output=True, text=True, env=env, timeout=300,
+        env=env, timeout=300,
     )
 
 

@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+import cli_forks
 import numpy as np
 import pytest
 from conftest import wait_for_staging
@@ -31,8 +32,7 @@ SIZE = 2.0
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-m", "crackbake", "tile", *args], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=600)
+    return cli_forks.run(["tile", *args], cwd=cwd, env=env, timeout=600)
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,10 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import warnings
 from pathlib import Path
 
+import cli_forks
 import numpy as np
 import pytest
 from PIL import Image
@@ -30,11 +29,11 @@ def _private_cache(tmp_path, monkeypatch):
 
 def _run(mesh: Path, out: Path, impact: np.ndarray, cache: Path):
     env = dict(os.environ, PYTHONPATH=str(ROOT), CRACKBAKE_CACHE_DIR=str(cache))
-    return subprocess.run(
-        [sys.executable, "-m", "crackbake", str(mesh), "--preset", "glass",
+    return cli_forks.run(
+        [str(mesh), "--preset", "glass",
          "--impact", ",".join(repr(float(x)) for x in impact), "--sim-faces", "12000",
          "--res", "512", "--formats", "png", "-o", str(out)],
-        capture_output=True, text=True, env=env, timeout=300,
+        env=env, timeout=300,
     )  # fmt: skip
 
 
