@@ -241,6 +241,17 @@ def _bake(
     t = time.perf_counter()
     # The faces plus the copies of faces straying past the page, wrapped where engines show them.
     arrays = bake_arrays(uvmesh)
+    if uvmesh.udim is not None:  # one page per UDIM tile, the whole network on each
+        from crackbake.bake.udim import bake_udim
+
+        maps = bake_udim(
+            arrays, uvmesh.udim, segments(network), params.res,
+            max_distance=params.max_distance, profile_shape=params.profile,
+            min_px=params.min_px, dilate_px=params.dilate, tile=params.tile, ctx=ctx,
+            look=params.crack_look(), seed=params.seed,
+        )  # fmt: skip
+        timings["bake"] = time.perf_counter() - t
+        return maps
     maps = bake_cracks(
         arrays["vertices"],
         arrays["faces"],
@@ -290,6 +301,16 @@ def _bake_stress(
     res = params.stress_res or min(params.res, STRESS_RES_DEFAULT)
     logger.info("baking the stress field %dx%d", res, res, extra={"stage": "stress_bake"})
     t = time.perf_counter()
+    if uvmesh.udim is not None:  # a page per tile, the tile moved onto the 0-1 page
+        from crackbake.bake.udim import tile_uvmesh
+
+        pages = [
+            bake_stress(tile_uvmesh(uvmesh, tile), solved.result, res, tangents=uvmesh.tangents,
+                        initial=solved.sim, dilate_px=params.dilate, tile=params.tile, ctx=ctx)
+            for tile in uvmesh.udim
+        ]  # fmt: skip
+        timings["stress_bake"] = time.perf_counter() - t
+        return pages
     stress = bake_stress(
         uvmesh,
         solved.result,
