@@ -55,7 +55,7 @@ def _inspect(exr: Path, png_dir: Path | None):
     else:
         if not exr.is_file():
             raise CrackbakeError(
-                f"EXR '{exr}' not found; check the path (a UDIM set is name.<UDIM>.exr)"
+                f"EXR '{exr}' does not exist; check the path (a UDIM set is name.<UDIM>.exr)"
             )
         info, channels = inspect_exr(exr)
         per_tile = None

@@ -202,9 +202,6 @@ def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
     if (lo < -UV_TOLERANCE).any() or (hi > 1.0 + UV_TOLERANCE).any():
         if is_udim(corners, faces):
             return _udim_check(uv, faces, corners, ctx)
-        problem = udim_problem(corners, faces)
-        if problem is not None:
-            return UVCheck(False, problem, True, None)
         stray = ((corners < -UV_TOLERANCE) | (corners > 1.0 + UV_TOLERANCE)).any(axis=(1, 2))
         outside_fraction = float(stray.mean())
         outside = UVCheck(
@@ -214,7 +211,7 @@ def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
             None,
         )
         if (lo < -STRAY_MARGIN).any() or (hi > 1.0 + STRAY_MARGIN).any():
-            return outside
+            return _not_udim(outside, corners, faces)
     if not (uv_area2(corners) > DEGENERATE_AREA2).any():
         return UVCheck(False, "every face has zero UV area", False, None)
     wraps = np.zeros((0, 3), np.int64)
@@ -226,9 +223,15 @@ def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
         lost_fraction = lost / OVERLAP_RES**2
         lost_faces = len(np.unique(copies[~keep, 0]))
         if outside_fraction > STRAY_FACE_FRACTION and lost_fraction > STRAY_LOST_FRACTION:
-            return outside
+            return _not_udim(outside, corners, faces)
     overlap = uv_overlap_fraction(np.clip(uv, 0.0, 1.0), faces, OVERLAP_RES, ctx=ctx)
     return UVCheck(True, "", False, overlap, outside_fraction, wraps, lost_fraction, lost_faces)
+
+
+def _not_udim(outside: UVCheck, corners: np.ndarray, faces: np.ndarray) -> UVCheck:
+    """``outside``, or, for UVs that look like UDIM tiles, why they are not a UDIM layout."""
+    problem = udim_problem(corners, faces)
+    return outside if problem is None else UVCheck(False, problem, True, None)
 
 
 def _udim_check(uv: np.ndarray, faces: np.ndarray, corners: np.ndarray, ctx) -> UVCheck:
