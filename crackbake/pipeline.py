@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from crackbake.errors import CrackbakeWarning
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
@@ -144,7 +146,11 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     timings["load"] = time.perf_counter() - t
     check_scale(mesh)  # before any work: the float32 bake cannot resolve extreme scales
     # Before the heavy stages: a run that cannot fit is refused now, not killed at 20 GB.
-    check_memory(estimate_peak(**run_sizes(params.resolved()[0], mesh)), params.max_memory)
+    sizes = run_sizes(params.resolved()[0], mesh)
+    tiles = _udim_pages(mesh, params)
+    if tiles > 1:  # every tile's maps are held until the write: T pages of res^2
+        sizes["res"] = int(np.ceil(params.res * np.sqrt(tiles)))
+    check_memory(estimate_peak(**sizes), params.max_memory)
 
     solver_stats: dict = {}
     solved = None
@@ -204,6 +210,19 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         maps=maps,
         solved=solved,
     )
+
+
+def _udim_pages(mesh: Mesh, params: RunParams) -> int:
+    """How many UDIM tiles the run will bake (1 when the UVs are not a UDIM layout), before
+    the UV stage: the memory estimate counts a page per tile."""
+    if mesh.uv is None or params.uv == "unwrap":
+        return 1
+    from crackbake.bake.uv.check import is_udim, udim_tiles
+
+    corners = np.asarray(mesh.uv, np.float64)[mesh.faces]
+    if not np.isfinite(corners).all() or not is_udim(corners, np.asarray(mesh.faces)):
+        return 1
+    return len(np.unique(udim_tiles(corners), axis=0))
 
 
 def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMesh:

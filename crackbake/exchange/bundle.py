@@ -433,6 +433,16 @@ def _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, e
     exr = {"compression": params.exr_compression, "run": run_attributes(__version__, effective)}
     if "png" in formats:
         warn_udim_target(params.target)
+    colour = {"png", "glb", "preview", "usd"} & set(formats)
+    if colour and mesh.source and base_color_texture(mesh.source, 16,
+                                                     params.allow_outside_textures) is not None:
+        warnings.warn(
+            "the asset's base-colour texture is not composited under the cracks on UDIM tiles "
+            "(the base colour is grey with the cracks); composite the <stem>_mask.<UDIM>.png or "
+            "_data maps over your own tiles, or --uv unwrap for one page with the texture",
+            CrackbakeWarning,
+            stacklevel=4,
+        )
     if "usdz" in formats:
         warnings.warn(
             "--formats usdz: AR Quick Look (ARKit) reads no UDIM textures, so no .usdz is "
