@@ -277,6 +277,26 @@ def test_usd_references_the_tiles_with_the_udim_token(tmp_path):
     # The UVs stay on their tiles.
     uv = np.asarray(UsdGeom.PrimvarsAPI(prim).GetPrimvar("st").ComputeFlattened())
     assert uv[:, 0].max() > 1.5 and uv[:, 1].max() > 1.5
+    # USD's own UDIM resolver finds the four tiles of every texture the material reads.
+    layer = stage.GetRootLayer()
+    files = {UsdShade.Shader(p).GetInput("file").Get().path for p in stage.Traverse()
+             if p.GetTypeName() == "Shader" and UsdShade.Shader(p).GetInput("file")}  # fmt: skip
+    assert len(files) >= 4
+    for f in files:
+        assert UsdShade.UdimUtils.IsUdimIdentifier(f)
+        tiles = UsdShade.UdimUtils.ResolveUdimTilePaths(f, layer)
+        assert sorted(t for _, t in tiles) == ["1001", "1002", "1011", "1012"], f
+    # The validators: only the MaterialX ids usd-core's registry lacks (as tests/test_usd.py),
+    # and the normal-map check, which opens the file and does not expand <UDIM> (usd-core 0.26).
+    from pxr import UsdValidation as V
+
+    reg = V.ValidationRegistry()
+    names = [m.name for m in reg.GetAllValidatorMetadata() if "UsdzValidators" not in
+             list(m.GetKeywords())]  # fmt: skip
+    left = [e for e in V.ValidationContext(reg.GetOrLoadValidatorsByName(names)).Validate(stage)
+            if e.GetName() != "MissingShaderIdInRegistry"]  # fmt: skip
+    assert all(e.GetName() == "InvalidFile" and "<UDIM>" in e.GetMessage() for e in left), [
+        e.GetMessage() for e in left]  # fmt: skip
 
 
 def test_a_solved_udim_run_writes_stress_per_tile(tmp_path):
@@ -309,3 +329,19 @@ def test_a_solved_udim_run_writes_stress_per_tile(tmp_path):
     left, right = stress[1001][rows, 60], stress[1002][rows, 3]
     assert np.abs(left).max() > 0
     np.testing.assert_allclose(left, right, rtol=0.1, atol=0.05 * np.abs(left).max())
+
+
+@pytest.mark.reference
+def test_blender_reads_the_tiles_and_the_usd_udim_textures(tmp_path):
+    from tests.blender_runner import run_blender
+
+    pytest.importorskip("pxr")
+    _, out = _plate_run(tmp_path, formats=("png", "usd"), target="blender")
+    got = run_blender("udim_tiles.py", out / "tiles_base_color.1001.png", out / "tiles.usda")
+    assert [t["number"] for t in got["tiles"]] == [1001, 1002, 1011, 1012]
+    assert all(t["size"] == [64, 64] for t in got["tiles"])
+    images = got["usd_images"]
+    assert images and all(i["source"] == "TILED" for i in images.values()), images
+    assert all(i["tiles"] == [1001, 1002, 1011, 1012] for i in images.values()), images
+    assert "tiles_base_color.<UDIM>.png" in images
+    assert got["uv_max"][0] > 1.5 and got["uv_max"][1] > 1.5  # the layout kept its tiles
