@@ -345,3 +345,11 @@ def test_blender_reads_the_tiles_and_the_usd_udim_textures(tmp_path):
     assert all(i["tiles"] == [1001, 1002, 1011, 1012] for i in images.values()), images
     assert "tiles_base_color.<UDIM>.png" in images
     assert got["uv_max"][0] > 1.5 and got["uv_max"][1] > 1.5  # the layout kept its tiles
+
+
+def test_usdz_is_not_written_for_tiles_with_one_warning(tmp_path):
+    pytest.importorskip("pxr")
+    with pytest.warns(CrackbakeWarning, match="--formats usdz: AR Quick Look .* no UDIM"):
+        result, out = _plate_run(tmp_path, formats=("usd", "usdz"))
+    assert (out / "tiles.usda").is_file() and not (out / "tiles.usdz").exists()
+    assert "tiles.usdz" not in [f["name"] for f in result.files]
