@@ -353,3 +353,13 @@ def test_usdz_is_not_written_for_tiles_with_one_warning(tmp_path):
         result, out = _plate_run(tmp_path, formats=("usd", "usdz"))
     assert (out / "tiles.usda").is_file() and not (out / "tiles.usdz").exists()
     assert "tiles.usdz" not in [f["name"] for f in result.files]
+
+
+def test_islands_overlapping_on_one_tile_warn_as_overlap(gl_ctx):
+    # Squares 1 and 2 both on tile 1002: kept (UDIM), measured per tile, the overlap warned.
+    mesh = tiled_plate(4, tiles=((0, 0), (1, 0), (1, 0), (1, 1)))
+    with pytest.warns(CrackbakeWarning, match="overlaps .* cracks will show twice"):
+        uvm = prepare_uvs(mesh, "auto", res=64, ctx=gl_ctx)
+    np.testing.assert_array_equal(uvm.udim, [[0, 0], [1, 0], [1, 1]])
+    # Three islands of one area on three tiles, the one on 1002 covered twice: 1/3 of the texels.
+    assert uvm.overlap_fraction == pytest.approx(1 / 3, abs=0.02)

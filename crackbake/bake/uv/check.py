@@ -236,22 +236,21 @@ def _not_udim(outside: UVCheck, corners: np.ndarray, faces: np.ndarray) -> UVChe
 
 def _udim_check(uv: np.ndarray, faces: np.ndarray, corners: np.ndarray, ctx) -> UVCheck:
     """A usable UDIM layout: its tiles and its overlap, measured tile by tile (each tile's
-    faces moved onto the 0-1 page) and summed over the tiles' covered area."""
+    faces moved onto the 0-1 page): texels covered twice over texels covered, on all tiles."""
     face_tile = udim_tiles(corners)
     numbers = udim_number(face_tile)
     used = np.unique(numbers)
     tiles = np.stack([(used - 1001) % 10, (used - 1001) // 10], axis=1).astype(np.int64)
     if not (uv_area2(corners) > DEGENERATE_AREA2).any():
         return UVCheck(False, "every face has zero UV area", False, None)
-    overlapping = covered = 0.0
+    twice = covered = 0
     for number, tile in zip(used, tiles, strict=True):
         own = np.flatnonzero(numbers == number)
-        area = float(uv_area2(corners[own]).sum())
         local = np.clip(uv - tile, 0.0, 1.0)
-        frac = uv_overlap_fraction(local, faces[own], OVERLAP_RES, ctx=ctx)
-        overlapping += frac * area
-        covered += area
-    overlap = overlapping / covered if covered > 0 else 0.0
+        t, c = uv_overlap_fraction(local, faces[own], OVERLAP_RES, ctx=ctx, texel_counts=True)
+        twice += t
+        covered += c
+    overlap = twice / covered if covered > 0 else 0.0
     return UVCheck(True, "", True, overlap, tiles=tiles)
 
 
