@@ -160,7 +160,7 @@ def test_a_udim_run_writes_every_map_per_tile_and_lists_the_tiles(tmp_path):
     assert "tiles_cracks.exr" not in names and "tiles.glb" in names and "preview.png" in names
     udim = result.manifest["uv"]["udim"]
     assert [t["udim"] for t in udim["tiles"]] == [1001, 1002, 1011, 1012]
-    assert udim["resolution_per_tile"] == 64 and udim["glb_grid"] == 2
+    assert udim["resolution_per_tile"] == 64 and udim["glb_grid"] == [2, 2]
     assert "tiles_mask.1002.png" in udim["tiles"][1]["files"]
     assert "tiles_mask.<UDIM>.png" in result.manifest["maps"]["textures"]["files"]
     # Each tile is a 64 x 64 EXR whose mask holds the cracks crossing it.
@@ -199,6 +199,35 @@ def test_packed_uv_puts_each_tile_in_its_cell():
     expect = np.repeat([[0, 0], [1, 0], [0, 1], [1, 1]], len(mesh.uv) // 4, axis=0)
     np.testing.assert_array_equal(cells, expect)
     assert udim_name("a_mask.png", 1012) == "a_mask.1012.png"
+
+
+def test_the_packed_page_leaves_no_row_empty():
+    from types import SimpleNamespace
+
+    from crackbake.bake.udim import UdimMaps, grid_size, packed_maps
+
+    assert [grid_size(n) for n in (1, 2, 3, 5, 10)] == [(1, 1), (2, 1), (2, 2), (3, 2), (4, 3)]
+    res = 16
+
+    def page(value):
+        normal = np.zeros((res, res, 3), np.float32)
+        normal[..., 0] = value  # unnormalised on purpose: a halving renormalises
+        normal[..., 2] = 1.0
+        return SimpleNamespace(res=res, mask=np.full((res, res), value, np.float16),
+                               normal=normal, occlusion=np.full((res, res), 1 - value,
+                                                                np.float16), look=None)
+
+    two = packed_maps(UdimMaps(np.array([[0, 0], [1, 0]]), [page(0.25), page(0.75)]), 32)
+    assert two.mask.shape == (16, 32) and two.res == 32
+    assert two.mask[:, :16].max() == 0.25 and two.mask[:, 16:].min() == 0.75
+    three = packed_maps(UdimMaps(np.array([[0, 0], [1, 0], [0, 1]]),
+                                 [page(0.25), page(0.5), page(0.75)]), 16)  # fmt: skip
+    # Halved into 8-texel cells; tile 3 in the top-left cell (v up), the top-right one empty.
+    assert three.mask.shape == (16, 16)
+    assert three.mask[8:, :8].max() == 0.25 and three.mask[8:, 8:].min() == 0.5
+    assert three.mask[:8, :8].min() == 0.75 and three.mask[:8, 8:].max() == 0
+    assert three.occlusion[:8, 8:].min() == 1 and (three.normal[:8, 8:] == [0, 0, 1]).all()
+    np.testing.assert_allclose(np.linalg.norm(three.normal, axis=-1), 1, rtol=1e-6)
 
 
 @pytest.mark.parametrize(("target", "warns"), [("unreal", False), ("unity", True)])

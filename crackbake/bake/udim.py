@@ -10,8 +10,8 @@ the tiles are pages of one atlas.  The distance clamp is the whole mesh's, the d
 files read the same way.
 
 glTF has no UDIM: :func:`packed_uv` and :func:`packed_maps` lay the tiles side by side on a
-square grid of ``k`` x ``k`` cells (``k = ceil(sqrt(T))``, tiles in UDIM order, row by row from
-the bottom), one page the GLB and the preview use.
+grid of ``ceil(sqrt(T))`` columns and as many rows as they fill (tiles in UDIM order, row by
+row from the bottom), one page of square texels the GLB and the preview use.
 """
 
 from __future__ import annotations
@@ -182,33 +182,36 @@ def tile_uvmesh(uvmesh, tile: np.ndarray):
                    udim=None)  # fmt: skip
 
 
-def grid_size(n_tiles: int) -> int:
-    """Cells per edge of the square grid the GLB packs ``n_tiles`` tiles on."""
-    return max(1, math.ceil(math.sqrt(n_tiles)))
+def grid_size(n_tiles: int) -> tuple[int, int]:
+    """(columns, rows) of the grid the GLB packs ``n_tiles`` tiles on: ``ceil(sqrt(T))``
+    columns and as many rows as they fill, so no row is left empty (2 tiles: 2 x 1)."""
+    cols = max(1, math.ceil(math.sqrt(n_tiles)))
+    return cols, max(1, math.ceil(n_tiles / cols))
 
 
 def packed_uv(uv: np.ndarray, faces: np.ndarray, tiles: np.ndarray) -> np.ndarray:
-    """The UVs remapped onto the packed page: tile ``i`` to cell ``(i % k, i // k)``.
+    """The UVs remapped onto the packed page: tile ``i`` to cell ``(i % cols, i // cols)``.
 
     Returns
     -------
     (V, 2) float64
-        In [0, 1]; vertices no face uses keep their UVs divided by ``k``.
+        In [0, 1]; vertices no face uses keep their UVs divided by the grid size.
     """
     uv = np.asarray(uv, np.float64)
-    k = grid_size(len(tiles))
+    cols, rows = grid_size(len(tiles))
     shift = np.zeros_like(uv)
     for i, own in enumerate(tile_faces(uv, faces, tiles)):
-        cell = np.array([i % k, i // k], np.float64)
+        cell = np.array([i % cols, i // cols], np.float64)
         verts = np.unique(np.asarray(faces)[own])
         shift[verts] = cell - np.asarray(tiles[i], np.float64)
-    return (uv + shift) / k
+    return (uv + shift) / np.array([cols, rows], np.float64)
 
 
 @dataclass(eq=False)
 class PackedPage:
-    """The tiles' mask, normal and occlusion side by side on one square page (what the GLB's
-    base colour, normal and ORM textures and the preview are made from)."""
+    """The tiles' mask, normal and occlusion side by side on one page, (rows x cell,
+    cols x cell) texels: what the GLB's base colour, normal and ORM textures and the preview
+    are made from.  ``res`` is its larger edge."""
 
     res: int
     mask: np.ndarray
@@ -218,29 +221,29 @@ class PackedPage:
 
 
 def packed_maps(maps: UdimMaps, max_size: int) -> PackedPage:
-    """The tiles box-filtered (by halvings) into cells of a page at most ``max(res, max_size)``
-    texels wide, laid out as :func:`packed_uv` lays out the UVs."""
+    """The tiles box-filtered (by halvings) into square cells of a page at most
+    ``max(res, max_size)`` texels wide, laid out as :func:`packed_uv` lays out the UVs."""
     from crackbake.exchange.materials import downsample
 
-    k = grid_size(len(maps.pages))
+    cols, rows = grid_size(len(maps.pages))
     cell = maps.res
-    while k * cell > max(maps.res, max_size) and cell % 2 == 0:
+    while cols * cell > max(maps.res, max_size) and cell % 2 == 0:
         cell //= 2
-    page = k * cell
+    shape = (rows * cell, cols * cell)
     first = maps.pages[0]
     mask_dtype = first.mask.dtype if cell == maps.res else np.float32
-    mask = np.zeros((page, page), mask_dtype)
+    mask = np.zeros(shape, mask_dtype)
     normal = None
     if first.normal is not None:
-        normal = np.zeros((page, page, 3), np.float32)
+        normal = np.zeros((*shape, 3), np.float32)
         normal[..., 2] = 1.0
     occ = None
     if first.occlusion is not None:
-        occ = np.ones((page, page), first.occlusion.dtype if cell == maps.res else np.float32)
+        occ = np.ones(shape, first.occlusion.dtype if cell == maps.res else np.float32)
     for i, p in enumerate(maps.pages):
-        col, row = i % k, i // k
-        # Image rows run from the top (v = 1): cell row 0 (v 0..1/k) is the page's last band.
-        r0, c0 = (k - 1 - row) * cell, col * cell
+        col, row = i % cols, i // cols
+        # Image rows run from the top (v = 1): cell row 0 (v 0..1/rows) is the last band.
+        r0, c0 = (rows - 1 - row) * cell, col * cell
         mask[r0:r0 + cell, c0:c0 + cell] = downsample(p.mask, cell)
         if normal is not None:
             n = downsample(p.normal, cell)
@@ -249,7 +252,7 @@ def packed_maps(maps: UdimMaps, max_size: int) -> PackedPage:
             normal[r0:r0 + cell, c0:c0 + cell] = n
         if occ is not None:
             occ[r0:r0 + cell, c0:c0 + cell] = downsample(p.occlusion, cell)
-    return PackedPage(res=page, mask=mask, normal=normal, occlusion=occ, look=first.look)
+    return PackedPage(res=max(shape), mask=mask, normal=normal, occlusion=occ, look=first.look)
 
 
 def udim_name(name: str, number: int | str) -> str:

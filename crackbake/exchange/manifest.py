@@ -121,7 +121,7 @@ def build_manifest(
 
 def udim_entry(maps, stem: str, files: list[dict]) -> dict:
     """The manifest's ``uv.udim``: the tiles (UDIM number, integer (u, v) corner, coverage,
-    files), the per-tile resolution and the GLB's packing grid."""
+    files), the per-tile resolution and the GLB's packing grid (columns, rows)."""
     from crackbake.bake.udim import grid_size
 
     names = [f["name"] for f in files]
@@ -139,7 +139,7 @@ def udim_entry(maps, stem: str, files: list[dict]) -> dict:
         "tiles": tiles,
         "resolution_per_tile": int(maps.res),
         "pattern": f"{stem}_<map>.<UDIM>.<ext>",
-        "glb_grid": grid_size(len(tiles)),
+        "glb_grid": list(grid_size(len(tiles))),  # columns, rows
     }
 
 
