@@ -220,6 +220,8 @@ def test_the_packed_page_leaves_no_row_empty():
     two = packed_maps(UdimMaps(np.array([[0, 0], [1, 0]]), [page(0.25), page(0.75)]), 32)
     assert two.mask.shape == (16, 32) and two.res == 32
     assert two.mask[:, :16].max() == 0.25 and two.mask[:, 16:].min() == 0.75
+    assert packed_maps(UdimMaps(np.array([[0, 0], [1, 0]]), [page(0.25), page(0.75)]),
+                       16).mask.shape == (8, 16)  # at most 16 wide: 8-texel cells
     three = packed_maps(UdimMaps(np.array([[0, 0], [1, 0], [0, 1]]),
                                  [page(0.25), page(0.5), page(0.75)]), 16)  # fmt: skip
     # Halved into 8-texel cells; tile 3 in the top-left cell (v up), the top-right one empty.

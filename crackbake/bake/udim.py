@@ -221,13 +221,13 @@ class PackedPage:
 
 
 def packed_maps(maps: UdimMaps, max_size: int) -> PackedPage:
-    """The tiles box-filtered (by halvings) into square cells of a page at most
-    ``max(res, max_size)`` texels wide, laid out as :func:`packed_uv` lays out the UVs."""
+    """The tiles box-filtered (by halvings) into square cells of a page at most ``max_size``
+    texels wide (the GLB's texture limit), laid out as :func:`packed_uv` lays out the UVs."""
     from crackbake.exchange.materials import downsample
 
     cols, rows = grid_size(len(maps.pages))
     cell = maps.res
-    while cols * cell > max(maps.res, max_size) and cell % 2 == 0:
+    while cols * cell > max_size and cell % 2 == 0:
         cell //= 2
     shape = (rows * cell, cols * cell)
     first = maps.pages[0]
