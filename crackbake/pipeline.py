@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from crackbake.errors import CrackbakeWarning
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
@@ -144,7 +146,11 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     timings["load"] = time.perf_counter() - t
     check_scale(mesh)  # before any work: the float32 bake cannot resolve extreme scales
     # Before the heavy stages: a run that cannot fit is refused now, not killed at 20 GB.
-    check_memory(estimate_peak(**run_sizes(params.resolved()[0], mesh)), params.max_memory)
+    sizes = run_sizes(params.resolved()[0], mesh)
+    tiles = _udim_pages(mesh, params)
+    if tiles > 1:  # every tile's maps are held until the write: T pages of res^2
+        sizes["res"] = int(np.ceil(params.res * np.sqrt(tiles)))
+    check_memory(estimate_peak(**sizes), params.max_memory)
 
     solver_stats: dict = {}
     solved = None
@@ -206,6 +212,19 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     )
 
 
+def _udim_pages(mesh: Mesh, params: RunParams) -> int:
+    """How many UDIM tiles the run will bake (1 when the UVs are not a UDIM layout), before
+    the UV stage: the memory estimate counts a page per tile."""
+    if mesh.uv is None or params.uv == "unwrap":
+        return 1
+    from crackbake.bake.uv.check import is_udim, udim_tiles
+
+    corners = np.asarray(mesh.uv, np.float64)[mesh.faces]
+    if not np.isfinite(corners).all() or not is_udim(corners, np.asarray(mesh.faces)):
+        return 1
+    return len(np.unique(udim_tiles(corners), axis=0))
+
+
 def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMesh:
     """The UV stage, timed as ``unwrap``."""
     from crackbake.bake.tangents import with_tangents
@@ -241,6 +260,17 @@ def _bake(
     t = time.perf_counter()
     # The faces plus the copies of faces straying past the page, wrapped where engines show them.
     arrays = bake_arrays(uvmesh)
+    if uvmesh.udim is not None:  # one page per UDIM tile, the whole network on each
+        from crackbake.bake.udim import bake_udim
+
+        maps = bake_udim(
+            arrays, uvmesh.udim, segments(network), params.res,
+            max_distance=params.max_distance, profile_shape=params.profile,
+            min_px=params.min_px, dilate_px=params.dilate, tile=params.tile, ctx=ctx,
+            look=params.crack_look(), seed=params.seed,
+        )  # fmt: skip
+        timings["bake"] = time.perf_counter() - t
+        return maps
     maps = bake_cracks(
         arrays["vertices"],
         arrays["faces"],
@@ -290,6 +320,16 @@ def _bake_stress(
     res = params.stress_res or min(params.res, STRESS_RES_DEFAULT)
     logger.info("baking the stress field %dx%d", res, res, extra={"stage": "stress_bake"})
     t = time.perf_counter()
+    if uvmesh.udim is not None:  # a page per tile, the tile moved onto the 0-1 page
+        from crackbake.bake.udim import tile_uvmesh
+
+        pages = [
+            bake_stress(tile_uvmesh(uvmesh, tile), solved.result, res, tangents=uvmesh.tangents,
+                        initial=solved.sim, dilate_px=params.dilate, tile=params.tile, ctx=ctx)
+            for tile in uvmesh.udim
+        ]  # fmt: skip
+        timings["stress_bake"] = time.perf_counter() - t
+        return pages
     stress = bake_stress(
         uvmesh,
         solved.result,

@@ -97,11 +97,12 @@ def _udim_mesh() -> Mesh:
     return make_mesh(vertices, faces, uvs, source="udim.obj")
 
 
-def test_udim_detected_and_refused_in_keep_mode():
+def test_udim_detected_and_kept_in_keep_mode():
     check = U.check_uvs(_udim_mesh())
-    assert check.udim and not check.usable and "UDIM" in check.reason
-    with pytest.raises(CrackbakeError, match="UDIM tiles are not supported yet"):
-        U.prepare_uvs(_udim_mesh(), mode="keep")
+    assert check.udim and check.usable and check.reason == ""
+    np.testing.assert_array_equal(check.tiles, [[0, 0], [1, 0]])
+    out = U.prepare_uvs(_udim_mesh(), mode="keep")  # tests/test_udim.py bakes such layouts
+    np.testing.assert_array_equal(out.udim, [[0, 0], [1, 0]])
 
 
 # ------------------------------------------------------------------------------ prepare_uvs

@@ -65,6 +65,9 @@ class CrackMaps:
     look : crackbake.looks.Look or None
         The look the maps were baked with and the written material composites with (None:
         the default look).
+    scales : dict or None
+        The data map's ``width`` and ``depth`` divisors when they are shared with other pages
+        (the tiles of a UDIM set, :mod:`crackbake.bake.udim`); None: this page's own maxima.
     """
 
     res: int
@@ -82,6 +85,7 @@ class CrackMaps:
     min_px: float = 0.0
     timings: dict[str, float] = field(default_factory=dict)
     look: object = None
+    scales: dict | None = None
 
     def channels(self) -> dict[str, np.ndarray]:
         """Role -> image for the maps that were baked (``normal``/``occlusion`` only with

@@ -515,9 +515,11 @@ def _report(result, verbose: bool) -> None:
     lo, hi = m["mesh"]["bbox_min"], m["mesh"]["bbox_max"]
     bbox = " x ".join(f"{b - a:.4g}" for a, b in zip(lo, hi, strict=True))
     uv_found = "found" if m["mesh"]["has_uv"] else "none in the file"
+    udim = m["uv"].get("udim")
+    tiles = f" on {len(udim['tiles'])} UDIM tiles" if udim else ""
     err(
         f"mesh: {m['mesh']['vertices']} vertices, {m['mesh']['faces']} faces, "
-        f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}, "
+        f"bbox {bbox}; UVs {uv_found}, {m['uv']['method']}{tiles}, "
         f"{m['uv']['coverage']:.0%} of the texture used; "
         f"cracks: {m['cracks']['cracks']} ({m['cracks']['points']} points)"
     )

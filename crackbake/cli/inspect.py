@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -13,7 +14,7 @@ from crackbake.errors import CrackbakeError
 
 
 @click.command(cls=Command, context_settings={"help_option_names": ["-h", "--help"]})
-@click.argument("exr", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("exr", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "--png",
     "png_dir",
@@ -22,7 +23,11 @@ from crackbake.errors import CrackbakeError
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the table as JSON on stdout.")
 def inspect(exr: Path, png_dir: Path | None, as_json: bool) -> None:
-    """Describe the channels of EXR: layer, channel, type, min/max/mean, non-zero, units."""
+    """Describe the channels of EXR: layer, channel, type, min/max/mean, non-zero, units.
+
+    A UDIM set reads as one: name.<UDIM>.exr (quote it in a shell) gives one row per channel
+    over every tile and, with --png, the pictures of each tile (prefixed with its number).
+    """
     try:  # warnings as one line each, a CrackbakeError as one line and its exit code
         info, files = reported(lambda: _inspect(exr, png_dir), quiet=False)
     except Exception as exc:  # a bug: one line, like the bake command
@@ -43,9 +48,17 @@ def _inspect(exr: Path, png_dir: Path | None):
     a ``manifest.json`` appear at once, a folder of the user's own files is refused, symlinks
     are never written through, and an interrupt leaves the folder as it was.
     """
-    from crackbake.exchange.inspect import inspect_exr, write_pictures
+    from crackbake.exchange.inspect import UDIM_TOKEN, inspect_exr, inspect_udim, write_pictures
 
-    info, channels = inspect_exr(exr)
+    if UDIM_TOKEN in exr.name:
+        info, per_tile = inspect_udim(exr)
+    else:
+        if not exr.is_file():
+            raise CrackbakeError(
+                f"EXR '{exr}' does not exist; check the path (a UDIM set is name.<UDIM>.exr)"
+            )
+        info, channels = inspect_exr(exr)
+        per_tile = None
     if png_dir is None:
         return info, []
     from crackbake import __version__
@@ -53,7 +66,13 @@ def _inspect(exr: Path, png_dir: Path | None):
     from crackbake.transaction.stage import OutputStage
 
     def body() -> list[Path]:
-        written = write_pictures(info, channels, stage.staging_dir)
+        if per_tile is None:
+            written = write_pictures(info, channels, stage.staging_dir)
+        else:
+            written = []
+            for number, chans in per_tile.items():
+                tile_info = replace(info, path=str(exr).replace("<UDIM>", str(number)))
+                written += write_pictures(tile_info, chans, stage.staging_dir, prefix=f"{number}_")
         manifest = {
             "crackbake": __version__,
             "kind": "inspect",

@@ -9,6 +9,7 @@ bytes the glTF/Godot profile writes as files.
 from __future__ import annotations
 
 import os
+import warnings
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -20,6 +21,7 @@ from crackbake.bake.preview import preview_camera, render_preview, up_vector
 from crackbake.bake.raster import CrackMaps
 from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
+from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.exr import write_exr
 from crackbake.exchange.frames import submit_frames
 from crackbake.exchange.glb import write_glb
@@ -189,6 +191,9 @@ def _exr_threads(n: int | None):
 
 
 def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective) -> None:
+    if getattr(uvmesh, "udim", None) is not None:
+        _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
+        return
     formats = params.formats
     texture = None
     exr = {"compression": params.exr_compression, "run": run_attributes(__version__, effective)}
@@ -386,3 +391,114 @@ def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx, up=None) ->
         ctx=ctx,
     )
     write_bytes(stage.path("preview.png"), png_bytes(picture, level=6, srgb=True))
+
+
+class _TileStage:
+    """A stage whose file names get one tile's ``.<UDIM>`` before their extension."""
+
+    def __init__(self, stage, number: int):
+        self.stage, self.number = stage, number
+
+    def path(self, name: str):
+        from crackbake.bake.udim import udim_name
+
+        return self.stage.path(udim_name(name, self.number))
+
+
+def _udim_textures(textures: UsdTextures) -> UsdTextures:
+    """The USD material's files as UDIM sets: ``<name>.<UDIM>.png``."""
+    from dataclasses import replace
+
+    from crackbake.bake.udim import udim_name
+
+    def tag(name: str) -> str:
+        return udim_name(name, "<UDIM>")
+
+    return replace(
+        textures, base_color=tag(textures.base_color), normal=tag(textures.normal),
+        occlusion=(tag(textures.occlusion[0]), textures.occlusion[1]),
+        roughness=(tag(textures.roughness[0]), textures.roughness[1]), data=tag(textures.data),
+    )  # fmt: skip
+
+
+def _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective) -> None:
+    """A UDIM set (:mod:`crackbake.bake.udim`): every map per tile, ``<name>.<UDIM>.<ext>``; the
+    GLB and the preview on the tiles packed into one page, UVs remapped (glTF has no UDIM)."""
+    from dataclasses import replace
+
+    from crackbake.bake.udim import packed_maps, packed_uv, udim_name
+    from crackbake.exchange.targets import warn_udim_target
+
+    formats = params.formats
+    exr = {"compression": params.exr_compression, "run": run_attributes(__version__, effective)}
+    if "png" in formats:
+        warn_udim_target(params.target)
+    colour = {"png", "glb", "preview", "usd"} & set(formats)
+    if colour and mesh.source and base_color_texture(mesh.source, 16,
+                                                     params.allow_outside_textures) is not None:
+        warnings.warn(
+            "the asset's base-colour texture is not composited under the cracks on UDIM tiles "
+            "(the base colour is grey with the cracks); composite the <stem>_mask.<UDIM>.png or "
+            "_data maps over your own tiles, or --uv unwrap for one page with the texture",
+            CrackbakeWarning,
+            stacklevel=4,
+        )
+    if "usdz" in formats:
+        warnings.warn(
+            "--formats usdz: AR Quick Look (ARKit) reads no UDIM textures, so no .usdz is "
+            "written for UDIM tiles; use the .usda (--formats usd, <UDIM> textures), the GLB, "
+            "or --uv unwrap for one page",
+            CrackbakeWarning,
+            stacklevel=4,
+        )
+    with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
+        jobs: list[Future] = []
+        encoded: dict = {}
+        try:
+            for k, (number, page) in enumerate(zip(maps.numbers, maps.pages, strict=True)):
+                if "exr" in formats:
+                    path = stage.path(f"{stem}_cracks.{number}.exr")
+                    jobs.append(pool.submit(_write_exr, path, page, params.float32, **exr))
+                if stress is not None and "stress" in formats:
+                    path = stage.path(f"{stem}_stress.{number}.exr")
+                    jobs.append(pool.submit(_write_stress_exr, path, stress[k], **exr))
+                enc = _Encoder(pool, page, None)
+                if "png" in formats:
+                    normal_y = normal_convention(params.target, params.normal_y)
+                    for f in TARGETS[params.target].files:
+                        ny = normal_y if f.content == "normal" else "gl"
+                        name = udim_name(f.name.format(stem=stem), number)
+                        enc.want((f.content, f.bits, ny, page.res), stage.path(name))
+                if "usd" in formats:  # the same names on every tile: one <UDIM> set each
+                    usd_textures = _usd_textures(enc, _TileStage(stage, number), stem, params,
+                                                 page)  # fmt: skip
+                jobs.extend(enc.start(set()).values())
+                frames = submit_frames(pool, lambda n, u=number: stage.path(udim_name(n, u)),
+                                       stem, page, params.frames)  # fmt: skip
+                jobs.extend(frames)
+            packed = None
+            if {"glb", "preview"} & set(formats):
+                packed = packed_maps(maps, GLB_TEXTURE_MAX)
+                flat = replace(uvmesh, uv=packed_uv(uvmesh.uv, uvmesh.faces, uvmesh.udim),
+                               udim=None)  # fmt: skip
+            if "glb" in formats:
+                enc = _Encoder(pool, packed, None)
+                size = min(packed.res, GLB_TEXTURE_MAX)
+                glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal",
+                                                                       "orm")}
+                encoded = enc.start(set(glb_keys.values()))
+                jobs.extend(encoded.values())
+            if "preview" in formats:
+                _write_preview(stage, mesh, flat, network, packed, None, ctx, params.up)
+            write_sidecar(network, stage.path("cracks.json"))
+            write_obj(network, stage.path("cracks.obj"))
+            if "glb" in formats:
+                _write_glb(stage.path(f"{stem}.glb"), stem, flat, packed, encoded, glb_keys)
+            if "usd" in formats:
+                write_usd(stage.path(f"{stem}.usda"), stem, uvmesh, _udim_textures(usd_textures),
+                          up_vector(params.up, mesh), doc=f"crackbake {__version__}: {stem}")
+        finally:
+            for job in jobs:
+                job.exception()
+        for job in jobs:
+            job.result()

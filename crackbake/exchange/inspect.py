@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -49,6 +50,8 @@ class Inspection:
     compression: str
     attributes: dict[str, str]
     channels: list[ChannelStats]
+    #: UDIM numbers of the tiles described (a UDIM set), None for a single file.
+    tiles: list[int] | None = None
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2)
@@ -107,6 +110,81 @@ def inspect_exr(path: str | os.PathLike) -> tuple[Inspection, dict[str, np.ndarr
     return info, channels
 
 
+#: ``<name>.<UDIM>.exr``: the token a UDIM set is named with.
+UDIM_TOKEN = "<UDIM>"
+_TILE = re.compile(r"^(?P<pre>.*)\.(?P<n>1\d{3})\.exr$", re.IGNORECASE)
+
+
+def udim_files(path: str | os.PathLike) -> dict[int, Path]:
+    """The tiles of a UDIM set ``<name>.<UDIM>.exr``: UDIM number -> file, ascending.
+
+    Raises
+    ------
+    CrackbakeError
+        No tile of the set exists.
+    """
+    from crackbake.errors import CrackbakeError
+
+    path = Path(path)
+    pre, _, post = path.name.partition(UDIM_TOKEN)
+    found = {}
+    folder = path.parent
+    if folder.is_dir():
+        for f in folder.iterdir():
+            m = _TILE.match(f.name)
+            if m and f.name.startswith(pre) and f.name.endswith(post) and len(f.name) == len(
+                pre) + 4 + len(post) and 1001 <= int(m["n"]) <= 1999:  # fmt: skip
+                found[int(m["n"])] = f
+    if not found:
+        raise CrackbakeError(
+            f"no tile of the UDIM set '{path}' found (files {pre}1001{post}, {pre}1002{post}, "
+            "...); check the folder and the name"
+        )
+    return dict(sorted(found.items()))
+
+
+def inspect_udim(path: str | os.PathLike) -> tuple[Inspection, dict[int, dict]]:
+    """Inspect every tile of a UDIM set ``<name>.<UDIM>.exr``: one row per channel over all
+    tiles (min, max and non-finite over every texel, mean and non-zero share averaged over the
+    tiles, which are the same size); the channels of each tile by UDIM number.
+
+    Raises
+    ------
+    CrackbakeError
+        No tile found, a tile unreadable, or tiles of different sizes or channels.
+    """
+    from crackbake.errors import CrackbakeError
+
+    tiles = udim_files(path)
+    parts = {n: inspect_exr(f) for n, f in tiles.items()}
+    first_n = next(iter(parts))
+    first, _ = parts[first_n]
+    for n, (info, _) in parts.items():
+        if (info.width, info.height) != (first.width, first.height) or [
+            c.name for c in info.channels] != [c.name for c in first.channels]:  # fmt: skip
+            raise CrackbakeError(
+                f"UDIM tile {tiles[n]} is {info.width}x{info.height} with "
+                f"{len(info.channels)} channels but tile {tiles[first_n]} is "
+                f"{first.width}x{first.height} with {len(first.channels)}; a set's tiles must "
+                "match (rebake them together)"
+            )
+    rows = []
+    for k, c in enumerate(first.channels):
+        cs = [parts[n][0].channels[k] for n in parts]
+        lo = [x.min for x in cs if x.min is not None]
+        hi = [x.max for x in cs if x.max is not None]
+        mean = [x.mean for x in cs if x.mean is not None]
+        rows.append(ChannelStats(
+            c.name, c.layer, c.channel, c.type, min(lo) if lo else None,
+            max(hi) if hi else None, float(np.mean(mean)) if mean else None,
+            float(np.mean([x.nonzero for x in cs])), sum(x.nonfinite for x in cs), c.units,
+            c.role,
+        ))  # fmt: skip
+    info = Inspection(os.fspath(path), first.width, first.height, first.compression,
+                      first.attributes, rows, tiles=list(parts))  # fmt: skip
+    return info, {n: ch for n, (_, ch) in parts.items()}
+
+
 def _num(v: float | None) -> str:
     return "-" if v is None else f"{v:.6g}"
 
@@ -117,6 +195,12 @@ def format_table(info: Inspection) -> str:
         f"{info.path}: {info.width}x{info.height}, {len(info.channels)} channels, "
         f"{info.compression or 'unknown'} compression"
     )
+    if info.tiles:
+        head = (
+            f"{info.path}: UDIM set of {len(info.tiles)} tiles "
+            f"({', '.join(str(n) for n in info.tiles)}), each {info.width}x{info.height}, "
+            f"{len(info.channels)} channels, {info.compression or 'unknown'} compression"
+        )
     cols = ("layer", "channel", "type", "min", "max", "mean", "non-zero", "units")
     rows = [
         (
@@ -267,9 +351,13 @@ def _overlay(rgb: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
 
 def _sibling_mask(path: Path) -> np.ndarray | None:
     """The crack mask of ``<stem>_cracks.exr`` beside ``<stem>_stress.exr``, if there is one."""
-    if not path.stem.endswith("_stress"):
+    stem, tile = path.stem, ""
+    m = re.match(r"^(.*)(\.1\d{3})$", stem)
+    if m:  # a UDIM tile: <stem>_stress.1001.exr beside <stem>_cracks.1001.exr
+        stem, tile = m[1], m[2]
+    if not stem.endswith("_stress"):
         return None
-    other = path.with_name(path.stem.removesuffix("_stress") + "_cracks.exr")
+    other = path.with_name(stem.removesuffix("_stress") + "_cracks" + tile + ".exr")
     if not other.is_file():
         return None
     try:
@@ -280,7 +368,8 @@ def _sibling_mask(path: Path) -> np.ndarray | None:
 
 
 def write_pictures(
-    info: Inspection, channels: dict[str, np.ndarray], out_dir: str | os.PathLike
+    info: Inspection, channels: dict[str, np.ndarray], out_dir: str | os.PathLike,
+    prefix: str = "",
 ) -> list[Path]:
     """False-colour PNGs of every layer into ``out_dir`` (created); the files written.
 
@@ -290,7 +379,8 @@ def write_pictures(
     ``<field>.dir`` beside it, ``<field>_p1_dir.png`` adds the principal directions as strokes.
     The crack mask (``crack.mask.V`` of this file or of ``<stem>_cracks.exr`` beside a
     ``<stem>_stress.exr``) is drawn in black over the pictures of every layer outside
-    ``crack.*`` (the crack maps themselves stay readable).
+    ``crack.*`` (the crack maps themselves stay readable).  ``prefix`` starts every file name
+    (a UDIM tile's number).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -311,7 +401,7 @@ def write_pictures(
     written = []
 
     def save(stem: str, rgb: np.ndarray, overlay: bool = True) -> None:
-        path = out / (stem.replace(".", "_") + ".png")
+        path = out / (prefix + stem.replace(".", "_") + ".png")
         rgb8 = quantise(_overlay(rgb, mask if overlay else None), 8)
         write_bytes(path, png_bytes(rgb8, srgb=True))
         written.append(path)

@@ -79,7 +79,10 @@ def build_manifest(
     timings : dict of str to float
         Seconds per stage, wall clock (rounded to 0.1 ms here).
     """
-    return {
+    udim = getattr(maps, "pages", None) is not None
+    coverage = maps.coverage() if udim else float(maps.inside.mean())
+    depth_max = max(float(p.depth.max()) for p in maps.pages) if udim else float(maps.depth.max())
+    manifest = {
         "crackbake": __version__,
         "inputs": inputs(params),
         "params": effective,
@@ -88,7 +91,7 @@ def build_manifest(
             "method": uvmesh.method,
             # Share of the texture inside islands: the bake's footprint (texel centres on a
             # face), so overlapping kept islands count once.
-            "coverage": round(float(maps.inside.mean()), 4),
+            "coverage": round(coverage, 4),
             "vertices": int(len(uvmesh.vertices)),
             "overlap_fraction": float(uvmesh.overlap_fraction),
             "padding_px": int(uvmesh.padding_px),
@@ -96,9 +99,9 @@ def build_manifest(
         "cracks": network.stats(),
         "maps": {
             "resolution": params.res,
-            "depth_png_scale": float(maps.depth.max()),
+            "depth_png_scale": depth_max,
             "max_distance": maps.max_distance,
-            "covered_fraction": float(maps.inside.mean()),
+            "covered_fraction": coverage,
             "exr_channels": {
                 name: ("half" if layer.half and not params.float32 else "float")
                 for role in maps.channels()
@@ -111,6 +114,34 @@ def build_manifest(
         "files": files,
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     }
+    if udim:
+        manifest["uv"]["udim"] = udim_entry(maps, Path(params.mesh).stem, files)
+    return manifest
+
+
+def udim_entry(maps, stem: str, files: list[dict]) -> dict:
+    """The manifest's ``uv.udim``: the tiles (UDIM number, integer (u, v) corner, coverage,
+    files), the per-tile resolution and the GLB's packing grid (columns, rows)."""
+    from crackbake.bake.udim import grid_size
+
+    names = [f["name"] for f in files]
+    tiles = []
+    for number, tile, page in zip(maps.numbers, maps.tiles, maps.pages, strict=True):
+        tag = f".{number}."
+        tiles.append({
+            "udim": number,
+            "u": int(tile[0]),
+            "v": int(tile[1]),
+            "coverage": round(float(page.inside.mean()), 4),
+            "files": [n for n in names if tag in n],
+        })  # fmt: skip
+    return {
+        "tiles": tiles,
+        "resolution_per_tile": int(maps.res),
+        "pattern": f"{stem}_<map>.<UDIM>.<ext>",
+        "glb_grid": list(grid_size(len(tiles))),  # columns, rows
+    }
+
 
 
 def write_manifest(path: str | Path, manifest: dict) -> None:

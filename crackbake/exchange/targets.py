@@ -19,10 +19,12 @@ file is flat (0.5, 0.5, 1) and the occlusion is 1 (open).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
+from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.materials import ROUGHNESS_CRACK, ROUGHNESS_SURFACE, half_lut
 from crackbake.exchange.packing import (
     SRC_A,
@@ -105,6 +107,25 @@ TARGETS: dict[str, Target] = {
 assert tuple(TARGETS) == TARGET_NAMES  # params.TARGETS validates --target; keep them one list
 
 
+#: Targets whose engine reads a UDIM set (``<name>.<UDIM>.png``) as one texture: Unreal Engine
+#: 5 (virtual texturing imports the ``.1001`` sequence as one UDIM texture) and Blender (tiled
+#: images, ``<UDIM>`` in the path).  Unity, Godot and glTF 2.0 have no UDIM textures.
+UDIM_TARGETS = ("unreal", "blender")
+
+
+def warn_udim_target(target: str) -> None:
+    """One warning when ``target``'s engine cannot read the UDIM set the PNGs are written as."""
+    if target in UDIM_TARGETS:
+        return
+    warnings.warn(
+        f"--target {target}: {TARGETS[target].engine} read no UDIM sets, so the maps written "
+        "per tile (<name>.<UDIM>.png) need a material per tile there; use the GLB (its tiles "
+        "packed into one page), --target unreal or blender, or --uv unwrap for one page",
+        CrackbakeWarning,
+        stacklevel=4,
+    )
+
+
 def normal_convention(target: str, normal_y: str | None = None) -> str:
     """``gl`` or ``dx``: ``normal_y`` when given, else the target's own."""
     y = normal_y or TARGETS[target].normal_y
@@ -113,7 +134,11 @@ def normal_convention(target: str, normal_y: str | None = None) -> str:
 
 
 def data_scales(maps) -> dict[str, float]:
-    """Divisors of the data map's G (width) and B (depth) channels, mesh units (1 when 0)."""
+    """Divisors of the data map's G (width) and B (depth) channels, mesh units (1 when 0);
+    the ones the maps share with other pages (``maps.scales``, a UDIM set's tiles) when set."""
+    shared = getattr(maps, "scales", None)
+    if shared is not None:
+        return dict(shared)
     width = maps.width
     if not width.size:
         w = 0.0
@@ -294,12 +319,21 @@ def _data_planes(maps, bits: int):
 def describe(target: str, normal_y: str | None, stem: str, maps) -> dict:
     """The manifest's ``textures`` entry: target, normal convention, files, data scales."""
     t = TARGETS[target]
-    return {
+    udim = getattr(maps, "pages", None) is not None
+
+    def named(f: MapFile) -> str:
+        name = f.name.format(stem=stem)
+        if udim:  # one file per tile: <name>.<UDIM>.png
+            stem_, _, ext = name.rpartition(".")
+            name = f"{stem_}.<UDIM>.{ext}"
+        return name
+
+    out = {
         "target": target,
         "engine": t.engine,
         "normal_y": normal_convention(target, normal_y),
         "files": {
-            f.name.format(stem=stem): {
+            named(f): {
                 "content": f.content, "bits": f.bits, "channels": CONTENTS[f.content],
                 "colorspace": "sRGB" if f.content == "base_color" else "linear",
             }
@@ -308,3 +342,6 @@ def describe(target: str, normal_y: str | None, stem: str, maps) -> dict:
         "data_scales": data_scales(maps),
         "normal_baked": maps.normal is not None,
     }
+    if udim:
+        out["engine_reads_udim"] = target in UDIM_TARGETS
+    return out

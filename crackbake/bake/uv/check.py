@@ -55,6 +55,8 @@ class UVCheck:
         face; their cracks do not show there.
     lost_faces : int
         Straying faces with at least one copy that could not be wrapped.
+    tiles : (T, 2) int64 or None
+        UDIM layouts only: the used tiles' integer (u, v) corners, in UDIM order (1001 first).
     """
 
     usable: bool
@@ -65,6 +67,7 @@ class UVCheck:
     wraps: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     lost_fraction: float = 0.0
     lost_faces: int = 0
+    tiles: np.ndarray | None = None
 
 
 def uv_area2(corners: np.ndarray) -> np.ndarray:
@@ -105,6 +108,68 @@ def is_udim(corners: np.ndarray, faces: np.ndarray | None = None) -> bool:
     return bool(((tu > 0) | (tv > 0)).any())
 
 
+def udim_problem(corners: np.ndarray, faces: np.ndarray) -> str | None:
+    """Why UVs spread over whole tiles are not a UDIM layout, or None when they do not look
+    like one (most of the area outside the 0-1 tile, most faces inside one tile).
+
+    Parameters
+    ----------
+    corners : (F, 3, 2) float
+        UV corners per face.
+    faces : (F, 3) int
+        The UV vertex indices of the corners.
+
+    Returns
+    -------
+    str or None
+        A short why: faces straddling two tiles, islands running across a tile edge, tiles at
+        negative ``u`` or ``v`` or at ``u >= 10`` (UDIM numbers none of them).
+    """
+    tile = np.floor(corners.mean(axis=1))
+    inside = (
+        (corners >= tile[:, None, :] - UV_TOLERANCE)
+        & (corners <= tile[:, None, :] + 1.0 + UV_TOLERANCE)
+    ).all(axis=(1, 2))
+    off_page = (tile != 0).any(axis=1)
+    # Tiles of their own: most faces inside one tile and a good share beyond the 0-1 tile.
+    if inside.mean() < 0.9 or off_page.mean() < 0.05:
+        return None
+    why = []
+    if (~inside).any():
+        why.append(f"{int((~inside).sum())} faces straddle two tiles")
+    else:
+        key = tile[:, 0] * 4096.0 + tile[:, 1]
+        per_corner = np.repeat(key, 3)
+        n = int(faces.max()) + 1
+        lo, hi = np.full(n, np.inf), np.full(n, -np.inf)
+        np.minimum.at(lo, faces.reshape(-1), per_corner)
+        np.maximum.at(hi, faces.reshape(-1), per_corner)
+        crossing = int(np.count_nonzero(hi > lo))
+        if crossing:
+            why.append(f"islands run across a tile edge ({crossing} UV vertices shared by "
+                       "faces of two tiles)")
+    negative = int(np.count_nonzero((tile < 0).any(axis=1)))
+    if negative:
+        why.append(f"{negative} faces lie on negative tiles (u or v < 0)")
+    beyond = int(np.count_nonzero(tile[:, 0] > 9))
+    if beyond:
+        why.append(f"{beyond} faces lie at u >= 10")
+    if not why:
+        return None
+    return "UVs look like UDIM tiles but " + ", ".join(why) + " (UDIM numbers tiles u 0-9, v >= 0)"
+
+
+def udim_tiles(corners: np.ndarray) -> np.ndarray:
+    """The integer (u, v) tile of each face, (F, 2) int64: the tile holding its UV centroid."""
+    return np.floor(np.asarray(corners, np.float64).mean(axis=1)).astype(np.int64)
+
+
+def udim_number(tiles: np.ndarray) -> np.ndarray:
+    """UDIM numbers ``1001 + u + 10 v`` of integer tiles (..., 2)."""
+    tiles = np.asarray(tiles, np.int64)
+    return 1001 + tiles[..., 0] + 10 * tiles[..., 1]
+
+
 def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
     """Decide whether the mesh's own UVs can be baked into, and how much they overlap.
 
@@ -136,8 +201,7 @@ def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
     outside_fraction = 0.0
     if (lo < -UV_TOLERANCE).any() or (hi > 1.0 + UV_TOLERANCE).any():
         if is_udim(corners, faces):
-            tiles = np.unique(np.floor(corners.mean(axis=1)), axis=0)
-            return UVCheck(False, f"UVs span {len(tiles)} UDIM tiles", True, None)
+            return _udim_check(uv, faces, corners, ctx)
         stray = ((corners < -UV_TOLERANCE) | (corners > 1.0 + UV_TOLERANCE)).any(axis=(1, 2))
         outside_fraction = float(stray.mean())
         outside = UVCheck(
@@ -147,7 +211,7 @@ def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
             None,
         )
         if (lo < -STRAY_MARGIN).any() or (hi > 1.0 + STRAY_MARGIN).any():
-            return outside
+            return _not_udim(outside, corners, faces)
     if not (uv_area2(corners) > DEGENERATE_AREA2).any():
         return UVCheck(False, "every face has zero UV area", False, None)
     wraps = np.zeros((0, 3), np.int64)
@@ -159,9 +223,35 @@ def check_uvs(mesh: Mesh, ctx=None) -> UVCheck:
         lost_fraction = lost / OVERLAP_RES**2
         lost_faces = len(np.unique(copies[~keep, 0]))
         if outside_fraction > STRAY_FACE_FRACTION and lost_fraction > STRAY_LOST_FRACTION:
-            return outside
+            return _not_udim(outside, corners, faces)
     overlap = uv_overlap_fraction(np.clip(uv, 0.0, 1.0), faces, OVERLAP_RES, ctx=ctx)
     return UVCheck(True, "", False, overlap, outside_fraction, wraps, lost_fraction, lost_faces)
+
+
+def _not_udim(outside: UVCheck, corners: np.ndarray, faces: np.ndarray) -> UVCheck:
+    """``outside``, or, for UVs that look like UDIM tiles, why they are not a UDIM layout."""
+    problem = udim_problem(corners, faces)
+    return outside if problem is None else UVCheck(False, problem, True, None)
+
+
+def _udim_check(uv: np.ndarray, faces: np.ndarray, corners: np.ndarray, ctx) -> UVCheck:
+    """A usable UDIM layout: its tiles and its overlap, measured tile by tile (each tile's
+    faces moved onto the 0-1 page): texels covered twice over texels covered, on all tiles."""
+    face_tile = udim_tiles(corners)
+    numbers = udim_number(face_tile)
+    used = np.unique(numbers)
+    tiles = np.stack([(used - 1001) % 10, (used - 1001) // 10], axis=1).astype(np.int64)
+    if not (uv_area2(corners) > DEGENERATE_AREA2).any():
+        return UVCheck(False, "every face has zero UV area", False, None)
+    twice = covered = 0
+    for number, tile in zip(used, tiles, strict=True):
+        own = np.flatnonzero(numbers == number)
+        local = np.clip(uv - tile, 0.0, 1.0)
+        t, c = uv_overlap_fraction(local, faces[own], OVERLAP_RES, ctx=ctx, texel_counts=True)
+        twice += t
+        covered += c
+    overlap = twice / covered if covered > 0 else 0.0
+    return UVCheck(True, "", True, overlap, tiles=tiles)
 
 
 def stray_copies(corners: np.ndarray) -> np.ndarray:

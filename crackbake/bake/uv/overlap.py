@@ -8,8 +8,8 @@ from crackbake.bake.context import GLScope, shader_source
 
 
 def uv_overlap_fraction(
-    uv: np.ndarray, faces: np.ndarray, res: int = 1024, ctx=None
-) -> float:
+    uv: np.ndarray, faces: np.ndarray, res: int = 1024, ctx=None, texel_counts: bool = False
+) -> float | tuple[int, int]:
     """Fraction of the covered UV area that more than one face covers.
 
     The UV triangles are rasterised with OpenGL (EGL) into a ``res`` x ``res`` R32F target with
@@ -27,12 +27,15 @@ def uv_overlap_fraction(
         Raster resolution, texels per side.
     ctx : moderngl.Context, optional
         The run's GL context; a temporary one is created (and released) when not given.
+    texel_counts : bool
+        Return the two texel counts instead of their ratio (pages measured apart, the tiles
+        of a UDIM layout, add up).
 
     Returns
     -------
-    float
+    float or (int, int)
         (#texels covered at least twice) / (#texels covered at least once); 0.0 when nothing is
-        covered.
+        covered.  With ``texel_counts``: the two counts.
 
     Raises
     ------
@@ -48,7 +51,7 @@ def uv_overlap_fraction(
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise ValueError(f"faces must have shape (F, 3), got {faces.shape}")
     if len(faces) == 0 or len(uv) == 0:
-        return 0.0
+        return 0.0 if not texel_counts else (0, 0)
     if faces.min() < 0 or faces.max() >= len(uv):
         raise ValueError("faces index vertices that uv does not have")
     res = int(res)
@@ -82,8 +85,9 @@ def uv_overlap_fraction(
     # Counts are small whole numbers in float32; compare at the half-way points.
     covered = int(np.count_nonzero(counts >= 0.5))
     if covered == 0:
-        return 0.0
-    return int(np.count_nonzero(counts >= 1.5)) / covered
+        return 0.0 if not texel_counts else (0, 0)
+    twice = int(np.count_nonzero(counts >= 1.5))
+    return (twice, covered) if texel_counts else twice / covered
 
 
 def _copy_vertices(uv: np.ndarray, faces: np.ndarray, copies: np.ndarray) -> np.ndarray:

@@ -58,6 +58,7 @@ def kept_uvmesh(mesh: Mesh, check: UVCheck, res: int = 2048) -> UVMesh:
         overlap_fraction=overlap,
         padding_px=0,
         wraps=np.asarray(check.wraps, np.int64),
+        udim=None if check.tiles is None else np.asarray(check.tiles, np.int64),
     )
 
 
@@ -98,6 +99,7 @@ def prepare_uvs(
     mode : {"auto", "keep", "unwrap"}
         ``"keep"`` uses the mesh's UVs (error when unusable), ``"unwrap"`` always runs xatlas,
         ``"auto"`` keeps usable UVs and unwraps otherwise (warning why when the mesh had UVs).
+        UVs on UDIM tiles are usable: the :class:`UVMesh` lists the tiles (``udim``).
     res : int
         Texture resolution an unwrap packs for, texels per side.
     padding : int, optional
@@ -135,13 +137,14 @@ def prepare_uvs(
     if mode == "keep":
         if check.udim:
             raise CrackbakeError(
-                f"{label}: UDIM tiles are not supported yet; move the UVs into the 0-1 tile "
+                f"{label}: cannot keep the UVs: {check.reason}; move each face inside one tile "
                 "or use --uv unwrap"
             )
         raise CrackbakeError(f"{label}: cannot keep the UVs: {check.reason}; use --uv unwrap")
     if mesh.uv is not None:
+        fix = "; move each face inside one tile to keep the layout" if check.udim else ""
         warnings.warn(
-            f"{label}: {check.reason}; unwrapping with xatlas instead",
+            f"{label}: {check.reason}; unwrapping with xatlas instead{fix}",
             CrackbakeWarning,
             stacklevel=2,
         )

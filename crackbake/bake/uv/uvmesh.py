@@ -48,6 +48,10 @@ class UVMesh:
         ``uv - (du, dv)`` where an engine sampling with REPEAT shows them
         (:func:`crackbake.bake.uv.check.check_uvs` chose those that overlap no other face).
         The GLB keeps the artist's UVs; only the bake draws the copies (:func:`bake_arrays`).
+    udim : (T, 2) int64 or None
+        Kept UVs on UDIM tiles only: the used tiles' integer (u, v) corners in UDIM order
+        (:mod:`crackbake.bake.udim` bakes one page per tile); ``uv`` then spans the tiles.
+        None for a single 0-1 page.
     """
 
     vertices: np.ndarray
@@ -60,6 +64,7 @@ class UVMesh:
     padding_px: int
     tangents: np.ndarray | None = None
     wraps: np.ndarray | None = None
+    udim: np.ndarray | None = None
 
 
 def bake_arrays(uvmesh: UVMesh) -> dict[str, np.ndarray | None]:
