@@ -421,3 +421,41 @@ def test_sigterm_stops_a_decal_bake_between_two_gl_calls(gl_ctx, monkeypatch):
     assert (whole.mask > 0.5).sum() > 500
     for name, img in whole.channels().items():
         np.testing.assert_array_equal(sliced.channels()[name], img, err_msg=name)
+
+
+def _four_pieces(thin_back: bool = False):
+    """Four unit squares as separate shells (no shared vertices) meeting at (1, 1, 0), z up;
+    ``thin_back`` adds a back-facing copy of the first square in the same plane."""
+    g = np.linspace(0.0, 1.0, 5)
+    xx, yy = np.meshgrid(g, g, indexing="ij")
+    pts = np.c_[xx.ravel(), yy.ravel(), np.zeros(xx.size)]
+    i = np.arange(4)[:, None] * 5 + np.arange(4)[None, :]
+    quads = np.stack([i, i + 5, i + 6, i + 1], -1).reshape(-1, 4)
+    tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    verts, faces = [], []
+    for k, (dx, dy) in enumerate([(0, 0), (1, 0), (0, 1), (1, 1)]):
+        verts.append(pts + [dx, dy, 0])
+        faces.append(tris + k * len(pts))
+    if thin_back:
+        verts.append(pts)
+        faces.append(tris[:, ::-1] + 4 * len(pts))
+    return np.concatenate(verts), np.concatenate(faces)
+
+
+def test_touching_coplanar_pieces_take_one_decal_box():
+    # Separate shells meeting in one plane under the impact (a tiled floor, panels) are one
+    # surface for the decal: no "another surface" warning, and a box of real depth (it was 0,
+    # and the projection matrix divided by it).
+    import warnings
+
+    v, f = _four_pieces()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        proj = make_projector(v, f, np.array([1.0, 1.0, 0.0]), 0.5)
+    assert proj.depth > 0.01 * 0.5
+    # A coincident back-facing sheet is another surface (an engine paints it too): said, and
+    # the box still has a depth.
+    v, f = _four_pieces(thin_back=True)
+    with pytest.warns(UserWarning, match=r"the decal at \(1, 1, 0\) cannot hold"):
+        proj = make_projector(v, f, np.array([1.0, 1.0, 0.0]), 0.5)
+    assert proj.depth > 0 and np.isfinite(proj.matrix).all()

@@ -139,30 +139,37 @@ def make_projector(
     n = (normals[near] * face_areas(vertices, faces)[near, None]).sum(0)
     if not np.linalg.norm(n) > 0:
         raise CrackbakeError(
-            f"the surface at the impact {tuple(np.round(p, 6))} has no normal (degenerate faces); "
+            f"the surface at the impact ({_xyz(p)}) has no normal (degenerate faces); "
             "move the impact onto a face with area"
         )
     axes = _frame(n)
     half, own = _surface_half_depth(vertices, faces, normals, axes, centre, size, hit)
     reach = half * 1.05 + DEPTH_MARGIN * size
-    other = _other_surface_depth(vertices, faces, own, axes, centre, size)
+    other = _other_surface_depth(vertices, faces, own, axes, centre, size, normals, half)
     if other < reach:
         # Another surface (the far side of a thin ear, a wall behind) lies inside the box an
         # engine projects through: stop the box between the two.
         reach = half + SECOND_SURFACE_SHARE * (other - half)
         if other <= half * 1.0001:
             warnings.warn(
-                f"the decal at {tuple(np.round(centre, 6))} cannot hold the surface under it "
+                f"the decal at ({_xyz(centre)}) cannot hold the surface under it "
                 f"(reaching {half:.4g} deep) without reaching another surface {other:.4g} "
                 "behind or in front of it, which engines will paint too; use a smaller --decal",
                 CrackbakeWarning,
                 stacklevel=2,
             )
-    depth = 2.0 * reach
+    # Never a box of no depth (a flat surface with a coincident back-facing sheet): engines
+    # divide by it.
+    depth = 2.0 * max(reach, DEPTH_MARGIN * 1e-3 * size)
     matrix = np.eye(4)
     matrix[:3, :3] = axes.T
     matrix[:3, 3] = centre
     return Projector(matrix=matrix, width=float(size), height=float(size), depth=float(depth))
+
+
+def _xyz(p) -> str:
+    """A point as a message writes it: ``0.5, 0.25, 0`` (numpy 2 would print np.float64(...))."""
+    return ", ".join(f"{float(x):.6g}" for x in p)
 
 
 def _surface_half_depth(vertices, faces, normals, axes, centre, size, hit) -> float:
@@ -188,13 +195,17 @@ def _surface_half_depth(vertices, faces, normals, axes, centre, size, hit) -> fl
     return float(np.abs(local[sub[own].ravel(), 2]).max()), idx[own]
 
 
-def _other_surface_depth(vertices, faces, own, axes, centre, size) -> float:
+def _other_surface_depth(vertices, faces, own, axes, centre, size, normals=None,
+                         own_depth: float = 0.0) -> float:
     """Nearest |local z| of any surface inside the footprint other than the decal's own
     (``own``: the faces :func:`_surface_half_depth` measured), mesh units; inf when none.
 
     The nearest hit along the projection per point of a 64 x 64 grid over the footprint (a
     depth pre-pass in the projector's view, both facings): a hit on a face outside ``own``
-    counts, as an engine would paint it if the box reached it.
+    counts, as an engine would paint it if the box reached it.  A face of another piece that
+    faces the projector and lies within the own surface's depth (``own_depth``; ``normals``
+    (M, 3) given) does not: it is a piece touching the surface (separate shells meeting in one
+    plane, a button on a coat), which the engine should paint with it.
     """
     local = (vertices - centre) @ axes.T
     half = 0.5 * size
@@ -202,6 +213,9 @@ def _other_surface_depth(vertices, faces, own, axes, centre, size) -> float:
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     inside = (lo[:, 0] <= half) & (hi[:, 0] >= -half) & (lo[:, 1] <= half) & (hi[:, 1] >= -half)
     inside[own] = False
+    if normals is not None:
+        tol = own_depth + 1e-6 * size
+        inside &= ~((normals @ axes[2] > 0) & (np.abs(tri[:, :, 2]).max(axis=1) <= tol))
     cand = np.flatnonzero(inside)
     if len(cand) == 0:
         return float("inf")
