@@ -583,3 +583,29 @@ def test_decals_on_ray_equal_the_local_library(tmp_path, local_ray):
     want = _library_hashes(tmp_path / "here")
     assert _library_hashes(tmp_path / "ray") == want and len(want) >= 5
 
+
+
+def test_an_unreachable_address_is_one_line_at_once(tmp_path):
+    """``--address HOST:PORT`` where nothing listens: one line naming the address and the fix,
+    exit 2, in seconds (Ray itself retries for minutes, printing a log line every few seconds),
+    and nothing written; the same for ``crackbake decals --address ray://...``."""
+    import socket
+    import subprocess
+    import sys
+
+    with socket.socket() as s:  # a port nothing listens on once closed
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    shutil.copy(SPOT, tmp_path / "spot.obj")
+    (tmp_path / "jobs.toml").write_text('[[job]]\nmesh = "spot.obj"\nres = 64\n')
+    for args in (["batch", "jobs.toml", "-o", "out", "--address", f"127.0.0.1:{port}"],
+                 ["decals", "--preset", "mud", "-n", "2", "--res", "64", "-o", "out",
+                  "--address", f"ray://127.0.0.1:{port}"]):
+        t = time.perf_counter()
+        r = subprocess.run([sys.executable, "-m", "crackbake", *args], cwd=tmp_path,
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2, r.stderr
+        assert time.perf_counter() - t < 60
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and f"127.0.0.1:{port}" in lines[0] and "ray start" in lines[0]
+        assert not (tmp_path / "out").exists()

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from crackbake.cli.common import CONTEXT, Command, err
+from crackbake.errors import CrackbakeError
 
 EPILOG = """\b
 Examples:
@@ -75,6 +76,9 @@ def batch(jobs: Path, out: Path, workers, cpus_per_job, address, retries, resume
                 resume=resume)
     try:
         records = run_batch(job_list, plan, report_for(sys.stderr, echo, quiet))
+    except CrackbakeError as exc:  # already one line naming the fix
+        err(f"error: {exc}")
+        sys.exit(2)
     except Exception as exc:  # Ray could not start or connect: one line
         text = " ".join(str(exc).split())[:300]
         err(f"error: cannot run the batch on Ray ({type(exc).__name__}: {text})")

@@ -101,6 +101,8 @@ def map_variants(params, variants: list, plan: Plan) -> list:
         ray, owned = _start_ray(plan)
     except ImportError:
         raise CrackbakeError("--address needs Ray: pip install 'crackbake[batch]'") from None
+    except CrackbakeError:
+        raise
     except Exception as exc:  # no cluster there
         text = " ".join(str(exc).split())[:200]
         raise CrackbakeError(f"cannot reach a Ray cluster at --address {plan.address} "
@@ -166,6 +168,32 @@ def _run_job(params, extra: dict) -> dict:
     return record
 
 
+#: Seconds to wait for a TCP answer at --address before refusing it: Ray itself retries an
+#: unreachable GCS for minutes, printing a log line every few seconds.
+REACH_TIMEOUT_S = 5.0
+
+
+def _reach(address: str) -> None:
+    """Refuse ``--address HOST:PORT`` (or ``ray://HOST:PORT``) at once when nothing accepts a
+    TCP connection there; ``auto`` and other forms are left to Ray."""
+    import socket
+
+    from crackbake.errors import CrackbakeError
+
+    hostport = address.split("://", 1)[1] if address.startswith("ray://") else address
+    host, sep, port = hostport.rstrip("/").rpartition(":")
+    if not sep or not port.isdigit() or not host:
+        return
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=REACH_TIMEOUT_S):
+            pass
+    except OSError as exc:
+        why = exc.strerror or type(exc).__name__
+        raise CrackbakeError(f"cannot reach a Ray cluster at --address {address} ({why}); start "
+                             "one there with ray start --head, check the host and port, or "
+                             "leave --address out") from None
+
+
 def _start_ray(plan: Plan):
     """Connect to ``plan.address`` or start a local Ray sized to this machine; returns ray and
     whether this process owns the instance (and must shut it down)."""
@@ -177,8 +205,17 @@ def _start_ray(plan: Plan):
     quiet = {"include_dashboard": False, "log_to_driver": False,
              "logging_level": logging.ERROR}
     if plan.address is not None:
-        ray.init(address=plan.address, **{k: v for k, v in quiet.items()
-                                          if k != "include_dashboard"})
+        _reach(plan.address)
+        try:
+            ray.init(address=plan.address, **{k: v for k, v in quiet.items()
+                                              if k != "include_dashboard"})
+        except Exception as exc:  # ConnectionError, a version mismatch, a refused client
+            from crackbake.errors import CrackbakeError
+
+            text = " ".join(str(exc).split())[:200]
+            raise CrackbakeError(f"cannot reach a Ray cluster at --address {plan.address} "
+                                 f"({type(exc).__name__}: {text}); start one with ray start "
+                                 "--head or leave --address out") from None
         return ray, False
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = min(plan.workers or cores, cores)
