@@ -93,7 +93,9 @@ def textured_spot(folder: Path) -> Path:
 
 def run(repo: Path, args: list[str], out: Path | None = None) -> dict:
     """One fresh process of ``python -m crackbake ARGS`` on ``repo``'s code: wall, CPU, stages."""
-    env = dict(os.environ, PYTHONPATH=str(repo))
+    # The tree first; what PYTHONPATH already holds after it (an extra site, say).
+    extra = os.environ.get("PYTHONPATH")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo), *([extra] if extra else [])]))
     if out is not None and out.exists():
         shutil.rmtree(out)
     t = time.perf_counter()

@@ -138,8 +138,10 @@ def test_zlib_ng_writes_the_bytes_stdlib_zlib_writes(monkeypatch, shape, dtype):
     img = _map_like(np.random.default_rng(sum(shape)), shape, dtype)
     assert pngenc._rle_zlib is not zlib  # the fast path is really taken
     fast = png_bytes(img)
+    assert png_bytes(img, level=6) == fast  # run lengths only: the level changes nothing
     monkeypatch.setattr(pngenc, "_rle_zlib", zlib)
     assert png_bytes(img) == fast
+    assert png_bytes(img, level=6) == fast
     # Decoded by stdlib zlib and the Up filter undone: the pixels round-trip (PIL would narrow
     # 16-bit RGBA to 8 bits).
     idat = fast[fast.index(b"IDAT") + 4 : fast.index(b"IEND") - 8]
