@@ -25,6 +25,13 @@ def main() -> None:
     if error:
         print(error, file=sys.stderr)
         raise SystemExit(2)
+    if sys.argv[1:] in (["--version"], ["-V"]):
+        # What click's version option prints, without importing click and the command's
+        # modules: a version check (scripts, the Blender add-on) costs the interpreter only.
+        from crackbake import __version__
+
+        print(f"crackbake, version {__version__}")
+        return
     from crackbake.cli import main as command
 
     command(prog_name="crackbake")

@@ -92,3 +92,63 @@ def test_a_run_refused_before_its_stages_imports_none_of_them(tmp_path):
     assert "file not found" in r.stderr, r.stderr
     code, _, loaded = r.stdout.strip().partition(" ")
     assert code == "2" and loaded == "", r.stdout
+
+
+# Runs the console entry with the arguments given and prints the libraries it imported.
+_ENTRY = """
+import sys
+from crackbake.entry import main
+try:
+    main()
+except SystemExit as exc:
+    assert exc.code in (None, 0), exc.code
+heavy = ("click", "numpy", "numba", "scipy", "trimesh", "moderngl", "OpenEXR",
+         "crackbake.cli.bake", "crackbake.io.mesh", "crackbake.pipeline")
+print(" ".join(sorted(h for h in heavy if h in sys.modules)), file=sys.stderr)
+"""
+
+
+def _entry_loads(*args: str) -> tuple[str, set[str]]:
+    r = subprocess.run([sys.executable, "-c", _ENTRY, *args], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    return r.stdout, set(r.stderr.split())
+
+
+def test_help_loads_the_options_but_no_numpy():
+    """``crackbake --help`` needs click and the options' defaults, not the arrays (numpy alone
+    is about 0.1 s of a 0.15 s budget, issue 25)."""
+    out, loaded = _entry_loads("--help")
+    assert "--impact" in out and "--res" in out  # the bake's options really were listed
+    assert loaded == {"click", "crackbake.cli.bake"}, loaded
+
+
+def test_version_loads_nothing_but_the_package():
+    """``crackbake --version`` (a script's or the add-on's check) prints what click's version
+    option prints, without importing click or any command."""
+    out, loaded = _entry_loads("--version")
+    assert loaded == set(), loaded
+    r = subprocess.run([sys.executable, "-c", "from crackbake.cli import main; "
+                        "main(['-V'], prog_name='crackbake')"],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 0 and r.stdout.startswith("crackbake, version "), r
+    assert out == r.stdout
+
+
+def test_inspect_loads_no_bake_modules(tmp_path):
+    """``crackbake inspect`` reads the EXR and prints its table without the bake's libraries
+    (numba alone is ~0.4 s of its 0.5 s budget at 4096², issue 25); the pictures (``--png``)
+    load the packing kernels when asked for."""
+    import numpy as np
+
+    from crackbake.exchange.exr import write_exr
+
+    exr = tmp_path / "a.exr"
+    write_exr(exr, {"crack.mask.V": np.eye(8, dtype=np.float16)})
+    code = _ENTRY.replace("main()", "sys.argv[1:1] = ['inspect']; main()")
+    r = subprocess.run([sys.executable, "-c", code, str(exr)], capture_output=True, text=True,
+                       timeout=120)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "crack.mask" in r.stdout  # the table really was printed
+    loaded = set(r.stderr.split())
+    assert not loaded & {"numba", "scipy", "trimesh", "moderngl", "crackbake.pipeline"}, loaded

@@ -114,3 +114,39 @@ def test_bad_input_is_refused():
         png_bytes(np.zeros((2, 2, 5), np.uint8))
     with pytest.raises(CrackbakeError, match="uint8 or uint16"):
         png_bytes(np.zeros((2, 2), np.int32))
+
+
+def _map_like(rng: np.random.Generator, shape: tuple, dtype) -> np.ndarray:
+    """A crack-map-like image: flat ground, a few sharp strokes and a smooth ramp."""
+    top = np.iinfo(dtype).max
+    img = np.zeros(shape, dtype)
+    img[..., 0] = (np.linspace(0, top, shape[1])[None, :] * np.ones((shape[0], 1))).astype(dtype)
+    for _ in range(20):
+        r, c = rng.integers(0, shape[0]), rng.integers(0, shape[1] - 40)
+        img[r : r + 3, c : c + 40] = rng.integers(0, top, shape[2], endpoint=True)
+    return img
+
+
+@pytest.mark.parametrize(("shape", "dtype"), [((512, 384, 4), np.uint16), ((300, 500, 3), np.uint8),
+                                              ((256, 256, 1), np.uint8)])  # fmt: skip
+def test_zlib_ng_writes_the_bytes_stdlib_zlib_writes(monkeypatch, shape, dtype):
+    """The maps' deflate (level 1, Z_RLE) goes through zlib-ng when it is installed: it must
+    give the files stdlib zlib gives, byte for byte (the speed-up changes no output)."""
+    pytest.importorskip("zlib_ng")
+    from crackbake.exchange import pngenc
+
+    img = _map_like(np.random.default_rng(sum(shape)), shape, dtype)
+    assert pngenc._rle_zlib is not zlib  # the fast path is really taken
+    fast = png_bytes(img)
+    assert png_bytes(img, level=6) == fast  # run lengths only: the level changes nothing
+    monkeypatch.setattr(pngenc, "_rle_zlib", zlib)
+    assert png_bytes(img) == fast
+    assert png_bytes(img, level=6) == fast
+    # Decoded by stdlib zlib and the Up filter undone: the pixels round-trip (PIL would narrow
+    # 16-bit RGBA to 8 bits).
+    idat = fast[fast.index(b"IDAT") + 4 : fast.index(b"IEND") - 8]
+    rows = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(shape[0], -1)
+    assert (rows[:, 0] == 2).all()
+    raw = np.cumsum(rows[:, 1:], axis=0, dtype=np.uint8)  # wraps mod 256, as the filter did
+    want = np.ascontiguousarray(img.astype(img.dtype.newbyteorder(">"))).view(np.uint8)
+    assert np.array_equal(raw, want.reshape(shape[0], -1))

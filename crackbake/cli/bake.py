@@ -18,7 +18,6 @@ from crackbake import __version__
 from crackbake.cli.common import CONTEXT, Command, err, silence
 from crackbake.display import Display, display_mode
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.looks import parse_look
 from crackbake.params import (
     CRACK_WIDTH_REL_DEFAULT,
     DECAL_RES_DEFAULT,
@@ -495,6 +494,8 @@ def run_params(mesh: Path, o: dict) -> RunParams:
     bias, density = _parse_curvature(o.pop("curvature"))
     impacts = tuple(parse_impact(t) for t in o.pop("impacts"))
     directions = tuple(parse_direction(d) for d in o.pop("directions"))
+    from crackbake.looks import parse_look  # numpy: not loaded for --help and --version
+
     look = parse_look(o.pop("look"))
     return RunParams(
         look=look,

@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import warnings
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +21,7 @@ from crackbake.bake.raster import CrackMaps
 from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.errors import CrackbakeWarning
-from crackbake.exchange.exr import write_exr
+from crackbake.exchange.exr import exr_threads, write_exr
 from crackbake.exchange.frames import submit_frames
 from crackbake.exchange.glb import write_glb
 from crackbake.exchange.halving import base_color_half, normal_half
@@ -171,23 +170,8 @@ def write_outputs(
         The run's effective parameters (the manifest's ``params``), summarised in the EXR
         headers' ``comments`` (:func:`~crackbake.exchange.layers.run_attributes`).
     """
-    with _exr_threads(EXR_THREADS if {"exr", "stress"} & set(params.formats) else None):
+    with exr_threads(EXR_THREADS if {"exr", "stress"} & set(params.formats) else None):
         _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
-
-
-@contextmanager
-def _exr_threads(n: int | None):
-    """OpenEXR's global worker count set to ``n`` for the write, then restored."""
-    import OpenEXR
-
-    before = OpenEXR.global_thread_count()
-    if n is not None:
-        OpenEXR.set_global_thread_count(n)
-    try:
-        yield
-    finally:
-        if n is not None:
-            OpenEXR.set_global_thread_count(before)
 
 
 def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective) -> None:

@@ -39,6 +39,26 @@ _RESERVED_ATTRIBUTES = frozenset(
 
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
 
+#: OpenEXR's worker threads while a file is read (the library default is none: the calling
+#: thread decompresses every block alone).  ``crackbake inspect`` of a 4096² crack master
+#: decompresses 0.47 GB of planes; the blocks are independent.
+READ_THREADS = max(2, min(8, os.cpu_count() or 1))
+
+
+@contextmanager
+def exr_threads(n: int | None) -> Iterator[None]:
+    """OpenEXR's global worker count set to ``n`` (None: unchanged), then restored."""
+    import OpenEXR
+
+    before = OpenEXR.global_thread_count()
+    if n is not None:
+        OpenEXR.set_global_thread_count(n)
+    try:
+        yield
+    finally:
+        if n is not None:
+            OpenEXR.set_global_thread_count(before)
+
 
 def _openexr_compression(name: str):
     import OpenEXR
@@ -247,7 +267,11 @@ def read_exr(path: PathLike) -> tuple[dict[str, np.ndarray], dict]:
         check_regular(path)  # OpenEXR would block on a FIFO forever
         with OpenEXR.File(os.fspath(path), header_only=True) as f:
             _check_size(path, f.parts[0].header if f.parts else {})
-        with _stderr_captured() as said, OpenEXR.File(os.fspath(path), separate_channels=True) as f:
+        with (
+            exr_threads(READ_THREADS),
+            _stderr_captured() as said,
+            OpenEXR.File(os.fspath(path), separate_channels=True) as f,
+        ):
             if not f.parts:  # what the bindings give for a truncated file
                 why = (said() or ["it holds no readable image"])[0]
                 why = why.removeprefix(f"{os.fspath(path)}: ")

@@ -7,6 +7,12 @@ the byte above) is one vectorised subtraction and compresses smooth maps about a
 Pillow's adaptive filtering; at zlib level 1 it encoded a 4096² RGB test image in 0.40 s
 against Pillow's 0.76 s at level 1 (measured here, one thread).
 
+The maps are deflated by zlib-ng (its Python bindings, the ``zlib`` API) when it is installed:
+with the Z_RLE strategy (run lengths only: the level changes nothing in either library) it writes
+the very bytes stdlib zlib 1.2/1.3 writes (checked on every file of a 4096² run: same SHA-256)
+4-5x faster (the 4096² 16-bit data map: 0.09 s against 0.35 s of CPU), and it releases the GIL
+the same way.  Level 0 (stored blocks, sized differently) stays with stdlib zlib.
+
 Colour textures carry an ``sRGB`` chunk; data maps carry no colour chunk at all (no sRGB, gAMA
 or cHRM), so readers take the values as they are.
 """
@@ -20,6 +26,11 @@ import zlib
 import numpy as np
 
 from crackbake.errors import CrackbakeError
+
+try:  # an optional speed-up: the same bytes either way (module docstring)
+    from zlib_ng import zlib_ng as _rle_zlib
+except ImportError:  # pragma: no cover - zlib-ng is a dependency; a bare install still works
+    _rle_zlib = zlib
 
 PathLike = str | os.PathLike
 
@@ -93,7 +104,8 @@ def png_rows(
         parts.append(_chunk(b"sRGB", b"\x00"))  # perceptual intent
     # Z_RLE: after the Up filter the maps are long runs of zeros; on crackbake's maps it was as
     # fast as the default strategy or faster and 4-25 % smaller (base colour: 4x smaller).
-    z = zlib.compressobj(int(level), zlib.DEFLATED, 15, 9, zlib.Z_RLE)
+    lib = _rle_zlib if int(level) >= 1 else zlib
+    z = lib.compressobj(int(level), lib.DEFLATED, 15, 9, lib.Z_RLE)
     parts.append(_chunk(b"IDAT", z.compress(memoryview(rows).cast("B")) + z.flush()))
     parts.append(_chunk(b"IEND", b""))
     return b"".join(parts)

@@ -1,0 +1,217 @@
+"""Whole-process speed (issue 25): every figure as fresh ``crackbake`` processes, median of N.
+
+Each case runs the real command in a new interpreter (what an artist's re-bake from Blender
+or a batch job pays: imports, EGL, every stage, the exit); the table gives the wall seconds
+and the CPU seconds (user + system of the child, all its threads) of each, plus the stage
+times the runs' ``manifest.json`` files record.  On a busy machine the CPU seconds are the
+steadier comparison.
+
+Cases (floors from issue 25):
+
+- ``help`` / ``version``: ``crackbake --help`` and ``--version`` (≤ 0.15 s);
+- ``bake``: the README example, ``spot.obj --preset glass --impact 0.334,0.044,0.287 --res
+  4096`` with the default formats (≤ 4.0 s on 2 cores with llvmpipe); its ``write`` stage (the
+  13 files, ≤ 1.0 s), its ``bake`` stage (≤ 1.5 s) and the start-up before the first stage
+  (``start``: wall minus the manifest's ``total``, which also holds the exit; ≤ 0.25 s);
+- ``rebake``: the same mesh re-baked from that run's ``cracks.json`` (``--cracks``, ≤ 2.5 s);
+- ``inspect``: ``crackbake inspect`` on that run's 4096² crack EXR (≤ 0.5 s);
+- ``load``: the ``load`` stage of spot with a 1024² base colour texture bound by an MTL
+  (generated here; ≤ 0.1 s), from a 512² run.
+
+Usage::
+
+    python benchmarks/bench_process.py [-n 3] [--cases bake rebake ...] [--repo OTHER_CHECKOUT]
+
+``--repo`` runs every case against another checkout too (``git worktree add /tmp/old main``),
+interleaved run by run with this one so both see the same load, and adds its column and the
+ratio.  The numba cache (``NUMBA_CACHE_DIR``) must be warm for both trees
+(``python -m crackbake.precompile``): compilation is not what this measures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import zlib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+IMPACT = "0.334,0.044,0.287"
+CASES = ("help", "version", "bake", "rebake", "inspect", "load")
+#: Floors of issue 25, seconds: (case, figure) -> floor.
+FLOORS = {
+    ("help", "wall"): 0.15,
+    ("version", "wall"): 0.15,
+    ("bake", "wall"): 4.0,
+    ("bake", "start"): 0.25,
+    ("bake", "bake"): 1.5,
+    ("bake", "write"): 1.0,
+    ("rebake", "wall"): 2.5,
+    ("inspect", "wall"): 0.5,
+    ("load", "load"): 0.1,
+}
+
+
+def _png(path: Path, size: int = 1024) -> None:
+    """An RGB gradient with some texture noise, as an 8-bit PNG (no dependency but zlib)."""
+    import struct
+
+    import numpy as np
+
+    y, x = np.mgrid[0:size, 0:size]
+    rng = np.random.default_rng(0)
+    img = np.stack([x * 255 // size, y * 255 // size, (x ^ y) & 255], -1).astype(np.int16)
+    img = np.clip(img + rng.integers(-8, 9, img.shape), 0, 255).astype(np.uint8)
+    rows = np.concatenate([np.zeros((size, 1), np.uint8), img.reshape(size, -1)], 1)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data)
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    ihdr = struct.pack(">IIBBBBB", size, size, 8, 2, 0, 0, 0)
+    idat = zlib.compress(rows.tobytes(), 6)
+    head = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+    path.write_bytes(head + chunk(b"IDAT", idat) + chunk(b"IEND", b""))
+
+
+def textured_spot(folder: Path) -> Path:
+    """examples/spot.obj with a generated 1024² texture bound through an MTL, and UVs kept."""
+    folder.mkdir(parents=True, exist_ok=True)
+    _png(folder / "spot_texture.png")
+    (folder / "spot.mtl").write_text("newmtl spot\nKd 1 1 1\nmap_Kd spot_texture.png\n")
+    text = (ROOT / "examples" / "spot.obj").read_text()
+    (folder / "spot.obj").write_text("mtllib spot.mtl\nusemtl spot\n" + text)
+    return folder / "spot.obj"
+
+
+def run(repo: Path, args: list[str], out: Path | None = None) -> dict:
+    """One fresh process of ``python -m crackbake ARGS`` on ``repo``'s code: wall, CPU, stages."""
+    # The tree first; what PYTHONPATH already holds after it (an extra site, say).
+    extra = os.environ.get("PYTHONPATH")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo), *([extra] if extra else [])]))
+    if out is not None and out.exists():
+        shutil.rmtree(out)
+    t = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "crackbake", *args], env=env, cwd=repo,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    if proc.returncode != 0:
+        raise SystemExit(f"{repo}: crackbake {' '.join(args)} failed ({proc.returncode}): {err}")
+    row = {"wall": wall, "cpu": usage.ru_utime + usage.ru_stime}
+    if out is not None:
+        timings = json.loads((out / "manifest.json").read_text())["timings_s"]
+        row.update({k: float(v) for k, v in timings.items()})
+        row["start"] = wall - timings["total"]
+    return row
+
+
+def case_args(case: str, scratch: Path, tag: str) -> tuple[list[str], Path | None]:
+    spot = ROOT / "examples" / "spot.obj"
+    if case == "help":
+        return ["--help"], None
+    if case == "version":
+        return ["--version"], None
+    if case == "bake":
+        out = scratch / f"{tag}_bake"
+        return [str(spot), "--preset", "glass", "--impact", IMPACT, "--res", "4096",
+                "-q", "-o", str(out)], out  # fmt: skip
+    if case == "rebake":
+        out = scratch / f"{tag}_rebake"
+        return [str(spot), "--cracks", str(scratch / f"{tag}_cracks.json"), "--res", "4096",
+                "-q", "-o", str(out)], out  # fmt: skip
+    if case == "inspect":
+        return ["inspect", str(scratch / f"{tag}_cracks.exr")], None
+    if case == "load":
+        out = scratch / f"{tag}_load"
+        return [str(scratch / "textured" / "spot.obj"), "--preset", "glass", "--impact", IMPACT,
+                "--res", "512", "-q", "-o", str(out)], out  # fmt: skip
+    raise ValueError(case)
+
+
+#: The figures reported for each case, besides wall and CPU.
+STAGES = {
+    "bake": ("start", "load", "simmesh", "stress", "solve", "unwrap", "bake", "stress_bake",
+             "write"),
+    "rebake": ("start", "load", "cracks", "bake", "write"),
+    "load": ("load",),
+}  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("-n", type=int, default=3, help="runs per case (median) [3]")
+    ap.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
+    ap.add_argument("--repo", type=Path, help="another checkout to compare against (A/B)")
+    ap.add_argument("--keep", type=Path, help="scratch folder to use and keep")
+    a = ap.parse_args()
+    repos = {"this": ROOT}
+    if a.repo is not None:
+        repos = {"other": a.repo.resolve(), "this": ROOT}
+    scratch = Path(a.keep or tempfile.mkdtemp(prefix="bench_process_"))
+    scratch.mkdir(parents=True, exist_ok=True)
+    textured_spot(scratch / "textured")
+    # The re-bake and inspect cases need one bake's sidecar and EXR per tree.
+    for tag, repo in repos.items():
+        if {"rebake", "inspect"} & set(a.cases):
+            args, out = case_args("bake", scratch, tag)
+            run(repo, args, out)
+            shutil.copy(out / "cracks.json", scratch / f"{tag}_cracks.json")
+            shutil.copy(out / "spot_cracks.exr", scratch / f"{tag}_cracks.exr")
+    rows: dict[tuple[str, str], list[dict]] = {}
+    for case in a.cases:
+        for _ in range(a.n):
+            for tag, repo in repos.items():  # interleaved: both trees see the same load
+                args, out = case_args(case, scratch, tag)
+                rows.setdefault((case, tag), []).append(run(repo, args, out))
+                print(".", end="", file=sys.stderr, flush=True)
+    print(file=sys.stderr)
+    load = os.getloadavg()[0]
+    print(f"\nmedian of {a.n} fresh processes per cell; load average at the end {load:.1f}; "
+          f"{os.cpu_count()} CPUs; seconds\n")  # fmt: skip
+    tags = list(repos)
+    header = ["case", "figure", "floor"]
+    for t in tags:
+        header += [f"{t} s (min)"]
+    header += [f"{t} CPU s" for t in tags]
+    if len(tags) == 2:
+        header += ["this / other"]
+    print("| " + " | ".join(header) + " |")
+    print("|" + "---|" * len(header))
+    for case in a.cases:
+        for fig in ("wall", *STAGES.get(case, ())):
+            cells = [case, fig, f"{FLOORS[(case, fig)]:.2f}" if (case, fig) in FLOORS else ""]
+            meds = []
+            for t in tags:
+                vals = [r[fig] for r in rows[(case, t)] if fig in r]
+                if not vals:
+                    cells.append("–")
+                    meds.append(None)
+                    continue
+                meds.append(statistics.median(vals))
+                cells.append(f"{meds[-1]:.3f} ({min(vals):.3f})")
+            for t in tags:
+                cells.append(
+                    f"{statistics.median(r['cpu'] for r in rows[(case, t)]):.2f}"
+                    if fig == "wall" else ""
+                )  # fmt: skip
+            if len(tags) == 2:
+                ok = None not in meds and meds[0] > 0
+                cells.append(f"{meds[1] / meds[0]:.2f}" if ok else "")
+            print("| " + " | ".join(cells) + " |")
+    if a.keep is None:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
