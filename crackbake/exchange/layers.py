@@ -350,7 +350,9 @@ def run_attributes(version: str, params: Mapping[str, object] | None) -> dict[st
         value = params.get(key)
         if value is not None:
             words += [f"--{key}", PurePath(str(value)).name if key == "cracks" else str(value)]
-    impacts = list(params.get("impacts") or [])
+    impacts = params.get("impacts")
+    # a tile's "impacts" is a count of random impacts, not a list of points
+    impacts = list(impacts) if isinstance(impacts, list | tuple) else []
     for imp in impacts[:3]:
         pos = imp.get("point") if isinstance(imp, Mapping) else imp
         if isinstance(pos, list | tuple) and len(pos) == 3:
