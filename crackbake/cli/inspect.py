@@ -53,7 +53,7 @@ def _inspect(exr: Path, png_dir: Path | None):
     if UDIM_TOKEN in exr.name:
         info, per_tile = inspect_udim(exr)
     else:
-        if not exr.is_file():
+        if not exr.exists():  # a FIFO or device exists: inspect_exr names what it is
             raise CrackbakeError(
                 f"EXR '{exr}' does not exist; check the path (a UDIM set is name.<UDIM>.exr)"
             )

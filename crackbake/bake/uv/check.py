@@ -82,8 +82,8 @@ def is_udim(corners: np.ndarray, faces: np.ndarray | None = None) -> bool:
 
     With ``faces`` (F, 3), the UV vertex indices of the corners, a vertex shared by faces of
     two tiles (an island crossing a tile edge) rules UDIM out."""
-    if corners.size == 0:
-        return False
+    if corners.size == 0 or corners.ndim != 3 or corners.shape[-1] != 2:
+        return False  # no UVs, or not two coordinates each (the caller says what they are)
     tile = np.floor(corners.mean(axis=1))  # (F, 2); a centroid is strictly inside its tile
     inside = (corners >= tile[:, None, :] - UV_TOLERANCE) & (
         corners <= tile[:, None, :] + 1.0 + UV_TOLERANCE
