@@ -261,11 +261,12 @@ def bake_cracks(
     return maps
 
 
-#: Most texels the crack pass measures in one GL call (rows of a band, scissored): a fraction of
-#: a second of llvmpipe even in a dense star's centre, so SIGINT/SIGTERM, which Python handles
-#: only between calls, stop a bake of any size promptly.  The bands themselves (and so the
-#: surface pass's rounding: the pixels) stay as ``tile`` makes them.
-SLICE_TEXELS = 1 << 19
+#: Most texels the crack pass measures in one GL call (rows of a band, scissored): under a second
+#: of llvmpipe even in a dense star's centre, so SIGINT/SIGTERM, which Python handles only
+#: between calls, stop a bake of any size promptly.  The bands themselves (and so the surface
+#: pass's rounding: the pixels) stay as ``tile`` makes them.  2**19 texels cost the 4096² render
+#: 3-6 % (a ctx.finish per slice, 32 slices); at 2**21 (8 slices) it equals the unsliced bake's.
+SLICE_TEXELS = 1 << 21
 
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 # width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
