@@ -101,7 +101,7 @@ test:
 	$(VPY) -m ruff check crackbake tests benchmarks examples
 	NUMBA_CACHE_DIR=$(abspath $(TEST_KERNELS)) CRACKBAKE_PRECOMPILED_CACHE=$(abspath $(PRECOMPILED)) \
 	  CRACKBAKE_BLENDER_PYTHON=$(abspath $(BPY)) CRACKBAKE_GLTF_VALIDATOR=$(abspath $(NODE_DIR)) \
-	  CRACKBAKE_REFERENCE=require $(VPY) -m pytest -q -n auto --dist loadfile
+	  CRACKBAKE_REFERENCE=require $(VPY) -m pytest -q -n auto --dist loadfile --durations=30
 
 # The quick loop while editing: ruff and every test not marked slow or reference.
 check: setup
