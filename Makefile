@@ -3,6 +3,7 @@ PY       ?= python3
 VENV     := .venv
 VPY      := $(VENV)/bin/python
 STAMP    := $(VENV)/.installed
+TSTAMP   := $(VENV)/.installed-test
 KSTAMP   := $(VENV)/.precompiled
 APT_PKGS := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgbm1
 
@@ -28,13 +29,21 @@ PRECOMPILED  := $(VENV)/numba-precompiled
 
 .PHONY: demo test test-kernels check setup syslibs references lint bench clean
 
-setup: syslibs $(STAMP) $(KSTAMP)
+setup: syslibs $(STAMP) $(TSTAMP) $(KSTAMP)
 
+# The package and what a run needs first; the test tools (ray, usd-core, pytest...) after it, in
+# a step of their own, so that `make test` installs them while the kernels compile.
 $(STAMP): pyproject.toml
 	@$(VPY) -m pip --version >/dev/null 2>&1 || { rm -rf $(VENV) && $(PY) -m venv $(VENV); }
 	$(VPY) -m pip install --quiet --upgrade pip
-	$(VPY) -m pip install --quiet -e '.[test]'
+	$(VPY) -m pip install --quiet -e .
 	@touch $(STAMP)
+
+# (the extra's requirements alone: `-e '.[test]'` would reinstall the package under the compile)
+$(TSTAMP): $(STAMP)
+	$(VPY) -c "import tomllib; print('\\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['optional-dependencies']['test']))" > $(VENV)/test-requirements.txt
+	$(VPY) -m pip install --quiet -r $(VENV)/test-requirements.txt
+	@touch $(TSTAMP)
 
 # numba compiles its kernels once into the on-disk cache here, not in the first run.
 $(KSTAMP): $(STAMP)
@@ -94,10 +103,10 @@ $(GLTFV):
 
 # Every test, the reference checks included: CRACKBAKE_REFERENCE=require turns a skipped
 # reference check (Blender, glTF validator: pytest marker `reference`) into a failure.
-# The two set-ups overlap: the reference downloads (bpy is a 300 MB wheel) wait on the network
-# while the kernel precompile keeps both cores busy.
+# The set-ups overlap: the test tools' install and the reference downloads (bpy is a 300 MB
+# wheel) wait on the network and the disk while the kernel precompile keeps the cores busy.
 test:
-	@$(MAKE) --no-print-directory -j2 test-kernels references
+	@$(MAKE) --no-print-directory -j3 test-kernels $(TSTAMP) references
 	$(VPY) -m ruff check crackbake tests benchmarks examples
 	NUMBA_CACHE_DIR=$(abspath $(TEST_KERNELS)) CRACKBAKE_PRECOMPILED_CACHE=$(abspath $(PRECOMPILED)) \
 	  CRACKBAKE_BLENDER_PYTHON=$(abspath $(BPY)) CRACKBAKE_GLTF_VALIDATOR=$(abspath $(NODE_DIR)) \

@@ -111,15 +111,20 @@ def test_open_and_non_manifold_meshes_give_valid_networks(variants, runs, kind, 
         assert "not manifold" not in res["stderr"] and "edge paths" not in res["stderr"]
 
 
+#: The seeds of the slow sweep: with the quick test's seeds (3, 4) every mesh sees six
+#: realisations per preset.  (It ran ten seeds: 80 runs, 3 minutes of ``make test``.)
+SWEEP_SEEDS = (0, 1, 2, 5, 6)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", KINDS)
-def test_ten_seeds_each(variants, tmp_path, kind):
-    """10 seeds x 2 presets per mesh, in-process (one import for all 80 runs), small maps."""
+def test_seed_sweep(variants, tmp_path, kind):
+    """5 more seeds x 2 presets per mesh, in-process (one import for all 40 runs), small maps."""
     from click.testing import CliRunner
 
     from crackbake.cli import main
 
-    for seed in range(10):
+    for seed in SWEEP_SEEDS:
         for preset in sorted(PRESETS):
             out = tmp_path / f"out_{preset}_{seed}"
             args = [str(variants[kind]), *PRESETS[preset], "--sim-faces", "20000", "--res", "64",

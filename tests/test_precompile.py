@@ -63,8 +63,10 @@ def test_first_run_after_precompile_compiles_nothing(tmp_path):
                              capture_output=True, text=True, timeout=600)
         assert pre.returncode == 0, pre.stderr
         assert "kernels compiled" in pre.stdout
-    # glass: an impact; crackle on thesis: the other solver; glaze: growth (--shrink-rate).
-    for options in (["--preset", "glass", "--impact", "0.334,0.044,0.287"],
+    # glass: an impact and a decal; crackle on thesis: the other solver; glaze: growth
+    # (--shrink-rate).
+    for options in (["--preset", "glass", "--impact", "0.334,0.044,0.287", "--decal", "0.4",
+                     "--decal-res", "512"],
                     ["--preset", "crackle", "--method", "thesis"],
                     ["--preset", "glaze"]):
         out = tmp_path / f"out_{options[1]}"
