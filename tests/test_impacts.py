@@ -496,3 +496,15 @@ def test_missing_stars_counts_arms_across_touching_shells(tmp_path):
     assert missing_stars(network, sim.vertices, sim.faces) == []
     [(_, arms)] = missing_stars(network, sim.vertices, sim.faces, link=0.0)
     assert arms == 0
+
+
+def test_large_touching_pieces_are_not_warned(tmp_path):
+    # A plate lying on a plate, hit on the small one: it holds more than a quarter of its
+    # star's disc, and the star carries across (test_touching_shells_crack_together): silent.
+    from crackbake.simulate.stress import ImpactSource
+
+    path = _plate_with_plate(tmp_path / "plates.obj")
+    mesh = load_mesh(path)
+    sim = build_simmesh(mesh, target_faces=20000)
+    said = _said(sim, mesh, ImpactSource((0.55, 0.0, 0.075), 0.5))
+    assert not [s for s in said if "touching a larger one" in s]
