@@ -395,3 +395,116 @@ def test_lobe_tip_grows_a_star(tmp_path):
     assert m["arms"] >= 5
     assert m["radial_median"] >= 0.9
     assert _far_side_share(star) < 0.1 < 0.5 * _far_side_share(web)
+
+
+# Small pieces touching larger ones (issue 18 §3): an eye in its socket, a nail lying on a
+# plate.  The solver carries cracks across touching shells; the star measures and warnings
+# measure over them as one surface too.
+
+
+def _piece_on_plate(path: Path, kind: str) -> tuple[Path, np.ndarray, float]:
+    """A 3 x 3 x 0.2 slab with a small piece touching its top (z = 0.1): ``dome``, an open
+    half sphere of radius 0.4 (an eye) standing on its rim, or ``nail``, a 0.6 x 0.48 x 0.04
+    box lying on it.  Returns the path, the piece's top point and its bounding-box diagonal.
+    (A slab thicker than a sim edge: a thinner one's underside touches the dome's rim too.)"""
+    plate = trimesh.creation.box(extents=(3.0, 3.0, 0.2))
+    if kind == "dome":
+        ball = trimesh.creation.uv_sphere(radius=0.4, count=[32, 33])
+        keep = ball.vertices[ball.faces].mean(axis=1)[:, 2] > 0
+        piece = trimesh.Trimesh(ball.vertices, ball.faces[keep], process=False)
+        piece.remove_unreferenced_vertices()
+        piece.apply_translation((0.5, 0.0, 0.1))
+    else:
+        piece = trimesh.creation.box(extents=(0.6, 0.48, 0.04))
+        piece.apply_translation((0.5, 0.0, 0.12))
+    trimesh.util.concatenate([plate, piece]).export(path)
+    top = np.asarray(piece.vertices)
+    lo, hi = top.min(axis=0), top.max(axis=0)
+    return path, np.array([0.5, 0.0, hi[2]]), float(np.linalg.norm(hi - lo))
+
+
+def _said(sim, mesh, src) -> list[str]:
+    from crackbake.simulate.stress import stress_field
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        stress_field(sim, mesh, [src])
+    return [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+
+
+@pytest.mark.parametrize("kind", ["dome", "nail"])
+def test_piece_touching_a_larger_one_warns(tmp_path, kind):
+    # A star far wider than the small piece it lands on: most of its reach lies on the plate
+    # the piece touches, where it grows a web round the piece; said in one line naming the
+    # piece's size and the fix.  A point on the plate is silent, and so is the radius the
+    # warning names, where the sim mesh resolves one (the dome's; the thin nail lies within a
+    # sim edge of the plate below the impact, so every reach spreads over the plate).
+    from crackbake.simulate.stress import ImpactSource
+
+    path, top, size = _piece_on_plate(tmp_path / f"{kind}.obj", kind)
+    mesh = load_mesh(path)
+    sim = build_simmesh(mesh, target_faces=20000)
+    said = _said(sim, mesh, ImpactSource(tuple(top), 1.0))
+    assert len(said) == 1 and len(said[0]) < 250
+    assert "touching a larger one" in said[0] and "a point on the larger piece" in said[0]
+    named = float(said[0].split("lands on a piece ")[1].split(" ")[0])
+    assert named == pytest.approx(size, rel=0.01)
+    assert _said(sim, mesh, ImpactSource((-0.7, 0.0, 0.1), 0.5)) == []
+    if kind == "dome":
+        fits = float(said[0].split("give it radius ")[1].split(" ")[0])
+        assert fits < 1.0
+        assert _said(sim, mesh, ImpactSource(tuple(top), fits)) == []
+
+
+def test_star_distance_crosses_touching_shells(tmp_path):
+    # The star measures' surface distance crosses from the dome onto the plate it stands on
+    # (as the solver's cracks do): a plate point beside the rim lies about the pole-to-rim arc
+    # (pi/2 x 0.4) plus the gap to the rim away; each shell alone, the plate is out of reach.
+    from crackbake.metrics.star import surface_distance
+
+    path, top, _ = _piece_on_plate(tmp_path / "dome.obj", "dome")
+    sim = build_simmesh(load_mesh(path), target_faces=20000)
+    plate = np.array([[0.5 + 0.5, 0.0, 0.1], [0.5, -0.55, 0.1]])
+    d = surface_distance(plate, top, sim.vertices, sim.faces, max_distance=1.0,
+                         link=sim.edge_length)
+    arc = 0.5 * np.pi * 0.4
+    assert np.all(d > arc + 0.1 - 0.02) and np.all(d < 1.1 * (arc + 0.15))
+    # The default link, the mesh's mean edge, is about the sim edge.
+    assert np.allclose(surface_distance(plate, top, sim.vertices, sim.faces, max_distance=1.0),
+                       d, rtol=0.05)
+    assert np.isinf(surface_distance(plate, top, sim.vertices, sim.faces, max_distance=1.0,
+                                     link=0.0)).all()
+
+
+def test_missing_stars_counts_arms_across_touching_shells(tmp_path):
+    # A star whose arms run on the plate round the dome it was hit on (its 0.3-reach circle
+    # lies on the plate, past the dome's rim): counted across the shells, as the solver cracks
+    # them, 8 arms and a star; each shell alone the plate is out of reach and no arm counts.
+    from crackbake.metrics.star import missing_stars
+
+    path, top, _ = _piece_on_plate(tmp_path / "dome.obj", "dome")
+    sim = build_simmesh(load_mesh(path), target_faces=20000)
+    reach = 0.8 / 0.3  # the circle 0.8 from the pole over the dome: 0.17 past its rim
+    ang = np.arange(8) * np.pi / 4
+    r = np.arange(0.45, 1.2, 0.02)
+    cracks = [{"points": np.c_[0.5 + np.outer(np.cos(a), r).ravel(),
+                               np.outer(np.sin(a), r).ravel(), np.full(len(r), 0.1)]}
+              for a in ang]
+    network = {"cracks": cracks,
+               "impacts": [{"point": list(top), "radius": reach / (0.5 * np.pi)}]}
+    assert missing_stars(network, sim.vertices, sim.faces, link=sim.edge_length) == []
+    assert missing_stars(network, sim.vertices, sim.faces) == []
+    [(_, arms)] = missing_stars(network, sim.vertices, sim.faces, link=0.0)
+    assert arms == 0
+
+
+def test_large_touching_pieces_are_not_warned(tmp_path):
+    # A plate lying on a plate, hit on the small one: it holds more than a quarter of its
+    # star's disc, and the star carries across (test_touching_shells_crack_together): silent.
+    from crackbake.simulate.stress import ImpactSource
+
+    path = _plate_with_plate(tmp_path / "plates.obj")
+    mesh = load_mesh(path)
+    sim = build_simmesh(mesh, target_faces=20000)
+    said = _said(sim, mesh, ImpactSource((0.55, 0.0, 0.075), 0.5))
+    assert not [s for s in said if "touching a larger one" in s]

@@ -4,8 +4,12 @@ Every measure works on the distance from the impact *over the surface* at each p
 the straight distance on a flat plate, and on a curved mesh the geodesic one from
 :func:`surface_distance` (fast marching on a triangle mesh of the surface, the solver's own
 :func:`crackbake.simulate.stress.impact_distance`, interpolated inside the face nearest each
-crack point).  Lengths along a crack are straight segments between its
-points (the solver writes one per sim edge crossed, so they are short).
+crack point).  Separate shells that touch (closer than a sim edge: an eye in its socket, a
+nail on a finger) are one surface there, as for the solver, which carries cracks across them:
+the distance crosses from the shell it reached onto the shell it touches
+(:func:`crackbake.simulate.stress.geodesic.impact_distance`'s hop).  Lengths along a crack are
+straight segments between its points (the solver writes one per sim edge crossed, so they are
+short).
 
 The impact's **reach** is where its stress field ends: ``pi * radius / 2`` for
 :class:`crackbake.simulate.stress.ImpactSource` (:func:`impact_reach`).  Distances below are
@@ -37,6 +41,7 @@ __all__ = [
     "arm_straightness",
     "impact_reach",
     "length_beyond",
+    "mean_edge",
     "missing_stars",
     "own_cracks",
     "polylines",
@@ -127,12 +132,26 @@ def _interpolated(tri: np.ndarray, d: np.ndarray, q: np.ndarray) -> np.ndarray:
     return np.einsum("kc,kc->k", w, d)
 
 
+def mean_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Mean edge length of a triangle mesh, mesh units (0 without faces): the gap below which
+    separate shells touch, as the solver's ``_mates`` link on a sim mesh."""
+    from crackbake.geometry import edges
+
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return 0.0
+    v = np.asarray(vertices, dtype=np.float64)
+    e = edges(f, len(v))[0]
+    return float(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean())
+
+
 def surface_distance(
     points: np.ndarray,
     impact: np.ndarray,
     vertices: np.ndarray | None = None,
     faces: np.ndarray | None = None,
     max_distance: float | None = None,
+    link: float | None = None,
 ) -> np.ndarray:
     """Distance over the surface from ``impact`` to each of ``points``.
 
@@ -147,6 +166,11 @@ def surface_distance(
         mesh is a good choice).  Without it the straight distance is used (right on a plate).
     max_distance : float, optional
         Only distances up to this need be right; points farther get ``inf``.
+    link : float, optional
+        Separate shells of the mesh closer than this (mesh units) are one surface: the
+        distance crosses the gap (the solver's sim edge, ``SimMesh.edge_length``, as its
+        cracks do).  Default: the mesh's mean edge length (:func:`mean_edge`); 0: each shell
+        alone.
 
     Returns
     -------
@@ -165,7 +189,9 @@ def surface_distance(
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    node, snapped, _ = impact_distance(SimpleNamespace(vertices=v, faces=f), imp, max_distance)
+    link = mean_edge(v, f) if link is None else float(link)
+    node, snapped, _ = impact_distance(SimpleNamespace(vertices=v, faces=f, edge_length=link),
+                                       imp, max_distance)
     tri = v[f]
     _, nearest = cKDTree(tri.mean(axis=1)).query(pts)
     d = node[f[nearest]]
@@ -365,6 +391,7 @@ def star_metrics(
     faces: np.ndarray | None = None,
     bins: int = 5,
     others: list | None = None,
+    link: float | None = None,
 ) -> dict:
     """Every star measure of one impact.
 
@@ -383,6 +410,8 @@ def star_metrics(
     others : list of (point (3,), reach), optional
         The other impacts of the run: the star is measured on its own cracks only
         (:func:`own_cracks`).
+    link : float, optional
+        Touching shells closer than this are one surface (:func:`surface_distance`).
 
     Returns
     -------
@@ -397,12 +426,15 @@ def star_metrics(
     if others:
         polys = own_cracks(polys, impact, reach, others)
     flat = np.concatenate(polys) if polys else np.zeros((0, 3))
-    d_all = surface_distance(flat, impact, vertices, faces, max_distance=2.0 * reach)
+    if vertices is not None and faces is not None and link is None:
+        link = mean_edge(vertices, faces)
+    d_all = surface_distance(flat, impact, vertices, faces, max_distance=2.0 * reach, link=link)
     split = np.cumsum([len(p) for p in polys])[:-1]
     dists = np.split(d_all, split) if polys else []
     areas = None
     if vertices is not None and faces is not None:
-        node = surface_distance(vertices, impact, vertices, faces, max_distance=2.0 * reach)
+        node = surface_distance(vertices, impact, vertices, faces, max_distance=2.0 * reach,
+                                link=link)
         areas = annulus_areas(reach, bins, vertices, faces, node)
     straight = arm_straightness(polys, dists, reach)
     radial = arm_straightness(polys, dists, reach, geodesic=True)
@@ -422,12 +454,14 @@ def star_metrics(
 
 
 def missing_stars(network: Any, vertices: np.ndarray | None = None,
-                  faces: np.ndarray | None = None) -> list[tuple[dict, int]]:
+                  faces: np.ndarray | None = None,
+                  link: float | None = None) -> list[tuple[dict, int]]:
     """The impacts of ``network`` whose cracks hold no star.
 
     Per impact, its radial arms crossing the circle at 0.3 reach (:func:`radial_arms`, on its
     own cracks: :func:`own_cracks`), distances over ``vertices``/``faces`` (a fine mesh of the
-    surface, the sim mesh; straight without).  One fast-marching pass per impact, stopped at
+    surface, the sim mesh; straight without), across touching shells closer than ``link``
+    (the sim edge; :func:`surface_distance`).  One fast-marching pass per impact, stopped at
     the reach.
 
     Returns
@@ -437,6 +471,8 @@ def missing_stars(network: Any, vertices: np.ndarray | None = None,
     """
     impacts = list(network.impacts if hasattr(network, "impacts") else network["impacts"])
     polys = polylines(network)
+    if vertices is not None and faces is not None and link is None:
+        link = mean_edge(vertices, faces)
     out = []
     for k, imp in enumerate(impacts):
         reach = impact_reach(imp["radius"])
@@ -446,7 +482,8 @@ def missing_stars(network: Any, vertices: np.ndarray | None = None,
         arms = 0
         if own:
             flat = np.concatenate(own)
-            d = surface_distance(flat, imp["point"], vertices, faces, max_distance=reach)
+            d = surface_distance(flat, imp["point"], vertices, faces, max_distance=reach,
+                                 link=link)
             dists = np.split(d, np.cumsum([len(p) for p in own])[:-1])
             arms = len(radial_arms(own, dists, reach))
         if arms < STAR_MIN_ARMS:

@@ -20,7 +20,7 @@ from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import unit_rows, vertex_normals
 from crackbake.io.mesh import Mesh
 from crackbake.simulate.solver.fem import face_frames, face_geometry
-from crackbake.simulate.stress.geodesic import _snap, impact_distance, iso_length
+from crackbake.simulate.stress.geodesic import _shells, _snap, impact_distance, iso_length
 from crackbake.simulate.stress.sources import (
     CurvatureSource,
     DirectionalSource,
@@ -323,7 +323,10 @@ def _impact_field(
         dist, snapped, face = impact_distance(sim, src.point, max_distance=reach)
     nodal = dist[geo.faces]  # (M, 3)
     # A small separate piece wraps too: its own warning says more.
-    if not _warn_small_piece(geo, nodal, snapped, radius, edge) and wraps:
+    small = _warn_small_piece(geo, nodal, snapped, radius, edge)
+    if not small:
+        small = _warn_off_piece(geo, dist, face, snapped, radius, edge)
+    if not small and wraps:
         warnings.warn(wraps, CrackbakeWarning, stacklevel=3)
     d_face = nodal.mean(axis=1)  # inf when any corner is out of reach
     # Inside the source face the surface is flat, so the straight distance is the geodesic one.
@@ -457,6 +460,77 @@ def _warn_small_piece(geo: _Geometry, nodal: np.ndarray, snapped: np.ndarray, ra
         f"{area / flat:.0%} of its star's): the star cannot grow past that piece; give another "
         f"--impact point on a larger part, or a radius of about {2.0 * far / np.pi:.3g} (this "
         "piece's reach) for a star that fits it",
+        CrackbakeWarning,
+        stacklevel=4,
+    )
+    return True
+
+
+#: An impact on a small separate piece (under :data:`SMALL_PIECE_SHARE` of its star's disc,
+#: ``pi reach^2``) touching larger shells (an eye in its socket, a nail on a finger) whose reach
+#: holds more than this share of its surface on those shells gets a warning: the cracks cross
+#: only where the shells touch, and round the piece grows a web of cells, not a star.  Large
+#: pieces meeting at a seam (a tiled floor) carry a star across and are not warned.
+OFF_PIECE_SHARE = 0.5
+
+
+def _warn_off_piece(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray,
+                    radius: float, edge: float) -> bool:
+    """Warn when the impact lands on a small piece and its star's reach lies mostly on the
+    larger shells that piece touches (which ``dist`` reached across the gap); whether it
+    warned.
+
+    ``dist`` (N,) is the impact's geodesic distance at the sim nodes (``inf`` past the reach),
+    ``face`` the sim face holding ``snapped``, ``edge`` the sim edge there.  The piece is
+    small when its area is under :data:`SMALL_PIECE_SHARE` of ``pi reach^2``; the share off
+    it is the reached area (faces within the reach) on other shells.  Measured on the reach,
+    not on the star's circle at 0.3 reach: suzanne's eye (0.81 across, default radius) holds
+    that circle whole (its rim lies at 0.40-0.46 reach), yet 86 % of the reach lies on the head,
+    which cracks into a web round the eye and brow.  The warning names the piece's size (its
+    bounding-box diagonal) and the fix: the largest radius, tried down by :data:`FIT_STEP`,
+    that this check passes (while its 0.3-reach circle spans ``STAR_MIN_EDGES`` sim edges), or
+    a point on the larger piece.
+    """
+    from crackbake.metrics.star import STAR_MIN_EDGES
+
+    faces = geo.faces
+    d = dist[faces].max(axis=1)  # inf past the reach
+    shell = _shells(faces, len(geo.vertices))
+    mine = shell[faces[:, 0]] == shell[faces[face, 0]]
+    if mine[np.isfinite(d)].all():  # the distance reached no other shell
+        return False
+    piece = float(geo.area[mine].sum())
+
+    def off_share(reach: float) -> float:
+        """The share of the reach off the piece; 0 where the piece is not small."""
+        if piece >= SMALL_PIECE_SHARE * np.pi * reach * reach:
+            return 0.0
+        near = d <= reach
+        on, off = geo.area[near & mine].sum(), geo.area[near & ~mine].sum()
+        return float(off / (on + off))
+
+    reach = 0.5 * np.pi * radius
+    share = off_share(reach)
+    if share <= OFF_PIECE_SHARE:
+        return False
+    fits = reach
+    while 0.3 * fits * FIT_STEP >= STAR_MIN_EDGES * edge:
+        fits *= FIT_STEP
+        if off_share(fits) <= OFF_PIECE_SHARE:
+            break
+    else:
+        fits = 0.0
+    fits /= 0.5 * np.pi
+    own = np.unique(faces[mine])
+    corners = geo.vertices[own]
+    size = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
+    # Rounded to a millionth of the piece: no 1e-17 for a coordinate on a symmetry plane.
+    at = ",".join(f"{float(x) + 0.0:.4g}" for x in np.round(snapped / size, 6) * size)
+    fix = f"it radius {fits:.3g} (fits the piece) or " if fits else ""
+    warnings.warn(
+        f"the impact at ({at}) lands on a piece {size:.3g} across touching a larger one, "
+        f"{share:.0%} of its star's reach off it: expect a web of cells round it, not a star; "
+        f"give {fix}a point on the larger piece",
         CrackbakeWarning,
         stacklevel=4,
     )
