@@ -127,12 +127,22 @@ def test_tiles_bake_as_one_atlas_continuous_across_tile_edges(gl_ctx):
     assert all(p.scales == tiles.scales for p in tiles.pages)
 
 
-def _plate_run(tmp_path, formats=("exr", "png", "glb", "preview"), target="gltf", res=64):
+def _plate_run(tmp_path, formats=("exr", "png", "glb", "preview"), target="gltf", res=64,
+               materials=None, extra=()):
+    """Bake the plate written as ``tiles.obj`` with the crossing cracks (:data:`LINES`).
+    ``materials``: one material name per square (``usemtl`` before its faces, ``mtllib
+    tiles.mtl``: the caller writes it); ``extra``: more CLI-like keywords for RunParams."""
     mesh = tiled_plate()
     obj = tmp_path / "tiles.obj"
     lines = [f"v {x} {y} {z}" for x, y, z in mesh.vertices]
     lines += [f"vt {u} {v}" for u, v in mesh.uv]
-    lines += [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in mesh.faces + 1]
+    per_square = len(mesh.faces) // 4
+    if materials is not None:
+        lines.insert(0, "mtllib tiles.mtl")
+    for k, (a, b, c) in enumerate(mesh.faces + 1):
+        if materials is not None and k % per_square == 0:
+            lines.append(f"usemtl {materials[k // per_square]}")
+        lines.append(f"f {a}/{a} {b}/{b} {c}/{c}")
     obj.write_text("\n".join(lines) + "\n")
     loaded = load_mesh(obj)
     cracks = []
@@ -146,7 +156,7 @@ def _plate_run(tmp_path, formats=("exr", "png", "glb", "preview"), target="gltf"
     write_sidecar(CrackNetwork(cracks=cracks, mesh=mesh_info(loaded)), side)
     out = tmp_path / f"out_{target}"
     result = run(RunParams(mesh=obj, cracks=side, res=res, out=out, formats=formats,
-                           target=target))  # fmt: skip
+                           target=target, **dict(extra)))  # fmt: skip
     return result, out
 
 
@@ -394,3 +404,133 @@ def test_islands_overlapping_on_one_tile_warn_as_overlap(gl_ctx):
     np.testing.assert_array_equal(uvm.udim, [[0, 0], [1, 0], [1, 1]])
     # Three islands of one area on three tiles, the one on 1002 covered twice: 1/3 of the texels.
     assert uvm.overlap_fraction == pytest.approx(1 / 3, abs=0.02)
+
+
+NUMBERS = (1001, 1002, 1011, 1012)
+
+
+def _tile_textures(folder: Path, name: str = "albedo.{}.png", res: int = 64) -> dict:
+    """A distinct 8-bit texture per tile (its own hue plus a fine checker, so a texel from the
+    wrong tile or place shows), saved as ``name.format(number)``; number -> (res, res, 3)."""
+    from PIL import Image
+
+    y, x = np.mgrid[:res, :res]
+    out = {}
+    for k, number in enumerate(NUMBERS):
+        img = np.empty((res, res, 3), np.uint8)
+        img[...] = [60 + 40 * k, 200 - 35 * k, 90 + 20 * (k % 2)]
+        img[(x // 4 + y // 4) % 2 == 1] += 25
+        out[number] = img
+        Image.fromarray(img).save(folder / name.format(number))
+    return out
+
+
+def _png(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB"))
+
+
+@pytest.mark.parametrize("map_kd", ["albedo.<UDIM>.png", "albedo.%(UDIM)d.png",
+                                    "albedo.1001.png", "per-material"])  # fmt: skip
+def test_each_tile_composites_the_cracks_over_its_own_texture(tmp_path, map_kd):
+    from tests.test_pipeline import read_glb
+
+    tex = _tile_textures(tmp_path)
+    if map_kd == "per-material":  # Maya-style: one material per tile, each naming its file
+        (tmp_path / "tiles.mtl").write_text("".join(
+            f"newmtl m{n}\nmap_Kd albedo.{n}.png\n" for n in NUMBERS))
+        materials = [f"m{n}" for n in NUMBERS]
+    else:
+        (tmp_path / "tiles.mtl").write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd -bm 1 {map_kd}\n")
+        materials = ["skin"] * 4
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _, out = _plate_run(tmp_path, formats=("exr", "png", "glb"), materials=materials)
+    said = [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+    assert not [m for m in said if "texture" in m or "base-colour" in m or "grey" in m], said
+    from crackbake.exchange.exr import read_exr
+
+    tiles = {}
+    for number in NUMBERS:
+        planes, _ = read_exr(out / f"tiles_cracks.{number}.exr")
+        mask, occ = planes["crack.mask.V"], planes["crack.occlusion.V"]
+        base = _png(out / f"tiles_basecolor.{number}.png")
+        tiles[number] = base
+        off = (mask == 0) & (occ == 1)
+        assert off.mean() > 0.5
+        np.testing.assert_array_equal(base[off], tex[number][off])  # the tile's own texture
+        on = mask > 0.5
+        assert on.any() == (number != 1011)  # 1011 has no crack
+        # On the cracks: the texture darkened towards the crack colour (the same composite
+        # as one page, by hand: texture x (1 + m (crack / surface - 1)) x occlusion^(1/2.2)).
+        from crackbake.exchange.materials import CRACK_RGB, SURFACE_RGB
+
+        m, o = mask.astype(float)[..., None], occ.astype(float)[..., None]
+        want = tex[number] * (1 + m * (CRACK_RGB / SURFACE_RGB - 1)) * o ** (1 / 2.2)
+        np.testing.assert_allclose(base, want, atol=1.5)
+        assert (base[on] < tex[number][on]).all()
+    # The GLB's packed page (2 x 2 cells of 64, tile i in cell (i % 2, i // 2) from the
+    # bottom left) is made of the composited tiles.
+    doc, binary = read_glb(out / "tiles.glb")
+    ref = doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+    view = doc["bufferViews"][doc["images"][doc["textures"][ref]["source"]]["bufferView"]]
+    from io import BytesIO
+
+    from PIL import Image
+
+    start = view.get("byteOffset", 0)
+    page = np.asarray(Image.open(BytesIO(binary[start:start + view["byteLength"]])).convert("RGB"))
+    assert page.shape == (128, 128, 3)
+    for i, number in enumerate(NUMBERS):
+        r0, c0 = (1 - i // 2) * 64, (i % 2) * 64
+        np.testing.assert_array_equal(page[r0:r0 + 64, c0:c0 + 64], tiles[number])
+
+
+def test_one_image_on_a_udim_layout_lies_under_every_tile_with_one_line(tmp_path):
+    tex = _tile_textures(tmp_path)[1002]
+    from PIL import Image
+
+    Image.fromarray(tex).save(tmp_path / "albedo.png")
+    (tmp_path / "tiles.mtl").write_text("newmtl skin\nmap_Kd albedo.png\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _, out = _plate_run(tmp_path, formats=("exr", "png"), materials=["skin"] * 4)
+    said = [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+    one = [m for m in said if "is one image on a UDIM layout" in m]
+    assert len(one) == 1 and "albedo.png" in one[0] and "<name>.<UDIM>.png" in one[0], said
+    assert not any("not composited" in m for m in said)
+    from crackbake.exchange.exr import read_exr
+
+    for number in NUMBERS:
+        planes, _ = read_exr(out / f"tiles_cracks.{number}.exr")
+        off = (planes["crack.mask.V"] == 0) & (planes["crack.occlusion.V"] == 1)
+        np.testing.assert_array_equal(_png(out / f"tiles_basecolor.{number}.png")[off], tex[off])
+
+
+def test_a_missing_tile_texture_is_grey_with_one_warning(tmp_path):
+    tex = _tile_textures(tmp_path)
+    (tmp_path / "albedo.1011.png").unlink()
+    (tmp_path / "tiles.mtl").write_text("newmtl skin\nmap_Kd albedo.<UDIM>.png\n")
+    with pytest.warns(CrackbakeWarning, match=r"albedo.<UDIM>.png has no file for tile 1011; "
+                      r"grey there \(add albedo.1011.png"):  # fmt: skip
+        _, out = _plate_run(tmp_path, formats=("png",), materials=["skin"] * 4)
+    from crackbake.exchange.materials import SURFACE_RGB
+
+    grey = _png(out / "tiles_basecolor.1011.png")  # no crack on 1011: the plain surface
+    assert (grey == SURFACE_RGB.astype(np.uint8)).all(axis=-1).mean() > 0.9
+    base = _png(out / "tiles_basecolor.1001.png")
+    assert (base == tex[1001]).all(axis=-1).mean() > 0.5
+
+
+def test_the_texture_sets_a_mtl_names(tmp_path):
+    from crackbake.io.texture import _udim_template
+
+    assert _udim_template(["a.<UDIM>.png"]) == "a.<UDIM>.png"
+    assert _udim_template(["a.%(UDIM)d.exr"]) == "a.<UDIM>.exr"
+    assert _udim_template(["tex/a_1001.tif"]) == "tex/a_<UDIM>.tif"
+    assert _udim_template(["a.1001.png", "a.1002.png"]) == "a.<UDIM>.png"
+    assert _udim_template(["a.png"]) is None
+    assert _udim_template(["a.1001.png", "b.1002.png"]) is None  # two sets
+    assert _udim_template(["a.0042.png"]) is None  # not a tile number
+    assert _udim_template(["a.<UDIM>.png", "b.png"]) is None
