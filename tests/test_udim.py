@@ -128,11 +128,14 @@ def test_tiles_bake_as_one_atlas_continuous_across_tile_edges(gl_ctx):
 
 
 def _plate_run(tmp_path, formats=("exr", "png", "glb", "preview"), target="gltf", res=64,
-               materials=None, extra=()):
+               materials=None, extra=(), one_page=False):
     """Bake the plate written as ``tiles.obj`` with the crossing cracks (:data:`LINES`).
     ``materials``: one material name per square (``usemtl`` before its faces, ``mtllib
-    tiles.mtl``: the caller writes it); ``extra``: more CLI-like keywords for RunParams."""
+    tiles.mtl``: the caller writes it); ``extra``: more keywords for RunParams; ``one_page``:
+    the same plate with its UVs halved onto one 0-1 page (tile (i, j) -> quadrant (i, j))."""
     mesh = tiled_plate()
+    if one_page:
+        mesh = make_mesh(mesh.vertices, mesh.faces, mesh.uv / 2, source="tiles.obj")
     obj = tmp_path / "tiles.obj"
     lines = [f"v {x} {y} {z}" for x, y, z in mesh.vertices]
     lines += [f"vt {u} {v}" for u, v in mesh.uv]
@@ -534,3 +537,42 @@ def test_the_texture_sets_a_mtl_names(tmp_path):
     assert _udim_template(["a.1001.png", "b.1002.png"]) is None  # two sets
     assert _udim_template(["a.0042.png"]) is None  # not a tile number
     assert _udim_template(["a.<UDIM>.png", "b.png"]) is None
+
+
+def test_decals_on_udim_tiles_are_the_one_page_decals(tmp_path):
+    """Decals are projector images: the same plate with its UVs on four tiles or halved onto
+    one page gives the same decal files and projectors, here one decal across the 1001 | 1002
+    edge (the y = 0.5 crack runs through it); the UDIM set is written beside them."""
+    from crackbake.params.impacts import parse_impact
+
+    extra = (("impacts", (parse_impact("1.0,0.5,0"),)), ("decal", 1.0), ("decal_res", 64))
+    runs = {}
+    for one_page in (False, True):
+        folder = tmp_path / ("page" if one_page else "udim")
+        folder.mkdir()
+        result, out = _plate_run(folder, formats=("png",), extra=extra, one_page=one_page)
+        runs[one_page] = (result, out)
+    (tiled, out_t), (page, out_p) = runs[False], runs[True]
+    assert tiled.manifest["uv"]["udim"] and not page.manifest["uv"].get("udim")
+    assert (out_t / "tiles_mask.1002.png").is_file() and not (out_t / "tiles_mask.png").exists()
+    doc_t = json.loads((out_t / "decals.json").read_text())
+    doc_p = json.loads((out_p / "decals.json").read_text())
+    (entry_t,), (entry_p,) = doc_t["decals"], doc_p["decals"]
+    np.testing.assert_allclose(entry_t["matrix"], entry_p["matrix"], atol=1e-12)
+    assert entry_t["files"] == entry_p["files"]
+    for role, name in entry_t["files"].items():
+        a, b = _png_any(out_t / name), _png_any(out_p / name)
+        np.testing.assert_array_equal(a, b, err_msg=role)
+    alpha = _png_any(out_t / entry_t["files"]["alpha"])
+    # The crack along y = 0.5 crosses the decal's middle row on both sides of x = 1.
+    assert alpha[30:34, 4:28].max() > 200 and alpha[30:34, 36:60].max() > 200
+    assert alpha[:20, :56].max() == 0  # (the x = 1.5 crack runs along its right edge)
+    names = {f["name"] for f in tiled.files}
+    assert {"decals.json", entry_t["files"]["alpha"]} <= names
+
+
+def _png_any(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as im:
+        return np.asarray(im)
