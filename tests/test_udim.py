@@ -511,6 +511,20 @@ def test_one_image_on_a_udim_layout_lies_under_every_tile_with_one_line(tmp_path
         np.testing.assert_array_equal(_png(out / f"tiles_basecolor.{number}.png")[off], tex[off])
 
 
+def test_a_numbered_image_that_is_no_tile_set_is_one_image(tmp_path):
+    from PIL import Image
+
+    from crackbake.io.texture import base_color_tiles
+
+    tex = _tile_textures(tmp_path)[1012]
+    Image.fromarray(tex).save(tmp_path / "photo_2048.png")  # a number, but no tile of it
+    (tmp_path / "tiles.mtl").write_text("newmtl skin\nmap_Kd photo_2048.png\n")
+    (tmp_path / "tiles.obj").write_text("mtllib tiles.mtl\nusemtl skin\nv 0 0 0\n")
+    with pytest.warns(CrackbakeWarning, match="photo_2048.png is one image on a UDIM layout"):
+        got = base_color_tiles(tmp_path / "tiles.obj", [1001, 1002], 64)
+    assert len(got) == 2 and all((t == tex).all() for t in got)
+
+
 def test_a_missing_tile_texture_is_grey_with_one_warning(tmp_path):
     tex = _tile_textures(tmp_path)
     (tmp_path / "albedo.1011.png").unlink()

@@ -113,9 +113,14 @@ def base_color_tiles(
         files = _guarded(path, lambda: _obj_texture_files(path, allow_outside))
         if not files:
             return None
-        template = _udim_template([name for _, name in files.values()])
+        names = [name for _, name in files.values()]
+        base = next(iter(files.values()))[0]
+        template = _udim_template(names)
+        tokened = any(t in names[0] for t in UDIM_TOKENS)
+        if template is not None and len(names) == 1 and not tokened and not any(
+                os.path.exists(base / template.replace("<UDIM>", str(n))) for n in numbers):
+            template = None  # photo_2048.png: a number, but no tile of it exists: one image
         if template is not None:
-            base = next(iter(files.values()))[0]
             return _guarded(path, lambda: _tiles(path, base, template, numbers, res,
                                                  allow_outside))  # fmt: skip
         chosen = _one(set(files), path)  # several files that are not one set: grey, warned
