@@ -5,6 +5,7 @@ small text of the file is parsed (OBJ ``mtllib``/``usemtl`` lines, the glTF JSON
 is never read twice.  The texture is returned resampled to the bake's square page with row 0 the
 top of the image, which is ``v = 1`` in both OBJ and glTF (glTF's ``v`` runs down from the top
 of the image, trimesh flips it to ``v`` up on load), so texels line up with the baked maps.
+On UDIM tiles (:func:`base_color_tiles`) each tile reads its own file of the set the MTL names.
 """
 
 from __future__ import annotations
