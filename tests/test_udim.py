@@ -590,3 +590,18 @@ def _png_any(path: Path) -> np.ndarray:
 
     with Image.open(path) as im:
         return np.asarray(im)
+
+
+def test_a_tile_set_outside_the_mesh_folder_is_not_read(tmp_path):
+    from crackbake.io.texture import base_color_tiles
+
+    _tile_textures(tmp_path)  # the set one folder up from the mesh
+    asset = tmp_path / "asset"
+    asset.mkdir()
+    (asset / "tiles.mtl").write_text("newmtl skin\nmap_Kd ../albedo.<UDIM>.png\n")
+    (asset / "tiles.obj").write_text("mtllib tiles.mtl\nusemtl skin\nv 0 0 0\n")
+    with pytest.warns(CrackbakeWarning, match=r"'../albedo.1001.png' .* lies outside the mesh's "
+                      r"folder, so it was not read; using grey"):  # fmt: skip
+        assert base_color_tiles(asset / "tiles.obj", list(NUMBERS), 64) is None
+    got = base_color_tiles(asset / "tiles.obj", list(NUMBERS), 64, allow_outside=True)
+    assert [t.shape for t in got] == [(64, 64, 3)] * 4
