@@ -7,14 +7,19 @@ its UVs on 0-1 (the ordinary single-page path).  The distance clamp is fixed
 (``MAX_DISTANCE``): the default, 2 % of the mesh diagonal, grows with the plate and with it
 every texel's work (4 tiles at 1024: 19.6 s of bake with the default clamp, 13.5 s with the
 fixed one), which is not the tiles' cost.  Each configuration runs the real pipeline
-(``crackbake.pipeline.run`` with ``--cracks``) after a warm-up, ``--repeat`` times; the table
-gives the medians of the ``bake`` stage (the GPU bake of every tile) and of ``write`` (every
-file of every tile, the GLB packing included), and their ratio to N x the one-tile time.
+(``crackbake.pipeline.run`` with ``--cracks``) after a warm-up, ``--repeat`` times, the
+configurations taking turns (round 1 runs 1, 2, 4, 8 tiles, then round 2 ...), so a change in
+the machine's load falls on all of them alike; the table gives the medians of the ``bake``
+stage (the GPU bake of every tile) and of ``write`` (every file of every tile, the GLB packing
+included), their ratio to N x the one-tile time, and the ratio of the best runs (the least
+disturbed by other work on a shared machine).  ``--texture``: the asset has its own base colour
+(``albedo.<UDIM>.png``, one generated ``--res``² image per tile; ``albedo.png`` for one tile),
+composited under the cracks of every tile.
 
 Usage::
 
     python benchmarks/bench_udim.py [--res 1024] [--tiles 1 2 4 8] [--repeat 3]
-                                    [--formats exr,png,glb] [--markdown]
+                                    [--formats exr,png,glb] [--texture]
 """
 
 from __future__ import annotations
@@ -88,28 +93,55 @@ def write_network(mesh_path: Path, out: Path, tiles: int, cracks: int = 40, poin
     write_sidecar(CrackNetwork(cracks=out_cracks, mesh=mesh_info(mesh)), out)
 
 
-def measure(folder: Path, tiles: int, res: int, formats: tuple[str, ...], repeat: int) -> dict:
-    obj = folder / f"plate{tiles}.obj"
-    side = folder / f"plate{tiles}.json"
+def write_textures(obj: Path, tiles: int, res: int) -> None:
+    """An MTL naming ``albedo.<UDIM>.png`` (``albedo.png`` for one tile) and a noise texture
+    per tile, and the ``mtllib``/``usemtl`` lines in ``obj``."""
+    from PIL import Image
+
+    rng = np.random.default_rng(1)
+    one = tiles == 1
+    name = "albedo.png" if one else "albedo.<UDIM>.png"
+    (obj.parent / f"{obj.stem}.mtl").write_text(f"newmtl m\nmap_Kd {name}\n")
+    obj.write_text(f"mtllib {obj.stem}.mtl\nusemtl m\n" + obj.read_text())
+    for k in range(tiles):
+        img = rng.integers(40, 220, (res, res, 3), dtype=np.uint8)
+        number = 1001 + k % 10 + 10 * (k // 10)
+        Image.fromarray(img).save(obj.parent / name.replace("<UDIM>", str(number)))
+
+
+def prepare(folder: Path, tiles: int, res: int, formats: tuple[str, ...],
+            texture: bool) -> dict:
+    """The plate, its network and its run parameters; one warm-up run."""
+    sub = folder / f"t{tiles}"
+    sub.mkdir()
+    obj = sub / f"plate{tiles}.obj"
+    side = sub / f"plate{tiles}.json"
     write_plate(obj, tiles)
     write_network(obj, side, tiles)
+    if texture:
+        write_textures(obj, tiles, res)
     # A fixed distance clamp: the default (2 % of the diagonal) grows with the plate, and with
     # it the work per texel; the same clamp gives every tile the one-tile work.
     params = dict(mesh=obj, cracks=side, res=res, formats=formats, target="unreal",
                   max_distance=MAX_DISTANCE)
-    bake, write, total = [], [], []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        run(RunParams(out=folder / f"warm{tiles}", **params))
-        for r in range(repeat):
-            t = time.perf_counter()
-            result = run(RunParams(out=folder / f"o{tiles}_{r}", **params))
-            total.append(time.perf_counter() - t)
-            bake.append(result.manifest["timings_s"]["bake"])
-            write.append(result.manifest["timings_s"]["write"])
-    udim = result.manifest["uv"].get("udim")
-    return {"tiles": tiles, "udim": udim is not None, "bake": statistics.median(bake),
-            "write": statistics.median(write), "total": statistics.median(total)}
+    run(RunParams(out=sub / "warm", **params))
+    return params
+
+
+def once(folder: Path, tiles: int, params: dict, r: int) -> tuple[float, float, float, bool]:
+    """(bake, write, whole run) seconds of one run, and whether it was baked as UDIM tiles."""
+    t = time.perf_counter()
+    result = run(RunParams(out=folder / f"t{tiles}" / f"o{r}", **params))
+    total = time.perf_counter() - t
+    timings = result.manifest["timings_s"]
+    return timings["bake"], timings["write"], total, bool(result.manifest["uv"].get("udim"))
+
+
+def ratio(rows: list[dict], key: str, pick) -> dict[int, float]:
+    one = next((r for r in rows if r["tiles"] == 1), None)
+    if one is None:
+        return {}
+    return {r["tiles"]: pick(r[key]) / (r["tiles"] * pick(one[key])) for r in rows}
 
 
 def main() -> None:
@@ -118,22 +150,39 @@ def main() -> None:
     ap.add_argument("--tiles", type=int, nargs="+", default=[1, 2, 4, 8])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--formats", default="exr,png,glb")
-    ap.add_argument("--markdown", action="store_true")
+    ap.add_argument("--texture", action="store_true")
     args = ap.parse_args()
     formats = tuple(args.formats.split(","))
-    with tempfile.TemporaryDirectory(prefix="bench_udim_") as tmp:
-        rows = [measure(Path(tmp), n, args.res, formats, args.repeat) for n in args.tiles]
-    one = next((r for r in rows if r["tiles"] == 1), None)
-    head = "| tiles | UDIM | bake s | bake / (N x one) | write s | write / (N x one) | run s |"
-    print(f"res {args.res} per tile, formats {args.formats}, medians of {args.repeat}")
-    print(head)
-    print("|---:|:--:|---:|---:|---:|---:|---:|")
+    rows = {n: {"tiles": n, "bake": [], "write": [], "total": [], "udim": False}
+            for n in args.tiles}
+    with warnings.catch_warnings(), tempfile.TemporaryDirectory(prefix="bench_udim_") as tmp:
+        warnings.simplefilter("ignore")
+        folder = Path(tmp)
+        params = {n: prepare(folder, n, args.res, formats, args.texture) for n in args.tiles}
+        for r in range(args.repeat):  # the configurations take turns
+            for n in args.tiles:
+                bake, write, total, udim = once(folder, n, params[n], r)
+                rows[n]["bake"].append(bake)
+                rows[n]["write"].append(write)
+                rows[n]["total"].append(total)
+                rows[n]["udim"] = udim
+    rows = list(rows.values())
+    med = statistics.median
+    rb, rw, rt = (ratio(rows, k, med) for k in ("bake", "write", "total"))
+    bb = ratio(rows, "bake", min)
+    print(f"res {args.res} per tile, formats {args.formats}, texture {args.texture}, "
+          f"medians of {args.repeat} (configurations in turn)")
+    print("| tiles | UDIM | bake s | bake / (N x one) | best bake / (N x one) | write s | "
+          "write / (N x one) | run s | run / (N x one) |")
+    print("|---:|:--:|---:|---:|---:|---:|---:|---:|---:|")
     for r in rows:
         n = r["tiles"]
-        rb = f"{r['bake'] / (n * one['bake']):.2f}" if one else "-"
-        rw = f"{r['write'] / (n * one['write']):.2f}" if one else "-"
-        print(f"| {n} | {'yes' if r['udim'] else 'no'} | {r['bake']:.3f} | {rb} | "
-              f"{r['write']:.3f} | {rw} | {r['total']:.2f} |")
+
+        def f(d, n=n):
+            return f"{d[n]:.2f}" if n in d else "-"
+
+        print(f"| {n} | {'yes' if r['udim'] else 'no'} | {med(r['bake']):.3f} | {f(rb)} | "
+              f"{f(bb)} | {med(r['write']):.3f} | {f(rw)} | {med(r['total']):.2f} | {f(rt)} |")
 
 
 if __name__ == "__main__":

@@ -127,12 +127,25 @@ def test_tiles_bake_as_one_atlas_continuous_across_tile_edges(gl_ctx):
     assert all(p.scales == tiles.scales for p in tiles.pages)
 
 
-def _plate_run(tmp_path, formats=("exr", "png", "glb", "preview"), target="gltf", res=64):
+def _plate_run(tmp_path, formats=("exr", "png", "glb", "preview"), target="gltf", res=64,
+               materials=None, extra=(), one_page=False):
+    """Bake the plate written as ``tiles.obj`` with the crossing cracks (:data:`LINES`).
+    ``materials``: one material name per square (``usemtl`` before its faces, ``mtllib
+    tiles.mtl``: the caller writes it); ``extra``: more keywords for RunParams; ``one_page``:
+    the same plate with its UVs halved onto one 0-1 page (tile (i, j) -> quadrant (i, j))."""
     mesh = tiled_plate()
+    if one_page:
+        mesh = make_mesh(mesh.vertices, mesh.faces, mesh.uv / 2, source="tiles.obj")
     obj = tmp_path / "tiles.obj"
     lines = [f"v {x} {y} {z}" for x, y, z in mesh.vertices]
     lines += [f"vt {u} {v}" for u, v in mesh.uv]
-    lines += [f"f {a}/{a} {b}/{b} {c}/{c}" for a, b, c in mesh.faces + 1]
+    per_square = len(mesh.faces) // 4
+    if materials is not None:
+        lines.insert(0, "mtllib tiles.mtl")
+    for k, (a, b, c) in enumerate(mesh.faces + 1):
+        if materials is not None and k % per_square == 0:
+            lines.append(f"usemtl {materials[k // per_square]}")
+        lines.append(f"f {a}/{a} {b}/{b} {c}/{c}")
     obj.write_text("\n".join(lines) + "\n")
     loaded = load_mesh(obj)
     cracks = []
@@ -146,7 +159,7 @@ def _plate_run(tmp_path, formats=("exr", "png", "glb", "preview"), target="gltf"
     write_sidecar(CrackNetwork(cracks=cracks, mesh=mesh_info(loaded)), side)
     out = tmp_path / f"out_{target}"
     result = run(RunParams(mesh=obj, cracks=side, res=res, out=out, formats=formats,
-                           target=target))  # fmt: skip
+                           target=target, **dict(extra)))  # fmt: skip
     return result, out
 
 
@@ -394,3 +407,201 @@ def test_islands_overlapping_on_one_tile_warn_as_overlap(gl_ctx):
     np.testing.assert_array_equal(uvm.udim, [[0, 0], [1, 0], [1, 1]])
     # Three islands of one area on three tiles, the one on 1002 covered twice: 1/3 of the texels.
     assert uvm.overlap_fraction == pytest.approx(1 / 3, abs=0.02)
+
+
+NUMBERS = (1001, 1002, 1011, 1012)
+
+
+def _tile_textures(folder: Path, name: str = "albedo.{}.png", res: int = 64) -> dict:
+    """A distinct 8-bit texture per tile (its own hue plus a fine checker, so a texel from the
+    wrong tile or place shows), saved as ``name.format(number)``; number -> (res, res, 3)."""
+    from PIL import Image
+
+    y, x = np.mgrid[:res, :res]
+    out = {}
+    for k, number in enumerate(NUMBERS):
+        img = np.empty((res, res, 3), np.uint8)
+        img[...] = [60 + 40 * k, 200 - 35 * k, 90 + 20 * (k % 2)]
+        img[(x // 4 + y // 4) % 2 == 1] += 25
+        out[number] = img
+        Image.fromarray(img).save(folder / name.format(number))
+    return out
+
+
+def _png(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGB"))
+
+
+@pytest.mark.parametrize("map_kd", ["albedo.<UDIM>.png", "albedo.%(UDIM)d.png",
+                                    "albedo.1001.png", "per-material"])  # fmt: skip
+def test_each_tile_composites_the_cracks_over_its_own_texture(tmp_path, map_kd):
+    from tests.test_pipeline import read_glb
+
+    tex = _tile_textures(tmp_path)
+    if map_kd == "per-material":  # Maya-style: one material per tile, each naming its file
+        (tmp_path / "tiles.mtl").write_text("".join(
+            f"newmtl m{n}\nmap_Kd albedo.{n}.png\n" for n in NUMBERS))
+        materials = [f"m{n}" for n in NUMBERS]
+    else:
+        (tmp_path / "tiles.mtl").write_text(f"newmtl skin\nKd 1 1 1\nmap_Kd -bm 1 {map_kd}\n")
+        materials = ["skin"] * 4
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _, out = _plate_run(tmp_path, formats=("exr", "png", "glb"), materials=materials)
+    said = [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+    assert not [m for m in said if "texture" in m or "base-colour" in m or "grey" in m], said
+    from crackbake.exchange.exr import read_exr
+
+    tiles = {}
+    for number in NUMBERS:
+        planes, _ = read_exr(out / f"tiles_cracks.{number}.exr")
+        mask, occ = planes["crack.mask.V"], planes["crack.occlusion.V"]
+        base = _png(out / f"tiles_basecolor.{number}.png")
+        tiles[number] = base
+        off = (mask == 0) & (occ == 1)
+        assert off.mean() > 0.5
+        np.testing.assert_array_equal(base[off], tex[number][off])  # the tile's own texture
+        on = mask > 0.5
+        assert on.any() == (number != 1011)  # 1011 has no crack
+        # On the cracks: the texture darkened towards the crack colour (the same composite
+        # as one page, by hand: texture x (1 + m (crack / surface - 1)) x occlusion^(1/2.2)).
+        from crackbake.exchange.materials import CRACK_RGB, SURFACE_RGB
+
+        m, o = mask.astype(float)[..., None], occ.astype(float)[..., None]
+        want = tex[number] * (1 + m * (CRACK_RGB / SURFACE_RGB - 1)) * o ** (1 / 2.2)
+        np.testing.assert_allclose(base, want, atol=1.5)
+        assert (base[on] < tex[number][on]).all()
+    # The GLB's packed page (2 x 2 cells of 64, tile i in cell (i % 2, i // 2) from the
+    # bottom left) is made of the composited tiles.
+    doc, binary = read_glb(out / "tiles.glb")
+    ref = doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"]
+    view = doc["bufferViews"][doc["images"][doc["textures"][ref]["source"]]["bufferView"]]
+    from io import BytesIO
+
+    from PIL import Image
+
+    start = view.get("byteOffset", 0)
+    page = np.asarray(Image.open(BytesIO(binary[start:start + view["byteLength"]])).convert("RGB"))
+    assert page.shape == (128, 128, 3)
+    for i, number in enumerate(NUMBERS):
+        r0, c0 = (1 - i // 2) * 64, (i % 2) * 64
+        np.testing.assert_array_equal(page[r0:r0 + 64, c0:c0 + 64], tiles[number])
+
+
+def test_one_image_on_a_udim_layout_lies_under_every_tile_with_one_line(tmp_path):
+    tex = _tile_textures(tmp_path)[1002]
+    from PIL import Image
+
+    Image.fromarray(tex).save(tmp_path / "albedo.png")
+    (tmp_path / "tiles.mtl").write_text("newmtl skin\nmap_Kd albedo.png\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _, out = _plate_run(tmp_path, formats=("exr", "png"), materials=["skin"] * 4)
+    said = [str(w.message) for w in caught if issubclass(w.category, CrackbakeWarning)]
+    one = [m for m in said if "is one image on a UDIM layout" in m]
+    assert len(one) == 1 and "albedo.png" in one[0] and "<name>.<UDIM>.png" in one[0], said
+    assert not any("not composited" in m for m in said)
+    from crackbake.exchange.exr import read_exr
+
+    for number in NUMBERS:
+        planes, _ = read_exr(out / f"tiles_cracks.{number}.exr")
+        off = (planes["crack.mask.V"] == 0) & (planes["crack.occlusion.V"] == 1)
+        np.testing.assert_array_equal(_png(out / f"tiles_basecolor.{number}.png")[off], tex[off])
+
+
+def test_a_numbered_image_that_is_no_tile_set_is_one_image(tmp_path):
+    from PIL import Image
+
+    from crackbake.io.texture import base_color_tiles
+
+    tex = _tile_textures(tmp_path)[1012]
+    Image.fromarray(tex).save(tmp_path / "photo_2048.png")  # a number, but no tile of it
+    (tmp_path / "tiles.mtl").write_text("newmtl skin\nmap_Kd photo_2048.png\n")
+    (tmp_path / "tiles.obj").write_text("mtllib tiles.mtl\nusemtl skin\nv 0 0 0\n")
+    with pytest.warns(CrackbakeWarning, match="photo_2048.png is one image on a UDIM layout"):
+        got = base_color_tiles(tmp_path / "tiles.obj", [1001, 1002], 64)
+    assert len(got) == 2 and all((t == tex).all() for t in got)
+
+
+def test_a_missing_tile_texture_is_grey_with_one_warning(tmp_path):
+    tex = _tile_textures(tmp_path)
+    (tmp_path / "albedo.1011.png").unlink()
+    (tmp_path / "tiles.mtl").write_text("newmtl skin\nmap_Kd albedo.<UDIM>.png\n")
+    with pytest.warns(CrackbakeWarning, match=r"albedo.<UDIM>.png has no file for tile 1011; "
+                      r"grey there \(add albedo.1011.png"):  # fmt: skip
+        _, out = _plate_run(tmp_path, formats=("png",), materials=["skin"] * 4)
+    from crackbake.exchange.materials import SURFACE_RGB
+
+    grey = _png(out / "tiles_basecolor.1011.png")  # no crack on 1011: the plain surface
+    assert (grey == SURFACE_RGB.astype(np.uint8)).all(axis=-1).mean() > 0.9
+    base = _png(out / "tiles_basecolor.1001.png")
+    assert (base == tex[1001]).all(axis=-1).mean() > 0.5
+
+
+def test_the_texture_sets_a_mtl_names(tmp_path):
+    from crackbake.io.texture import _udim_template
+
+    assert _udim_template(["a.<UDIM>.png"]) == "a.<UDIM>.png"
+    assert _udim_template(["a.%(UDIM)d.exr"]) == "a.<UDIM>.exr"
+    assert _udim_template(["tex/a_1001.tif"]) == "tex/a_<UDIM>.tif"
+    assert _udim_template(["a.1001.png", "a.1002.png"]) == "a.<UDIM>.png"
+    assert _udim_template(["a.png"]) is None
+    assert _udim_template(["a.1001.png", "b.1002.png"]) is None  # two sets
+    assert _udim_template(["a.0042.png"]) is None  # not a tile number
+    assert _udim_template(["a.<UDIM>.png", "b.png"]) is None
+
+
+def test_decals_on_udim_tiles_are_the_one_page_decals(tmp_path):
+    """Decals are projector images: the same plate with its UVs on four tiles or halved onto
+    one page gives the same decal files and projectors, here one decal across the 1001 | 1002
+    edge (the y = 0.5 crack runs through it); the UDIM set is written beside them."""
+    from crackbake.params.impacts import parse_impact
+
+    extra = (("impacts", (parse_impact("1.0,0.5,0"),)), ("decal", 1.0), ("decal_res", 64))
+    runs = {}
+    for one_page in (False, True):
+        folder = tmp_path / ("page" if one_page else "udim")
+        folder.mkdir()
+        result, out = _plate_run(folder, formats=("png",), extra=extra, one_page=one_page)
+        runs[one_page] = (result, out)
+    (tiled, out_t), (page, out_p) = runs[False], runs[True]
+    assert tiled.manifest["uv"]["udim"] and not page.manifest["uv"].get("udim")
+    assert (out_t / "tiles_mask.1002.png").is_file() and not (out_t / "tiles_mask.png").exists()
+    doc_t = json.loads((out_t / "decals.json").read_text())
+    doc_p = json.loads((out_p / "decals.json").read_text())
+    (entry_t,), (entry_p,) = doc_t["decals"], doc_p["decals"]
+    np.testing.assert_allclose(entry_t["matrix"], entry_p["matrix"], atol=1e-12)
+    assert entry_t["files"] == entry_p["files"]
+    for role, name in entry_t["files"].items():
+        a, b = _png_any(out_t / name), _png_any(out_p / name)
+        np.testing.assert_array_equal(a, b, err_msg=role)
+    alpha = _png_any(out_t / entry_t["files"]["alpha"])
+    # The crack along y = 0.5 crosses the decal's middle row on both sides of x = 1.
+    assert alpha[30:34, 4:28].max() > 200 and alpha[30:34, 36:60].max() > 200
+    assert alpha[:20, :56].max() == 0  # (the x = 1.5 crack runs along its right edge)
+    names = {f["name"] for f in tiled.files}
+    assert {"decals.json", entry_t["files"]["alpha"]} <= names
+
+
+def _png_any(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as im:
+        return np.asarray(im)
+
+
+def test_a_tile_set_outside_the_mesh_folder_is_not_read(tmp_path):
+    from crackbake.io.texture import base_color_tiles
+
+    _tile_textures(tmp_path)  # the set one folder up from the mesh
+    asset = tmp_path / "asset"
+    asset.mkdir()
+    (asset / "tiles.mtl").write_text("newmtl skin\nmap_Kd ../albedo.<UDIM>.png\n")
+    (asset / "tiles.obj").write_text("mtllib tiles.mtl\nusemtl skin\nv 0 0 0\n")
+    with pytest.warns(CrackbakeWarning, match=r"'../albedo.1001.png' .* lies outside the mesh's "
+                      r"folder, so it was not read; using grey"):  # fmt: skip
+        assert base_color_tiles(asset / "tiles.obj", list(NUMBERS), 64) is None
+    got = base_color_tiles(asset / "tiles.obj", list(NUMBERS), 64, allow_outside=True)
+    assert [t.shape for t in got] == [(64, 64, 3)] * 4

@@ -112,6 +112,43 @@ def test_up_axis(tmp_path, up, axis):
     assert abs(np.linalg.det(m) - 1) < 1e-12  # a rotation: nothing mirrored
 
 
+def _pyramid(z_up: bool):
+    """A square pyramid (base 2 x 2, height 1.5) standing on its base: on z = 0 (Z-up, as a scan
+    or CAD export) or on y = 0 (Y-up); UVs from the base plane."""
+    from conftest import make_mesh
+
+    base = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float)
+    v = np.c_[base, np.zeros(4)]
+    v = np.vstack([v, [0.0, 0.0, 1.5]])
+    faces = np.array([[0, 2, 1], [0, 3, 2], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    uv = (v[:, :2] + 1) / 2
+    if not z_up:  # (x, y, z) -> (x, z, -y): a right-handed quarter turn, the base on y = 0
+        v = v[:, [0, 2, 1]] * [1, 1, -1]
+    mesh = make_mesh(v, faces, uv, source="pyramid.obj")
+    n = len(v)
+    return mesh, UVMesh(vertices=mesh.vertices, faces=mesh.faces, uv=mesh.uv,
+                        normals=mesh.normals, vertex_map=np.arange(n), method="kept",
+                        overlap_fraction=0.0, padding_px=0,
+                        tangents=np.tile([1.0, 0.0, 0.0, 1.0], (n, 1)))  # fmt: skip
+
+
+@pytest.mark.parametrize("z_up", [False, True])
+def test_a_z_up_and_a_y_up_mesh_keep_their_points_and_say_their_up_axis(tmp_path, z_up):
+    """No --up: the stage's upAxis is the mesh's own (the preview's guess), the points are
+    written as they are (no turn), so a DCC reading upAxis stands both the same way up."""
+    mesh, uvm = _pyramid(z_up)
+    out, _, _ = _write(tmp_path, uvm=uvm, mesh=mesh, name=f"z{z_up}")
+    stage = _open(out / "rock.usda")
+    assert UsdGeom.GetStageUpAxis(stage) == ("Z" if z_up else "Y")
+    prim = stage.GetPrimAtPath("/rock/mesh")
+    world = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(0))
+    np.testing.assert_allclose(world, np.eye(4), atol=1e-12)
+    points = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get())
+    np.testing.assert_allclose(points, uvm.vertices, atol=1e-6)
+    apex = points[np.argmax(points[:, 2 if z_up else 1])]
+    np.testing.assert_allclose(apex, [0, 0, 1.5] if z_up else [0, 1.5, 0], atol=1e-6)
+
+
 def test_validators_find_nothing(tmp_path):
     """Every UsdValidation validator (the successor of usdchecker's ComplianceChecker) but the
     usdz package rules: no errors.  usd-core's registry has no MaterialX node definitions (no

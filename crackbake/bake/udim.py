@@ -218,12 +218,18 @@ class PackedPage:
     normal: np.ndarray | None
     occlusion: np.ndarray | None
     look: object = None
+    texture: np.ndarray | None = None
 
 
-def packed_maps(maps: UdimMaps, max_size: int) -> PackedPage:
+def packed_maps(maps: UdimMaps, max_size: int, textures: list | None = None) -> PackedPage:
     """The tiles box-filtered (by halvings) into square cells of a page at most ``max_size``
-    texels wide (the GLB's texture limit), laid out as :func:`packed_uv` lays out the UVs."""
-    from crackbake.exchange.materials import downsample
+    texels wide (the GLB's texture limit), laid out as :func:`packed_uv` lays out the UVs.
+
+    ``textures``: the asset's base colour per tile ((res, res, 3) uint8, or None for a tile
+    without one), packed the same way into ``PackedPage.texture``; tiles without one and
+    empty cells get the grey the untextured base colour uses, so they composite as before.
+    """
+    from crackbake.exchange.materials import SURFACE_RGB, downsample
 
     cols, rows = grid_size(len(maps.pages))
     cell = maps.res
@@ -240,6 +246,10 @@ def packed_maps(maps: UdimMaps, max_size: int) -> PackedPage:
     occ = None
     if first.occlusion is not None:
         occ = np.ones(shape, first.occlusion.dtype if cell == maps.res else np.float32)
+    texture = None
+    if textures is not None and any(t is not None for t in textures):
+        texture = np.empty((*shape, 3), np.uint8)
+        texture[:] = SURFACE_RGB.astype(np.uint8)
     for i, p in enumerate(maps.pages):
         col, row = i % cols, i // cols
         # Image rows run from the top (v = 1): cell row 0 (v 0..1/rows) is the last band.
@@ -252,7 +262,11 @@ def packed_maps(maps: UdimMaps, max_size: int) -> PackedPage:
             normal[r0:r0 + cell, c0:c0 + cell] = n
         if occ is not None:
             occ[r0:r0 + cell, c0:c0 + cell] = downsample(p.occlusion, cell)
-    return PackedPage(res=max(shape), mask=mask, normal=normal, occlusion=occ, look=first.look)
+        if texture is not None and textures[i] is not None:
+            t = downsample(textures[i], cell)
+            texture[r0:r0 + cell, c0:c0 + cell] = t if t.dtype == np.uint8 else t + 0.5
+    return PackedPage(res=max(shape), mask=mask, normal=normal, occlusion=occ, look=first.look,
+                      texture=texture)  # fmt: skip
 
 
 def udim_name(name: str, number: int | str) -> str:

@@ -50,7 +50,7 @@ from crackbake.exchange.usd import UsdTextures, write_usd, write_usdz
 from crackbake.io.mesh import Mesh
 from crackbake.io.obj_lines import write_obj
 from crackbake.io.sidecar import write_sidecar
-from crackbake.io.texture import base_color_texture
+from crackbake.io.texture import base_color_texture, base_color_tiles
 from crackbake.network import CrackNetwork
 from crackbake.params import RunParams
 from crackbake.transaction.stage import OutputStage
@@ -407,7 +407,9 @@ def _udim_textures(textures: UsdTextures) -> UsdTextures:
 
 def _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective) -> None:
     """A UDIM set (:mod:`crackbake.bake.udim`): every map per tile, ``<name>.<UDIM>.<ext>``; the
-    GLB and the preview on the tiles packed into one page, UVs remapped (glTF has no UDIM)."""
+    GLB and the preview on the tiles packed into one page, UVs remapped (glTF has no UDIM).
+    Each tile's base colour composites the cracks over that tile's own texture
+    (:func:`~crackbake.io.texture.base_color_tiles`), as one page does over the asset's."""
     from dataclasses import replace
 
     from crackbake.bake.udim import packed_maps, packed_uv, udim_name
@@ -417,16 +419,10 @@ def _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, e
     exr = {"compression": params.exr_compression, "run": run_attributes(__version__, effective)}
     if "png" in formats:
         warn_udim_target(params.target)
-    colour = {"png", "glb", "preview", "usd"} & set(formats)
-    if colour and mesh.source and base_color_texture(mesh.source, 16,
-                                                     params.allow_outside_textures) is not None:
-        warnings.warn(
-            "the asset's base-colour texture is not composited under the cracks on UDIM tiles "
-            "(the base colour is grey with the cracks); composite the <stem>_mask.<UDIM>.png or "
-            "_data maps over your own tiles, or --uv unwrap for one page with the texture",
-            CrackbakeWarning,
-            stacklevel=4,
-        )
+    textures = None  # the asset's own base colour per tile, composited as on one page
+    if mesh.source and {"png", "glb", "preview", "usd"} & set(formats):
+        textures = base_color_tiles(mesh.source, maps.numbers, maps.res,
+                                    params.allow_outside_textures)  # fmt: skip
     if "usdz" in formats:
         warnings.warn(
             "--formats usdz: AR Quick Look (ARKit) reads no UDIM textures, so no .usdz is "
@@ -446,7 +442,7 @@ def _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, e
                 if stress is not None and "stress" in formats:
                     path = stage.path(f"{stem}_stress.{number}.exr")
                     jobs.append(pool.submit(_write_stress_exr, path, stress[k], **exr))
-                enc = _Encoder(pool, page, None)
+                enc = _Encoder(pool, page, None if textures is None else textures[k])
                 if "png" in formats:
                     normal_y = normal_convention(params.target, params.normal_y)
                     for f in TARGETS[params.target].files:
@@ -462,18 +458,19 @@ def _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, e
                 jobs.extend(frames)
             packed = None
             if {"glb", "preview"} & set(formats):
-                packed = packed_maps(maps, GLB_TEXTURE_MAX)
+                packed = packed_maps(maps, GLB_TEXTURE_MAX, textures)
                 flat = replace(uvmesh, uv=packed_uv(uvmesh.uv, uvmesh.faces, uvmesh.udim),
                                udim=None)  # fmt: skip
             if "glb" in formats:
-                enc = _Encoder(pool, packed, None)
+                enc = _Encoder(pool, packed, packed.texture)
                 size = min(packed.res, GLB_TEXTURE_MAX)
                 glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal",
                                                                        "orm")}
                 encoded = enc.start(set(glb_keys.values()))
                 jobs.extend(encoded.values())
             if "preview" in formats:
-                _write_preview(stage, mesh, flat, network, packed, None, ctx, params.up)
+                _write_preview(stage, mesh, flat, network, packed, packed.texture, ctx,
+                               params.up)
             write_sidecar(network, stage.path("cracks.json"))
             write_obj(network, stage.path("cracks.obj"))
             if "glb" in formats:

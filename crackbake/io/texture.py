@@ -5,6 +5,7 @@ small text of the file is parsed (OBJ ``mtllib``/``usemtl`` lines, the glTF JSON
 is never read twice.  The texture is returned resampled to the bake's square page with row 0 the
 top of the image, which is ``v = 1`` in both OBJ and glTF (glTF's ``v`` runs down from the top
 of the image, trimesh flips it to ``v`` up on load), so texels line up with the baked maps.
+On UDIM tiles (:func:`base_color_tiles`) each tile reads its own file of the set the MTL names.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import base64
 import io
 import json
 import os
+import re
 import struct
 import urllib.parse
 import warnings
@@ -61,16 +63,144 @@ def base_color_texture(
     suffix = path.suffix.lower()
     if not path.is_file():  # meshes built in memory name a source that is not a file
         return None
-    try:
+
+    def find():
         if suffix == ".obj":
-            found = _obj_texture(path, allow_outside)
-        elif suffix in (".gltf", ".glb"):
-            found = _gltf_texture(path, allow_outside)
-        else:
+            return _obj_texture(path, allow_outside)
+        if suffix in (".gltf", ".glb"):
+            return _gltf_texture(path, allow_outside)
+        return None
+
+    found = _guarded(path, lambda: _read(find(), path))
+    if found is None:
+        return None
+    return _resampled(*found, res, path)
+
+
+def base_color_tiles(
+    mesh_path: str | Path, numbers: list[int], res: int, allow_outside: bool = False
+) -> list[np.ndarray | None] | None:
+    """The asset's base colour per UDIM tile, each at ``res`` x ``res``, or ``None`` when it
+    has none.
+
+    An OBJ's ``map_Kd`` names a UDIM set as ``name.<UDIM>.png`` (also ``<udim>`` or
+    ``%(UDIM)d``), or as one tile of it (``name.1001.png``, ``name_1001.png``; several
+    materials naming ``name.1001.png``, ``name.1002.png``, ... are the same set): each tile
+    reads its own file.  A single image (no tile number; any glTF, which has no UDIM) lies
+    under every tile, as renderers repeat it on each (one warning says so).
+
+    Parameters
+    ----------
+    mesh_path : str or Path
+        The mesh file.
+    numbers : list of int
+        The used tiles' UDIM numbers (``UdimMaps.numbers``).
+    res : int
+        Texels per tile edge.
+    allow_outside : bool
+        As :func:`base_color_texture`.
+
+    Returns
+    -------
+    list of (res, res, 3) uint8 or None, or None
+        One entry per tile (``None`` for a tile whose file is missing: grey, one warning for
+        them all); ``None`` when the asset names no usable texture.
+    """
+    path = Path(mesh_path)
+    suffix = path.suffix.lower()
+    if not path.is_file():
+        return None
+    if suffix == ".obj":
+        files = _guarded(path, lambda: _obj_texture_files(path, allow_outside))
+        if not files:
             return None
-        name = found.name if isinstance(found, Path) else "embedded image"
-        if isinstance(found, Path):
-            found = read_bytes(found, f"{path.name}: its base-colour texture {found}")
+        names = [name for _, name in files.values()]
+        base = next(iter(files.values()))[0]
+        template = _udim_template(names)
+        tokened = any(t in names[0] for t in UDIM_TOKENS)
+        if template is not None and len(names) == 1 and not tokened and not any(
+                os.path.exists(base / template.replace("<UDIM>", str(n))) for n in numbers):
+            template = None  # photo_2048.png: a number, but no tile of it exists: one image
+        if template is not None:
+            return _guarded(path, lambda: _tiles(path, base, template, numbers, res,
+                                                 allow_outside))  # fmt: skip
+        chosen = _one(set(files), path)  # several files that are not one set: grey, warned
+        if chosen is None:
+            return None
+        found = _guarded(path, lambda: _read(
+            _existing(_named(path, *files[chosen], allow_outside), path), path))
+    elif suffix in (".gltf", ".glb"):
+        found = _guarded(path, lambda: _read(_gltf_texture(path, allow_outside), path))
+    else:
+        return None
+    if found is None:
+        return None
+    texture = _resampled(*found, res, path)
+    if texture is None:
+        return None
+    fix = ("glTF has no UDIM: an OBJ whose MTL names <name>.<UDIM>.png gives one texture per "
+           "tile" if suffix != ".obj" else "name the tiles <name>.<UDIM>.png, or "
+           "<name>.1001.png, ..., in the MTL for one texture per tile")
+    _warn(f"{path.name}: its base-colour texture {found[1]} is one image on a UDIM layout: it is "
+          f"composited under every tile, as renderers repeat it on each ({fix})")
+    return [texture] * len(numbers)
+
+
+#: The tokens a texture name may hold for the tile number (Mari, Blender, USD, MaterialX:
+#: ``<UDIM>``; Houdini, RenderMan: ``%(UDIM)d``).
+UDIM_TOKENS = ("<UDIM>", "<udim>", "%(UDIM)d")
+#: One tile of a UDIM set: ``name.1001.png`` or ``name_1001.png``.
+_TILE_NUMBER = re.compile(r"^(.*[._])(\d{4})(\.[^./]+)$")
+
+
+def _udim_template(names: list[str]) -> str | None:
+    """The set the MTL's ``map_Kd`` names spell, with ``<UDIM>`` for the tile number, or None
+    when they are not one UDIM set."""
+    if len(names) == 1:
+        for token in UDIM_TOKENS:
+            if token in names[0]:
+                return names[0].replace(token, "<UDIM>")
+    found = {_TILE_NUMBER.match(n) for n in names}
+    if None in found:
+        return None
+    templates = {f"{m.group(1)}<UDIM>{m.group(3)}" for m in found if int(m.group(2)) >= 1001}
+    return next(iter(templates)) if len(templates) == 1 and len(found) == len(names) else None
+
+
+def _tiles(path: Path, base: Path, template: str, numbers, res: int, allow_outside: bool):
+    """Each tile's file of the set ``template`` (``<UDIM>`` for the number), read and
+    resampled; missing tiles are None, with one warning naming them."""
+    out, missing = [], []
+    for number in numbers:
+        name = template.replace("<UDIM>", str(number))
+        target = _named(path, base, name, allow_outside)
+        if not os.path.exists(target):
+            missing.append(number)
+            out.append(None)
+            continue
+        blob = read_bytes(target, f"{path.name}: its base-colour texture {target}")
+        out.append(_resampled(blob, target.name, res, path))
+    if missing:
+        shown = ", ".join(map(str, missing))
+        _warn(f"{path.name}: its base-colour set {Path(template).name} has no file for tile"
+              f"{'s' if len(missing) > 1 else ''} {shown}; grey there (add "
+              f"{Path(template.replace('<UDIM>', str(missing[0]))).name} beside the others)")
+    return out if any(t is not None for t in out) else None
+
+
+def _read(found, path: Path):
+    """(bytes, name) of a texture found as a path or embedded bytes, or None."""
+    if found is None:
+        return None
+    if isinstance(found, Path):
+        return read_bytes(found, f"{path.name}: its base-colour texture {found}"), found.name
+    return found, "embedded image"
+
+
+def _guarded(path: Path, thunk):
+    """``thunk()``, or None with one warning when the texture cannot be read safely."""
+    try:
+        return thunk()
     except _Outside as exc:
         where = "" if exc.target == exc.name else f" ({exc.target})"
         _warn(
@@ -78,20 +208,14 @@ def base_color_texture(
             "was not read; using grey for the base colour (move it beside the mesh, or pass "
             "--allow-outside-textures to read it)"
         )
-        return None
     except NotRegularFile as exc:  # a FIFO or device named as a texture or material library
         _warn(f"{exc.label} is {exc.what}, not a regular file, so it was not read; using grey "
               "for the base colour")
-        return None
     except CrackbakeError as exc:  # e.g. an MTL file too big to be one
         _warn(f"{exc}; using grey for the base colour")
-        return None
     except (OSError, ValueError, KeyError, IndexError, TypeError, struct.error) as exc:
         _warn(f"{path.name}: its base-colour texture could not be read ({exc}); using grey")
-        return None
-    if found is None:
-        return None
-    return _resampled(found, res, path, name)
+    return None
 
 
 def _warn(message: str) -> None:
@@ -128,7 +252,7 @@ def _named(
 TEXTURE_PIXELS_MAX = 2**27
 
 
-def _resampled(blob: bytes, res: int, mesh_path: Path, name: str) -> np.ndarray | None:
+def _resampled(blob: bytes, name: str, res: int, mesh_path: Path) -> np.ndarray | None:
     from PIL import Image, UnidentifiedImageError
 
     try:
@@ -157,6 +281,16 @@ def _resampled(blob: bytes, res: int, mesh_path: Path, name: str) -> np.ndarray 
 
 
 def _obj_texture(path: Path, allow_outside: bool) -> Path | None:
+    files = _obj_texture_files(path, allow_outside)
+    chosen = _one(set(files), path)
+    if chosen is None:
+        return None
+    return _existing(_named(path, *files[chosen], allow_outside), path)
+
+
+def _obj_texture_files(path: Path, allow_outside: bool) -> dict[Path, tuple[Path, str]]:
+    """The ``map_Kd`` files of the OBJ's used materials: absolute path -> (folder, name as
+    written)."""
     data = read_bytes(path)
     libs = _directive(data, b"mtllib")
     used = set(_directive(data, b"usemtl"))
@@ -168,14 +302,10 @@ def _obj_texture(path: Path, allow_outside: bool) -> Path | None:
             continue
         for material, name in _mtl_maps(mtl, path).items():
             maps[material] = (mtl.parent, name)
-    files = {
+    return {
         Path(os.path.abspath(maps[m][0] / maps[m][1])): maps[m]
         for m in (used or set(maps)) if m in maps
     }  # fmt: skip
-    chosen = _one(set(files), path)
-    if chosen is None:
-        return None
-    return _existing(_named(path, *files[chosen], allow_outside), path)
 
 
 def _directive(data: bytes, word: bytes) -> list[str]:
