@@ -11,8 +11,8 @@ class CRACKBAKE_UL_impacts(bpy.types.UIList):
     def draw_item(self, context, layout, data, item, icon, active_data, active_prop, index=0,
                   flt_flag=0):
         # the point itself is the circle drawn in the viewport; the row keeps what is edited
-        split = layout.split(factor=0.2, align=True)
-        split.label(text=str(index + 1), icon="DOT")
+        split = layout.split(factor=0.15, align=True)
+        split.label(text=str(index + 1))
         row = split.row(align=True)
         row.prop(item, "radius", text="R")
         row.prop(item, "strength", text="S")
