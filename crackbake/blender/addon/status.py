@@ -86,18 +86,9 @@ def operator_text(active: bool) -> None:
 
 
 def redraw() -> None:
+    """Redraw the status bar of every window (clearing a status text nobody else holds)."""
     if bpy.app.background or _OPERATOR_TEXT["on"]:
         return
-    wm = bpy.context.window_manager
-    for window in getattr(wm, "windows", []):
-        workspace = getattr(window, "workspace", None)
-        if workspace is None:
-            continue
-        try:
-            with bpy.context.temp_override(window=window):
-                workspace.status_text_set_internal(None)
-        except (AttributeError, TypeError, RuntimeError):
-            if hasattr(bpy.context, "temp_override"):
-                continue
-            # Blender < 3.2 has no temp_override: the context's own window
-            workspace.status_text_set_internal(None)
+    for window in bpy.context.window_manager.windows:
+        with bpy.context.temp_override(window=window):  # Blender 3.2+
+            window.workspace.status_text_set_internal(None)
