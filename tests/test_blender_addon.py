@@ -4,7 +4,10 @@ clean user profile, baking spot, cancelling, reporting errors, and its ray-cast 
 
 from __future__ import annotations
 
+import ast
+import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -17,7 +20,13 @@ import pytest
 
 from crackbake import __version__
 from crackbake.blender.addon import runner
-from crackbake.blender.build import build_extension, default_command, zip_name
+from crackbake.blender.build import (
+    FOLDER,
+    build_extension,
+    default_command,
+    version_tuple,
+    zip_name,
+)
 from crackbake.params import parse_impact
 from tests.blender_runner import blender_python, run_blender
 from tests.test_bad_inputs import PLATE
@@ -40,11 +49,12 @@ def test_the_zip_is_a_blender_extension(addon_zip):
     assert addon_zip.name == f"crackbake_blender-{__version__}.zip" == zip_name()
     with zipfile.ZipFile(addon_zip) as zf:
         names = set(zf.namelist())
-        manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
-        defaults = zf.read("defaults.py").decode()
-    # every source of addon/ at the top of the archive, nothing else but the generated file
-    assert names == {p.name for p in ADDON.glob("*.py")} | {"blender_manifest.toml",
-                                                            "defaults.py"}
+        manifest = tomllib.loads(zf.read(f"{FOLDER}/blender_manifest.toml").decode())
+        defaults = zf.read(f"{FOLDER}/defaults.py").decode()
+        init = zf.read(f"{FOLDER}/__init__.py").decode()
+    # every source of addon/ in the archive's one folder, nothing else but the generated file
+    assert names == {f"{FOLDER}/{n}" for n in [p.name for p in ADDON.glob("*.py")]
+                     + ["blender_manifest.toml", "defaults.py"]}
     assert manifest["id"] == "crackbake" and manifest["type"] == "add-on"
     assert manifest["version"] == __version__
     assert manifest["blender_version_min"] == "4.2.0"
@@ -55,6 +65,21 @@ def test_the_zip_is_a_blender_extension(addon_zip):
     assert space["COMMAND"] == default_command() and space["VERSION"] == __version__
     assert "glass" in space["PRESETS"] and space["METHODS"] == ("iben", "thesis")
     assert space["HELP"]["seed"] == "Random seed."
+    # the legacy add-on's bl_info (Blender < 4.2), read as Blender reads it (a literal)
+    tree = ast.parse(init)
+    node = next(n for n in tree.body if isinstance(n, ast.Assign)
+                and getattr(n.targets[0], "id", "") == "bl_info")
+    bl_info = ast.literal_eval(node.value)
+    assert bl_info["version"] == tuple(int(p) for p in __version__.split(".")[:3])
+    assert bl_info["blender"] == (3, 4, 0) and bl_info["name"] == "Crackbake"
+    assert bl_info["location"] == "3D View > Sidebar > Crackbake"
+
+
+def test_the_version_tuple():
+    assert version_tuple("0.1.0") == (0, 1, 0)
+    assert version_tuple("1.2") == (1, 2, 0)
+    assert version_tuple("2.10.3rc1") == (2, 10, 3)
+    assert version_tuple("1.0.0.dev4") == (1, 0, 0)
 
 
 def test_the_zip_is_reproducible(addon_zip, tmp_path):
@@ -74,7 +99,7 @@ def test_the_command_writes_the_zip_and_refuses_a_file(tmp_path):
     path = Path(r.stdout.strip())
     assert path == tmp_path / "ext" / zip_name() and path.is_file()
     with zipfile.ZipFile(path) as zf:
-        assert "COMMAND = '/opt/cb/bin/crackbake'" in zf.read("defaults.py").decode()
+        assert "COMMAND = '/opt/cb/bin/crackbake'" in zf.read(f"{FOLDER}/defaults.py").decode()
     (tmp_path / "afile").write_text("x")
     r = cli("-o", "afile")
     assert r.returncode == 2
@@ -146,7 +171,9 @@ def _in_blender(addon_zip, tmp_path, mode: str, res: int, sim_faces: int, timeou
     assert out["installed"] == ["FINISHED"] and out["enabled"]
     assert out["command"] == default_command()
     assert out["tmp_left"] == []  # the exported mesh and its folder are gone
-    assert (tmp_path / "user" / "extensions" / "user_default" / "crackbake").is_dir()
+    # the zip's one folder is unpacked as the extension itself
+    assert (tmp_path / "user" / "extensions" / "user_default" / "crackbake" /
+            "blender_manifest.toml").is_file()
     return out
 
 
@@ -214,6 +241,18 @@ def test_install_bake_and_rebake_in_blender(addon_zip, tmp_path):
     assert grown["crack"] > grown["intact"] + 0.1, grown
     assert np.allclose(grown["intact_rgb"], [0.2, 0.4, 0.8], atol=0.05)  # the artist's colour
     assert ungrown["crack"] == pytest.approx(ungrown["intact"], abs=0.02), ungrown
+    # Blender's status bar: a blocking bake's line is gone when it returns; a background
+    # bake's ("Crackbake: <stage> <percent> %", with a Cancel button) is drawn from its start,
+    # follows crackbake's progress at every timer call, and is taken out of the header after
+    assert out["status_bar_after_wait"] == [None, False]
+    assert out["rebake_started"] == [["Crackbake: starting 0 %", 0.0], True]
+    run = out["rebake_run"]
+    assert run["status_bar"] and all(p["shown"] for p in run["status_bar"])
+    for p in run["status_bar"]:
+        assert p["line"][0] == f"Crackbake: {p['message']} {int(100 * p['fraction'])} %", p
+    assert run["status_bar"][-1]["fraction"] == 1.0  # crackbake said it was done
+    assert run["status_bar_after"] == {"line": None, "shown": False, "in_header": False}
+    assert out["rebake_status"].endswith("cracks") and not run["workdir_left"]
     # re-bake of the same network at 128: the same images, reloaded; no duplicates
     second = out["second"]
     assert out["rebake"] == ["FINISHED"] and out["rebake_params"]["cracks"].endswith(
@@ -300,3 +339,65 @@ def test_the_export_is_the_evaluated_mesh_crackbake_reads(tmp_path):
     assert out["bad_uv"] == "'Cube' has no UV map 'no such map'; add one (UV > Unwrap) or pick " \
         "another"
     assert out["bad_group"] == "'Cube' has no vertex group 'no such group'"
+
+
+# ---------------------------------------------------------------- as a legacy add-on (< 4.2)
+
+
+def _legacy_blender() -> str | None:
+    """A Blender executable older than 4.2 (``CRACKBAKE_LEGACY_BLENDER``, or ``blender`` on the
+    PATH, such as Debian's 3.4), or None."""
+    exe = os.environ.get("CRACKBAKE_LEGACY_BLENDER") or shutil.which("blender")
+    if exe is None:
+        return None
+    try:
+        said = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    words = said.stdout.split()
+    if said.returncode != 0 or len(words) < 2 or words[0] != "Blender":
+        return None
+    version = tuple(int(p) for p in words[1].split(".")[:2])
+    return exe if version < (4, 2) else None
+
+
+# Not a ``reference`` check: make test installs bpy 5.0, not an old Blender, and a skipped
+# reference check fails it.  It runs where a Blender < 4.2 is on the PATH (Debian's 3.4).
+@pytest.mark.slow
+def test_the_zip_installs_as_a_legacy_addon_and_bakes(addon_zip, tmp_path):
+    exe = _legacy_blender()
+    if exe is None:
+        pytest.skip("no Blender older than 4.2 (set CRACKBAKE_LEGACY_BLENDER; Debian: "
+                    "apt install blender python3-numpy)")
+    for d in ("scripts", "config", "tmp"):
+        (tmp_path / d).mkdir()
+    env = {**os.environ, "BLENDER_USER_SCRIPTS": str(tmp_path / "scripts"),
+           "BLENDER_USER_CONFIG": str(tmp_path / "config"), "TMPDIR": str(tmp_path / "tmp"),
+           "PYTHONPATH": str(REPO), "CRACKBAKE_CACHE_DIR": str(tmp_path / "c"),
+           "CRACKBAKE_TEST_SIM_FACES": "3000"}
+    proc = subprocess.run(
+        [exe, "-b", "--factory-startup", "--python", str(REPO / "tests" / "blender" /
+                                                        "addon_legacy.py"),
+         "--", str(addon_zip), str(SPOT), str(tmp_path / "out"), "128"],
+        capture_output=True, text=True, timeout=600, env=env)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    assert lines, proc.stdout[-3000:] + proc.stderr[-3000:]
+    out = json.loads(lines[-1])
+    assert out["version"] < [4, 2]
+    assert out["installed"] == out["enabled"] == ["FINISHED"]
+    # unpacked as the module crackbake_blender, with its bl_info (crackbake's version)
+    assert set(out["addon_dir"]) >= {"__init__.py", "ops.py", "blender_manifest.toml"}
+    assert out["bl_info"]["version"] == list(version_tuple())
+    assert out["add_impact"] == ["FINISHED"]
+    assert np.allclose(out["sidecar_impacts"], out["impacts"], atol=1e-5)
+    assert out["bake"] == ["FINISHED"] and out["status"].endswith("cracks"), out["status"]
+    # the status bar's line while it ran, gone after
+    assert out["status_bar"] and all(p["shown"] for p in out["status_bar"])
+    for p in out["status_bar"]:
+        assert p["line"][0] == f"Crackbake: {p['message']} {int(100 * p['fraction'])} %", p
+    assert out["status_bar_after"] == [None, False]
+    # the group (3.x's node-group sockets) between the material and its BSDF; Non-Color maps
+    assert out["group"] == "Crackbake Cracks" and all(out["linked"].values())
+    assert sorted(v[0] for v in out["images"].values()) == ["Non-Color"] * 3
+    assert {tuple(v[1]) for v in out["images"].values()} == {(128, 128)}
+    assert not list((tmp_path / "tmp").glob("crackbake-*"))  # the temporary folder is gone

@@ -1,6 +1,7 @@
 """``crackbake blender-addon -o DIR``: the Blender extension as an installable zip.
 
-The zip holds ``addon/``'s sources, its ``blender_manifest.toml`` with crackbake's version, and
+The zip holds one folder, ``crackbake_blender/``: ``addon/``'s sources (``__init__.py``'s
+``bl_info`` with crackbake's version), its ``blender_manifest.toml`` with the same version, and
 a generated ``defaults.py``: the command that runs this environment's crackbake (pre-filled in
 the extension's preferences), the preset and method names, and the bake options' help texts
 (the panel's tooltips say what ``crackbake --help`` says).
@@ -22,6 +23,10 @@ from crackbake.errors import CrackbakeError
 
 ADDON = Path(__file__).resolve().parent / "addon"
 MANIFEST = "blender_manifest.toml"
+#: The zip's one folder: an extension's files may sit in one (Blender 4.2+), a legacy add-on's
+#: must (older Blenders unpack the zip into their add-ons folder; this is its module name).
+FOLDER = "crackbake_blender"
+_BL_VERSION = '"version": (0, 0, 0),'
 #: The bake options whose help the extension shows (click parameter names).
 HELP_OPTIONS = ("preset", "method", "seed", "res", "min_px", "impacts", "weight_attribute",
                 "shrink", "noise", "spacing", "sim_faces", "directions", "curvature",
@@ -30,6 +35,28 @@ HELP_OPTIONS = ("preset", "method", "seed", "res", "min_px", "impacts", "weight_
 
 def zip_name(version: str = __version__) -> str:
     return f"crackbake_blender-{version}.zip"
+
+
+def version_tuple(version: str = __version__) -> tuple[int, int, int]:
+    """``bl_info``'s version: the leading number of each of the first three parts ("0.1.0rc1"
+    -> (0, 1, 0))."""
+    parts = []
+    for part in version.split(".")[:3]:
+        digits = ""
+        for ch in part:
+            if not ch.isdigit():
+                break
+            digits += ch
+        parts.append(int(digits or 0))
+    return tuple(parts + [0] * (3 - len(parts)))
+
+
+def init_source() -> str:
+    """``addon/__init__.py`` with crackbake's version in its ``bl_info``."""
+    text = (ADDON / "__init__.py").read_text(encoding="utf-8")
+    if _BL_VERSION not in text:
+        raise RuntimeError(f"{ADDON / '__init__.py'}: bl_info has no {_BL_VERSION} to fill in")
+    return text.replace(_BL_VERSION, f'"version": {version_tuple()!r},')
 
 
 def default_command() -> str:
@@ -92,11 +119,12 @@ def build_extension(out_dir: str | Path, command: str | None = None) -> Path:
         with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
             entries = [(MANIFEST, manifest),
                        ("defaults.py", defaults_source(command or default_command()))]
-            entries += [(p.name, p.read_text(encoding="utf-8"))
+            entries += [(p.name, init_source() if p.name == "__init__.py"
+                         else p.read_text(encoding="utf-8"))
                         for p in sorted(ADDON.glob("*.py"))]
             for name, text in entries:
                 # a fixed date: the same sources and command give the same bytes
-                info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+                info = zipfile.ZipInfo(f"{FOLDER}/{name}", date_time=(2020, 1, 1, 0, 0, 0))
                 info.compress_type, info.external_attr = zipfile.ZIP_DEFLATED, 0o644 << 16
                 zf.writestr(info, text.encode("utf-8"))
         partial.replace(target)
@@ -115,6 +143,7 @@ def build_extension(out_dir: str | Path, command: str | None = None) -> Path:
 def blender_addon(out_dir: Path, command: str | None) -> None:
     """Write the Blender extension (crackbake_blender-<version>.zip, Blender 4.2+): install it
     from Preferences > Get Extensions > Install from Disk, or with
-    `blender --command extension install-file -r user_default -e ZIP`."""
+    `blender --command extension install-file -r user_default -e ZIP`.  Older Blenders (3.4+)
+    install the same zip as a legacy add-on: Preferences > Add-ons > Install."""
     path = reported(lambda: build_extension(out_dir, command), quiet=False)
     click.echo(str(path.resolve()))

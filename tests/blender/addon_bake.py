@@ -26,6 +26,7 @@ result["installed"] = sorted(installed)
 module = "bl_ext.user_default.crackbake"
 result["enabled"] = module in bpy.context.preferences.addons
 ops_mod = sys.modules[module + ".ops"]
+status_mod = sys.modules[module + ".status"]
 prefs = bpy.context.preferences.addons[module].preferences
 result["command"] = prefs.command
 
@@ -120,6 +121,34 @@ def cycles_albedo(size):
             "intact_rgb": albedo[intact][:, :3].mean(axis=0).tolist()}
 
 
+def poll_until_done(cancel_at=None):
+    """Call the extension's timer function as Blender's timer would, timing each call; what
+    the status bar showed at each call, and after the bake."""
+    job = ops_mod._State.job
+    times, cancelled_at, lines = [], None, []
+    end = time.monotonic() + 500
+    while ops_mod._State.job is not None and time.monotonic() < end:
+        t = time.perf_counter()
+        again = ops_mod.poll_job()
+        times.append(time.perf_counter() - t)
+        if again is not None:
+            lines.append({"line": status_mod.STATE["line"], "shown": status_mod.is_shown(),
+                          "message": job.message, "fraction": job.fraction})
+        if cancel_at and cancelled_at is None and job.message.startswith(cancel_at):
+            cancelled_at = job.message
+            bpy.ops.crackbake.cancel()
+        if again is None:
+            break
+        time.sleep(ops_mod.POLL_SECONDS)
+    # the last call loads the result (the bake has ended); the others ran beside it
+    return {"polls": len(times), "max_poll_s": max(times[:-1]), "finish_s": times[-1],
+            "slowest": sorted(times[:-1])[-5:], "cancelled_at": cancelled_at,
+            "workdir_left": os.path.exists(job.workdir), "status": s.status,
+            "status_bar": lines, "status_bar_after": {
+                "line": status_mod.STATE["line"], "shown": status_mod.is_shown(),
+                "in_header": status_mod.draw in bpy.types.STATUSBAR_HT_header._dyn_ui_initialize()}}
+
+
 if mode == "bake":
     group = obj.vertex_groups.new(name="stress")
     group.add([v.index for v in me.vertices if v.co.z > 0], 1.0, "REPLACE")
@@ -144,10 +173,15 @@ if mode == "bake":
     node.inputs["Growth"].default_value = 1.0
     # growth is animatable
     result["keyframed"] = node.inputs["Growth"].keyframe_insert("default_value", frame=1)
-    # re-bake the same network at another resolution: the images are replaced in place
+    result["status_bar_after_wait"] = [status_mod.STATE["line"], status_mod.is_shown()]
+    # re-bake the same network at another resolution, in the background as the panel does
+    # (the status bar shows it meanwhile): the images are replaced in place
     s.res = int(res) // 2
-    r = bpy.ops.crackbake.bake(wait=True, reuse=True)
+    r = bpy.ops.crackbake.bake(reuse=True)
+    result["rebake_started"] = [status_mod.STATE["line"], status_mod.is_shown()]
+    result["rebake_run"] = poll_until_done()
     result["rebake"] = sorted(r)
+    result["rebake_status"] = s.status
     result["second"] = material_state()
     with open(os.path.join(s.last_out, "manifest.json")) as fh:
         result["rebake_params"] = json.load(fh)["params"]
@@ -195,26 +229,6 @@ elif mode == "unwrap":
     result["on_crack"], result["on_flipped"], result["points"] = int(on), int(flipped), total
     result["state"] = material_state()
 elif mode in ("cancel", "background"):
-    def poll_until_done(cancel_at=None):
-        """Call the extension's timer function as Blender's timer would, timing each call."""
-        job = ops_mod._State.job
-        times, cancelled_at = [], None
-        end = time.monotonic() + 500
-        while ops_mod._State.job is not None and time.monotonic() < end:
-            t = time.perf_counter()
-            again = ops_mod.poll_job()
-            times.append(time.perf_counter() - t)
-            if cancel_at and cancelled_at is None and job.message.startswith(cancel_at):
-                cancelled_at = job.message
-                bpy.ops.crackbake.cancel()
-            if again is None:
-                break
-            time.sleep(ops_mod.POLL_SECONDS)
-        # the last call loads the result (the bake has ended); the others ran beside it
-        return {"polls": len(times), "max_poll_s": max(times[:-1]), "finish_s": times[-1],
-                "slowest": sorted(times[:-1])[-5:], "cancelled_at": cancelled_at,
-                "workdir_left": os.path.exists(job.workdir), "status": s.status}
-
     if mode == "cancel":
         result["first"] = sorted(bpy.ops.crackbake.bake(wait=True))
         with open(os.path.join(s.last_out, "manifest.json")) as fh:

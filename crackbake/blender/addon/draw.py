@@ -29,7 +29,10 @@ def _draw() -> None:
         key = _key(obj)
         if key != _cache["key"]:  # closest-point queries only when something moved
             _cache["key"], _cache["circles"] = key, impact_circles(obj)
-        shader = gpu.shader.from_builtin("POLYLINE_UNIFORM_COLOR")
+        try:
+            shader = gpu.shader.from_builtin("POLYLINE_UNIFORM_COLOR")
+        except ValueError:  # Blender < 4.0's name
+            shader = gpu.shader.from_builtin("3D_POLYLINE_UNIFORM_COLOR")
         region = bpy.context.region
         shader.uniform_float("viewportSize", (region.width, region.height))
         shader.uniform_float("lineWidth", 2.0)

@@ -10,6 +10,12 @@ WEIGHT_ATTRIBUTE = "weight"
 UNWRAP_UV = "crackbake"  # the UV map a new unwrap is stored in
 
 
+def uv_values(layer) -> tuple:
+    """A UV map's per-corner values and their field for ``foreach_get``/``foreach_set``:
+    Blender 3.5+'s ``layer.uv[i].vector``, 3.4's ``layer.data[i].uv``."""
+    return (layer.uv, "vector") if hasattr(layer, "uv") else (layer.data, "uv")
+
+
 class ExportError(Exception):
     """The object cannot be exported (no faces, no UV map); the message says the fix."""
 
@@ -37,7 +43,8 @@ def mesh_arrays(obj, depsgraph, uv_name: str | None = "", group: str = "") -> di
         me.vertices.foreach_get("co", co)
         uv = np.zeros(n_loops * 2, np.float32)
         if uv_name is not None:
-            layer.uv.foreach_get("vector", uv)
+            values, field = uv_values(layer)
+            values.foreach_get(field, uv)
         uv = uv.reshape(-1, 2)
         weight = None
         if group:
@@ -102,5 +109,6 @@ def store_unwrap(mesh, uv: np.ndarray, faces: np.ndarray, name: str = "crackbake
     loop_uv = np.zeros((len(mesh.loops), 2), np.float32)
     loop_uv[tri] = uv[faces.reshape(-1)]  # a loop in two triangles takes its last corner's UV
     layer = mesh.uv_layers.get(name) or mesh.uv_layers.new(name=name)
-    layer.uv.foreach_set("vector", loop_uv.ravel())
+    values, field = uv_values(layer)
+    values.foreach_set(field, loop_uv.ravel())
     mesh.update()

@@ -51,6 +51,13 @@ def _math(nodes, op: str, b: float | None = None):
     return node
 
 
+def _new_socket(group, name: str, in_out: str, kind: str):
+    """A group input or output socket (Blender 4.0+'s interface, or 3.x's inputs/outputs)."""
+    if hasattr(group, "interface"):
+        return group.interface.new_socket(name, in_out=in_out, socket_type=kind)
+    return (group.inputs if in_out == "INPUT" else group.outputs).new(kind, name)
+
+
 def crack_group() -> bpy.types.ShaderNodeTree:
     """The shared "Crackbake Cracks" group, built on first use.
 
@@ -64,13 +71,13 @@ def crack_group() -> bpy.types.ShaderNodeTree:
         return group
     group = bpy.data.node_groups.new(GROUP, "ShaderNodeTree")
     for name, kind in _IN:
-        sock = group.interface.new_socket(name, in_out="INPUT", socket_type=kind)
+        sock = _new_socket(group, name, "INPUT", kind)
         if name in ("Growth", "Multiply"):
             sock.min_value, sock.max_value = 0.0, 1.0
         if name == "Growth":
             sock.default_value = 1.0
     for name, kind in _OUT:
-        group.interface.new_socket(name, in_out="OUTPUT", socket_type=kind)
+        _new_socket(group, name, "OUTPUT", kind)
     nodes, link = group.nodes, group.links.new
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
     gin.location, gout.location = (-900, 0), (700, 0)

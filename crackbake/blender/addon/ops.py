@@ -13,7 +13,7 @@ import bpy
 from bpy.props import BoolProperty, FloatProperty, FloatVectorProperty, IntProperty
 from mathutils import Vector
 
-from . import export, gltf, nodes, runner
+from . import export, gltf, nodes, runner, status
 from .raycast import object_scale, surface_hit
 
 #: Seconds between two polls of a running bake.
@@ -142,6 +142,7 @@ class CRACKBAKE_OT_place_impact(bpy.types.Operator):
         if _mesh_object(context, self) is None:
             return {"CANCELLED"}
         context.window_manager.modal_handler_add(self)
+        status.operator_text(True)
         context.workspace.status_text_set("Crackbake: click on the mesh to add an impact; "
                                           "Esc / right-click: done")
         return {"RUNNING_MODAL"}
@@ -149,6 +150,7 @@ class CRACKBAKE_OT_place_impact(bpy.types.Operator):
     def modal(self, context, event):
         if event.type in {"ESC", "RIGHTMOUSE"}:
             context.workspace.status_text_set(None)
+            status.operator_text(False)
             return {"FINISHED"}
         if event.type == "LEFTMOUSE" and event.value == "PRESS":
             from bpy_extras import view3d_utils
@@ -276,6 +278,7 @@ class CRACKBAKE_OT_bake(bpy.types.Operator):
             uv_name
         _State.unwrap = unwrap
         s.status, s.progress = "starting", 0.0
+        status.show("starting", 0.0)
         if self.wait:
             job.wait()
             return self._report(finish())
@@ -324,13 +327,14 @@ def poll_job():
     _obj, s = _settings()
     if s is not None:
         s.progress, s.status = job.fraction, job.message
+    status.update(job.message, job.fraction)
     _redraw()
     TIMER_STATS["calls"] += 1
     TIMER_STATS["max_s"] = max(TIMER_STATS["max_s"], time.perf_counter() - t0)
     if not ended:
         return POLL_SECONDS
     level, text = finish()
-    print(f"Crackbake: {text}")
+    print(text)
     return None
 
 
@@ -373,6 +377,7 @@ def finish() -> tuple[str, str]:
         return ("WARNING" if job.warnings else "INFO"), (
             f"Crackbake: {cracks} cracks baked into {', '.join(mats)}{warned}")
     finally:
+        status.hide()
         job.kill()
         job.cleanup()
         LAST_TIMINGS["run"] = job.ended - job.started
@@ -398,6 +403,7 @@ def unregister() -> None:
         except Exception:  # still running after 10 s: stop it outright
             job.kill()
         job.cleanup()
+    status.hide()
     if bpy.app.timers.is_registered(poll_job):
         bpy.app.timers.unregister(poll_job)
     for cls in reversed(CLASSES):

@@ -10,8 +10,10 @@ from .ops import _State
 class CRACKBAKE_UL_impacts(bpy.types.UIList):
     def draw_item(self, context, layout, data, item, icon, active_data, active_prop, index=0,
                   flt_flag=0):
-        row = layout.row(align=True)
-        row.label(text=f"{index + 1}: " + ", ".join(f"{c:.3g}" for c in item.location))
+        # the point itself is the circle drawn in the viewport; the row keeps what is edited
+        split = layout.split(factor=0.15, align=True)
+        split.label(text=str(index + 1))
+        row = split.row(align=True)
         row.prop(item, "radius", text="R")
         row.prop(item, "strength", text="S")
 
@@ -33,6 +35,8 @@ class CRACKBAKE_PT_panel(bpy.types.Panel):
         s = obj.crackbake
         layout = self.layout
         col = layout.column()
+        # Blender's own panels' layout: labels in a column of their own, not cut short
+        col.use_property_split, col.use_property_decorate = True, False
         col.prop(s, "preset")
         col.prop(s, "method")
         row = col.row(align=True)
@@ -56,11 +60,14 @@ class CRACKBAKE_PT_panel(bpy.types.Panel):
 
         running = _State.job is not None and _State.obj_name == obj.name
         if running:
-            layout.progress(factor=s.progress, type="BAR", text=s.status or "baking")
+            if hasattr(layout, "progress"):  # Blender 4.0+
+                layout.progress(factor=s.progress, type="BAR", text=s.status or "baking")
+            else:
+                layout.prop(s, "progress", text=s.status or "baking", slider=True)
             layout.operator("crackbake.cancel", icon="CANCEL")
         else:
             row = layout.row(align=True)
-            row.operator("crackbake.bake", icon="RENDER_STILL")
+            row.operator("crackbake.bake", text="Bake", icon="RENDER_STILL")
             row.operator("crackbake.bake", text="Re-bake", icon="FILE_REFRESH").reuse = True
             if s.status:
                 layout.label(text=s.status)
@@ -77,6 +84,7 @@ class CRACKBAKE_PT_advanced(bpy.types.Panel):
     def draw(self, context):
         s = context.active_object.crackbake
         col = self.layout.column()
+        col.use_property_split, col.use_property_decorate = True, False
         for name in ("shrink", "noise", "spacing", "curvature", "direction",
                      "direction_strength", "invert_weights", "sim_faces"):
             col.prop(s, name)
