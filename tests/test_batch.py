@@ -17,6 +17,8 @@ from click.testing import CliRunner
 
 ray = pytest.importorskip("ray")
 
+from test_docs import RUN_ELSEWHERE  # noqa: E402
+
 from crackbake.batch.command import batch  # noqa: E402
 from crackbake.cli.bake import bake  # noqa: E402
 
@@ -227,32 +229,52 @@ def _ray_processes() -> set[int]:
     return pids
 
 
+#: The two commands docs/batch.md opens with: tests/test_docs.py leaves them to the test below,
+#: which runs them as written and checks what they print and leave behind.
+DOCUMENTED = tuple(cmd for cmd, test in RUN_ELSEWHERE.items() if test.startswith("test_batch.py"))
+
+
 @pytest.mark.slow
-def test_embedded_ray_on_a_pipe_leaves_nothing_running(tmp_path):
-    """No --address: the command starts its own Ray, prints one line per finished job on a pipe
-    and shuts Ray down (no raylet or gcs_server of its own left)."""
+def test_the_documented_batch_on_a_pipe_leaves_nothing_running(tmp_path):
+    """docs/batch.md's two commands as written (examples/batch.toml, no --address): the command
+    starts its own Ray sized to the machine, prints one line per finished job on a pipe and
+    shuts Ray down (no raylet or gcs_server of its own left); the --resume run skips every
+    job."""
+    import shlex
     import subprocess
     import sys
 
-    shutil.copy(SPOT, tmp_path / "spot.obj")
-    (tmp_path / "jobs.toml").write_text(
-        f"[defaults]\n{SMALL}\n[[job]]\nmesh = \"spot.obj\"\npreset = \"glass\"\n"
-        "impact = \"0.334,0.044,0.287\"\nseeds = [4, 5]\n")
+    page = (SPOT.parents[1] / "docs" / "batch.md").read_text()
+    assert all(cmd in page for cmd in DOCUMENTED)
+    assert len(DOCUMENTED) == 2
+    (tmp_path / "examples").mkdir()
+    for name in ("batch.toml", "spot.obj"):
+        shutil.copy(SPOT.parent / name, tmp_path / "examples" / name)
     before = _ray_processes()
     env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
-    r = subprocess.run([sys.executable, "-m", "crackbake", "batch", "jobs.toml", "-o", "out",
-                        "--workers", "2"], cwd=tmp_path, env=env, capture_output=True,
-                       text=True, timeout=600)
-    assert r.returncode == 0, r.stderr
-    lines = r.stderr.splitlines()
-    assert sorted(line.split()[2] for line in lines if line.startswith("[")) == [
-        "spot_glass_s4", "spot_glass_s5"]
-    assert lines[-1].startswith("2 jobs: 2 ok")
+
+    def run(cmd: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-m", "crackbake", *shlex.split(cmd)[1:]],
+                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+
+    first = run(DOCUMENTED[0])
+    assert first.returncode == 0, first.stderr
+    lines = first.stderr.splitlines()
+    names = ["spot_crackle_ue", "spot_glass_s1", "spot_glass_s2", "spot_mud"]
+    assert sorted(line.split()[2] for line in lines if line.startswith("[")) == names
+    assert lines[-1].startswith("4 jobs: 4 ok")
+    assert "\r" not in first.stderr  # a pipe: no progress bar
     assert _ray_processes() <= before
-    doc = json.loads((tmp_path / "out" / "batch.json").read_text())
+    out = tmp_path / "spot_batch"
+    doc = json.loads((out / "batch.json").read_text())
     assert doc["ray"]["cpus"] >= 1 and doc["ray"]["start_s"] > 0
-    assert {j["numba_threads"] for j in doc["jobs"]} == {str(max(1, len(os.sched_getaffinity(0))
-                                                                 // 2))}
+    # no --workers: one job per core, numba's threads the one CPU each job was given
+    assert {j["numba_threads"] for j in doc["jobs"]} == {"1"}
+    assert all(_committed(out / n) for n in names)
+    again = run(DOCUMENTED[1])
+    assert again.returncode == 0, again.stderr
+    doc = json.loads((out / "batch.json").read_text())
+    assert [j["status"] for j in doc["jobs"]] == ["skipped"] * 4
 
 
 def _default_signals() -> None:
