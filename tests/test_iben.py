@@ -501,17 +501,47 @@ def test_origins_record_every_crack_started(impact_result, shrink_result):
         assert int(o[:, 4].sum()) == r.stats["edge_starts"]
 
 
+def _inserted(cracks) -> set:
+    """Points a later tip put on an older crack's segment to end there (the solver splits that
+    crack edge): each lies on the segment between two of its neighbours along the cracks and
+    carries that segment's time, not the step it was made at."""
+    nb: dict[tuple, list] = {}
+    for c in cracks:
+        for i, q in enumerate(c.points):
+            for j in (i - 1, i + 1):
+                if 0 <= j < len(c.points):
+                    nb.setdefault(tuple(q.round(12)), []).append(c.points[j])
+    out = set()
+    for k, ends in nb.items():
+        m = np.asarray(k)
+        for x in range(len(ends)):
+            for y in range(x + 1, len(ends)):
+                a, ab = ends[x], ends[y] - ends[x]
+                t = np.dot(m - a, ab) / max(np.dot(ab, ab), 1e-300)
+                if 0 < t < 1 and np.linalg.norm(a + t * ab - m) < 1e-9:
+                    out.add(k)
+    return out
+
+
 @pytest.mark.parametrize("make", [uniform, impact], ids=["shrink", "glass"])
 def test_no_crack_starts_right_beside_another(make):
     """A new crack starts no closer than RELAX_RINGS reference edges to any crack point that
-    existed then (the reference edge: that of a TIP_REF_FACES-face mesh of the surface)."""
+    existed then (the reference edge: that of a TIP_REF_FACES-face mesh of the surface).
+
+    Points inserted later on an older segment (where a tip ended on it) are left out: they
+    carry the older segment's time, and counting them found a start 0.98 of the distance from
+    a junction made 36 steps after it (plate seeds 1 and 3); without them the closest start
+    over seeds 1-6 is 1.001 of it."""
     from crackbake.simulate.solver import iben
 
     sim = plate(150)
     r = solve_iben(sim, make(sim), PARAMS)
     ref = np.sqrt(4.0 * 1.0 / (np.sqrt(3.0) * iben.TIP_REF_FACES))  # unit plate, area 1
-    pts = np.concatenate([c.points for c in r.cracks])
-    born = np.concatenate([c.time for c in r.cracks]) * r.steps
+    later = _inserted(r.cracks)
+    keep = np.array([tuple(q.round(12)) not in later for c in r.cracks for q in c.points])
+    assert 0 < (~keep).sum() < keep.sum()
+    pts = np.concatenate([c.points for c in r.cracks])[keep]
+    born = (np.concatenate([c.time for c in r.cracks]) * r.steps)[keep]
     assert len(r.origins) > 5
     for x, y, z, step, _edge, _length in r.origins[1:]:
         older = pts[born < step - 0.5]

@@ -102,14 +102,23 @@ def _jumps(m: np.ndarray, changed: bool = False) -> tuple[float, float, float]:
     return border, interior, control
 
 
-def _pair_quantile(m: np.ndarray, changed: bool = False, q: float = 99.5) -> float:
-    """The ``q``-th percentile over the interior column pairs of their mean |jump|: mud's
-    open gaps (3-8 % of a cell wide) make one pair's mean swing to 2.3x the average where a wide
-    crack runs obliquely across it, so the border pair is held to what interior pairs reach (a
-    seam, cutting every crack at the border, stands above them all)."""
+#: The border pair may jump up to this times the largest interior pair.  Over mud tiles of
+#: seeds 0-4 (512², 20k sim faces) the border reached 0.99x the largest interior pair (the
+#: mask, seed 1) and the control pair, which stands for a seam, 3.1-3.9x it in the dense maps.
+SEAM_MARGIN = 1.25
+
+
+def _pair_bound(m: np.ndarray, changed: bool = False) -> float:
+    """``SEAM_MARGIN`` times the largest mean |jump| of the interior column pairs: mud's open
+    gaps (3-8 % of a cell wide) make one pair's mean swing to 2.9x the average where a crack or
+    a boundary between two cracks' regions runs along it, so the border pair is held to what
+    interior pairs reach (a seam, cutting every crack at the border, stands above them all).
+    The 99.5th percentile was tried first: the border is one pair among 511, so it passed it
+    about once in 200 checks of a seamless map by chance (the time map at seed 4, seamless
+    when looked at, and the mask at seed 1 of an earlier solver, went past it)."""
     d = np.diff(m.astype(np.float64), axis=1)
     pairs = (d != 0).mean(axis=0) if changed else np.abs(d).mean(axis=0)
-    return float(np.percentile(pairs, q))
+    return SEAM_MARGIN * float(pairs.max())
 
 
 # Dense maps (every texel carries the nearest crack) show a seam plainly: the control pair
@@ -128,7 +137,7 @@ def test_maps_are_periodic(mud_tile, name):
         border, interior, control = _jumps(img, changed=name == "id")
         if MAPS[name]:
             assert control > MAPS[name] * interior  # the statistic sees a seam if there is one
-        assert border < 1.5 * interior or border <= _pair_quantile(img, name == "id"), (
+        assert border < 1.5 * interior or border <= _pair_bound(img, name == "id"), (
             name, border, interior)
 
 
@@ -139,9 +148,9 @@ def test_mask_png_3x3_has_no_seam(mud_tile):
     d = np.abs(np.diff(big, axis=1))
     seams = d[:, [n - 1, 2 * n - 1]].mean()
     inner = np.delete(d, [n - 1, 2 * n - 1], axis=1).mean()
-    assert seams < 1.5 * inner or seams <= _pair_quantile(mask)
+    assert seams < 1.5 * inner or seams <= _pair_bound(mask)
     rows = np.abs(np.diff(big, axis=0))[[n - 1, 2 * n - 1]].mean()
-    assert rows < 1.5 * np.abs(np.diff(big, axis=0)).mean() or rows <= _pair_quantile(mask.T)
+    assert rows < 1.5 * np.abs(np.diff(big, axis=0)).mean() or rows <= _pair_bound(mask.T)
 
 
 def test_network_closes_across_the_border(mud_tile):

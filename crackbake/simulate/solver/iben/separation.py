@@ -43,18 +43,34 @@ def _iso_m(p, q):
 
 
 @njit(cache=True)
-def grain_angle(seed, n):
-    """Seeded angle in [0, 2 pi) of node ``n``'s material grain (splitmix64 of seed and id).
-
-    A pure function of the pair, so runs are reproducible and nothing has to be stored or
-    carried over when nodes are created.
-    """
-    z = np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(n)
+def _splitmix(z):
     z = z + np.uint64(0x632BE59BD9B4E019)
     z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    z = z ^ (z >> np.uint64(31))
-    return 2.0 * np.pi * float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(cache=True)
+def grain_angle(seed, n, n0, x, y, z, q):
+    """Seeded angle in [0, 2 pi) of node ``n``'s material grain (splitmix64).
+
+    A node of the initial sim mesh (``n < n0``, ``State.gn0``) hashes its rest point
+    ``(x, y, z)`` counted in whole units of ``q`` (``State.gq``): its index depends on how many
+    points other impacts' refined balls added before it, its point does not, so a star grown
+    alone and beside other impacts starts from the same grain, at any mesh scale.  A node made
+    by a split hashes its rank among the split nodes (``n - n0``): a copy of a split node must
+    not share the grain of the node it was split from (copies sharing one grain widened mud's
+    gaps past its look), and that rank depends only on the splits before it.  A pure function,
+    so nothing is stored or carried over when nodes are created.
+    """
+    h = np.uint64(seed) * np.uint64(0x9E3779B97F4A7C15)
+    if n < n0:
+        h = _splitmix(h + np.uint64(np.int64(np.floor(x / q))))
+        h = _splitmix(h + np.uint64(np.int64(np.floor(y / q))))
+        h = _splitmix(h + np.uint64(np.int64(np.floor(z / q))))
+    else:
+        h = _splitmix(h + np.uint64(0xD1B54A32D192ED03) + np.uint64(n - n0))
+    return 2.0 * np.pi * float(h >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
 @njit(cache=True)
@@ -190,7 +206,7 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
         y0 = vn1 * x2 - vn2 * x1
         y1 = vn2 * x0 - vn0 * x2
         y2 = vn0 * x1 - vn1 * x0
-        th = grain_angle(seed, n)
+        th = grain_angle(seed, n, s.gn0, s.X[n, 0], s.X[n, 1], s.X[n, 2], s.gq)
         ct = np.cos(th)
         st = np.sin(th)
         d0 = ct * x0 + st * y0

@@ -153,7 +153,7 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
         hk=np.zeros(ncap + 65536), hnode=zi(ncap + 65536), hv=zi(ncap + 65536),
         segp=np.zeros((scap, 2), np.int64), seg_alive=np.zeros(scap, bool),
         seg_info=np.zeros((scap, 3)), clen=clen, corig=np.zeros((len(clen), 5)), G=G, gp=gp,
-        period=period, cnt=cnt,
+        period=period, gq=_grain_quantum(X0), gn0=int(n0), cnt=cnt,
     )
     incidence(m0, s.F, s.NF, s.NFc)
     mesh = SimpleNamespace(X0=X0, F0=F0, S0=S0, n0=n0, m0=m0, bnd=bnd, h_node=h_node,
@@ -163,6 +163,13 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     if np.any(s.area[:m0] <= 0):
         raise CrackbakeError("the simulation mesh has zero-area faces; clean the mesh first")
     return s, mesh
+
+
+def _grain_quantum(X0: np.ndarray) -> float:
+    """The unit initial nodes hash their rest point in (``State.gq``): 2**-24 of the bounding-box
+    diagonal, so the grain at a point is the same at any mesh scale, and the same with or
+    without other impacts' refined balls (they add no extreme points)."""
+    return float(np.linalg.norm(X0.max(0) - X0.min(0)) or 1.0) * 2.0 ** -24
 
 
 def _mates(X0: np.ndarray, F0: np.ndarray, link: float, period: float = 0.0) -> np.ndarray:

@@ -94,6 +94,8 @@ class State(NamedTuple):
     G: F4  #: (nx, ny, nz, 6) shadow grid (or (1, 1, 1, 6) without)
     gp: F1  #: (5,) shadow grid origin (3), cell size, kernel radius; + impacts (shadow.py)
     period: float  #: tile period in x and y (plate [0, period)²), 0: not periodic
+    gq: float  #: grain quantum: initial nodes hash their rest point in whole units of it
+    gn0: int  #: initial node count: nodes from it on were made by splits (grain_angle)
     cnt: I1  #: (N_COUNTERS,) int64 counters, slots above
 
 

@@ -48,12 +48,14 @@ def numba_fields(cls: type) -> tuple[tuple[str, types.Type], ...]:
     """``(name, numba type)`` of each field of named tuple ``cls``, in order.
 
     An ``Annotated[np.ndarray, dtype, ndim]`` field is a ``C``-contiguous array of that dtype
-    and rank, a ``float`` field a float64.
+    and rank, a ``float`` field a float64, an ``int`` field an int64.
     """
     fields = []
     for name, hint in get_type_hints(cls, include_extras=True).items():
         if hint is float:
             fields.append((name, types.float64))
+        elif hint is int:
+            fields.append((name, types.int64))
         else:
             dtype, ndim = hint.__metadata__
             fields.append((name, types.Array(from_dtype(np.dtype(dtype)), ndim, "C")))
