@@ -7,8 +7,9 @@ calls ``python -m crackbake.precompile``; run it yourself after ``pip install`` 
 image build, for example) so the first real run starts warm.
 
 The kernels are compiled by real runs of the command on a small generated plate, one per
-solver path (the I&O solver with an impact, with shrinkage, and the thesis solver) and one
-with a projected decal, each in its own process, in two lanes that compile side by side.
+solver path (the I&O solver with an impact, with shrinkage, and the thesis solver) and one per
+output path (a projected decal on a textured plate for Blender, a tile), each in its own
+process, in two lanes that compile side by side.
 Typing is what costs (not LLVM), and every kernel signature a real run uses is the one these
 runs use, so a later run on any mesh loads them from the cache.
 """
@@ -24,22 +25,41 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-#: One small run per solver path: name -> command-line options after the mesh.
+#: One small run per solver path and per output path a first run would otherwise compile for:
+#: name -> the command line after ``crackbake`` (``{plate}``: the generated plate, ``{textured}``:
+#: the same with a base-colour texture; ``--res 256 -q -o <scratch>/<name>`` is added).
 CASES: dict[str, list[str]] = {
-    "iben": ["--preset", "glass", "--impact", "0.5,0.5,0:0.3", "--sim-faces", "3000"],
-    "thesis": ["--preset", "mud", "--method", "thesis", "--sim-faces", "3000"],
-    "shrinkage": ["--preset", "mud", "--sim-faces", "3000"],
-    # the projector bake's kernels (crackbake.bake.cells); thesis, so that it waits on nothing
-    # the I&O lane is still compiling
-    "decal": ["--preset", "glass", "--method", "thesis", "--impact", "0.5,0.5,0:0.3",
-              "--sim-faces", "3000", "--decal", "0.3", "--decal-res", "256"],
+    "iben": ["{plate}", "--preset", "glass", "--impact", "0.5,0.5,0:0.3", "--sim-faces", "3000"],
+    "thesis": ["{plate}", "--preset", "mud", "--method", "thesis", "--sim-faces", "3000"],
+    "shrinkage": ["{plate}", "--preset", "mud", "--sim-faces", "3000"],
+    # the projector bake (crackbake.bake.cells), the asset's own texture under the cracks and
+    # Blender's 16-bit normal map; thesis, so that it waits on nothing the I&O lane compiles
+    "decal": ["{textured}", "--preset", "glass", "--method", "thesis", "--impact",
+              "0.5,0.5,0:0.3", "--sim-faces", "3000", "--decal", "0.3", "--decal-res", "256",
+              "--target", "blender"],
+    "tile": ["tile", "--preset", "mud"],
 }
 
 #: Cases run one after another in one lane; lanes run side by side.  The two I&O cases share
 #: most kernels, so the second waits for the first and finds them cached.  The I&O solver's
 #: kernels are most of the compile (about 100 s of 160 on a 2-core machine), so the other lane
-#: also takes what is left: the decal case and the kernels of ``crackbake.exchange.halving.warm``.
-LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage"), ("thesis", "decal", "halving"))
+#: also takes what is left: the output paths above and the kernels of
+#: ``crackbake.exchange.halving.warm``.
+LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage"),
+                                      ("thesis", "decal", "tile", "halving"))
+
+
+def textured_plate_obj(path: Path) -> Path:
+    """:func:`plate_obj` with a material whose base colour is a small PNG beside it."""
+    import numpy as np
+    from PIL import Image
+
+    plate_obj(path)
+    path.write_text(f"mtllib {path.stem}.mtl\nusemtl base\n" + path.read_text())
+    path.with_suffix(".mtl").write_text(f"newmtl base\nmap_Kd {path.stem}.png\n")
+    ramp = np.linspace(60, 200, 64, dtype=np.uint8)
+    Image.fromarray(np.dstack([np.tile(ramp, (64, 1))] * 3)).save(path.with_suffix(".png"))
+    return path
 
 
 def plate_obj(path: Path, n: int = 12, uv_margin: float = 0.1) -> Path:
@@ -64,13 +84,15 @@ def plate_obj(path: Path, n: int = 12, uv_margin: float = 0.1) -> Path:
     return path
 
 
-def _run_case(name: str, mesh: Path, folder: Path) -> float:
+def _run_case(name: str, folder: Path) -> float:
     if name == "halving":
         # kernels only runs above 2048² reach (crackbake.exchange.halving.warm)
         cmd = [sys.executable, "-c", "from crackbake.exchange.halving import warm; warm()"]
     else:
-        cmd = [sys.executable, "-m", "crackbake", str(mesh), *CASES[name],
-               "--res", "256", "-q", "-o", str(folder / name)]
+        names = {"plate": folder / "plate.obj", "textured": folder / "textured.obj"}
+        args = [a.format(**names) for a in CASES[name]]
+        cmd = [sys.executable, "-m", "crackbake", *args, "--res", "256", "-q", "-o",
+               str(folder / name)]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -89,18 +111,18 @@ def precompile(jobs: int | None = None) -> dict[str, float]:
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(LANES)))
     with tempfile.TemporaryDirectory(prefix="crackbake-precompile-") as tmp:
         folder = Path(tmp)
-        mesh = folder / "plate.obj"
-        plate_obj(mesh)
+        plate_obj(folder / "plate.obj")
+        textured_plate_obj(folder / "textured.obj")
         with ThreadPoolExecutor(jobs) as pool:
-            futures = [pool.submit(_run_lane, lane, mesh, folder) for lane in LANES]
+            futures = [pool.submit(_run_lane, lane, folder) for lane in LANES]
             times: dict[str, float] = {}
             for f in futures:
                 times.update(f.result())
         return times
 
 
-def _run_lane(lane: tuple[str, ...], mesh: Path, folder: Path) -> dict[str, float]:
-    return {name: _run_case(name, mesh, folder) for name in lane}
+def _run_lane(lane: tuple[str, ...], folder: Path) -> dict[str, float]:
+    return {name: _run_case(name, folder) for name in lane}
 
 
 def main() -> None:
