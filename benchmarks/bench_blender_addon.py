@@ -17,7 +17,7 @@ interface never stalls during a large bake.  It prints the calls and the slowest
 Usage::
 
     CRACKBAKE_BLENDER_PYTHON=.venv-blender/bin/python python benchmarks/bench_blender_addon.py \\
-        [--res 2048] [--timer]
+        [--res 2048] [-n 3] [--timer]
 """
 
 from __future__ import annotations
@@ -63,6 +63,8 @@ os._exit(0)
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--res", type=int, default=None, help="2048, or 4096 with --timer")
+    parser.add_argument("-n", "--pairs", type=int, default=3,
+                        help="CLI and extension runs, taken in turn (the median is reported)")
     parser.add_argument("--timer", action="store_true",
                         help="time the extension's timer calls during a background bake")
     args = parser.parse_args()
@@ -82,26 +84,32 @@ def main() -> None:
                impact, "--res", str(args.res), "--target", "blender", "--formats", "png",
                "--uv", "keep", "-q"]
         subprocess.run([*cli, "-o", str(tmp / "warm")], check=True, env=env)
-        t = time.perf_counter()
-        subprocess.run([*cli, "-o", str(tmp / "cli")], check=True, env=env)
-        cli_s = time.perf_counter() - t
-
-        (tmp / "user").mkdir()
         (tmp / "child.py").write_text(CHILD)
-        proc = subprocess.run(
-            [bpy_python, str(tmp / "child.py"), str(zip_path), str(SPOT), str(tmp / "ext"),
-             str(args.res), impact],
-            env={**env, "BLENDER_USER_RESOURCES": str(tmp / "user")}, capture_output=True,
-            text=True, check=True)
-        ext = json.loads(proc.stdout.strip().splitlines()[-1])
-    print(f"spot, glass, one impact, {args.res}² (--target blender --formats png)\n")
-    print("| | seconds |\n|---|---|")
-    print(f"| CLI run (wall) | {cli_s:.2f} |")
-    print(f"| extension: bake operator (wait=True) | {ext['total']:.2f} |")
-    print(f"| - export (evaluated mesh to PLY) | {ext['export']:.2f} |")
-    print(f"| - crackbake run in the extension | {ext['run']:.2f} |")
-    print(f"| - load images, node group | {ext['finish']:.2f} |")
-    print(f"| **overhead** (operator - CLI) | {ext['total'] - cli_s:.2f} |")
+        pairs = []
+        # in turn, so that a change of the machine's load falls on both sides alike
+        for i in range(args.pairs):
+            t = time.perf_counter()
+            subprocess.run([*cli, "-o", str(tmp / f"cli{i}")], check=True, env=env)
+            cli_s = time.perf_counter() - t
+            (tmp / f"user{i}").mkdir()
+            proc = subprocess.run(
+                [bpy_python, str(tmp / "child.py"), str(zip_path), str(SPOT),
+                 str(tmp / f"ext{i}"), str(args.res), impact],
+                env={**env, "BLENDER_USER_RESOURCES": str(tmp / f"user{i}")},
+                capture_output=True, text=True, check=True)
+            pairs.append((cli_s, json.loads(proc.stdout.strip().splitlines()[-1])))
+    print(f"spot, glass, one impact, {args.res}² (--target blender --formats png), "
+          f"{args.pairs} pairs in turn\n")
+    print("| pair | CLI run (wall) | bake operator (wait=True) | export | crackbake run in it "
+          "| load images, node group | **overhead** (operator - CLI) |")
+    print("|---|---|---|---|---|---|---|")
+    for i, (cli_s, ext) in enumerate(pairs):
+        print(f"| {i + 1} | {cli_s:.2f} | {ext['total']:.2f} | {ext['export']:.2f} | "
+              f"{ext['run']:.2f} | {ext['finish']:.2f} | {ext['total'] - cli_s:+.2f} |")
+    over = sorted(ext["total"] - cli_s for cli_s, ext in pairs)
+    own = sorted(ext["export"] + ext["finish"] for _, ext in pairs)
+    print(f"\nmedian overhead {over[len(over) // 2]:+.2f} s (floor 1.5 s); the extension's own "
+          f"steps (export + loading) median {own[len(own) // 2]:.2f} s")
 
 
 TIMER_FLOOR_S = 0.05  # one timer call may hold Blender's interface this long at most

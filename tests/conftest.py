@@ -52,7 +52,8 @@ def pytest_terminal_summary(terminalreporter):
     for reports in terminalreporter.stats.values():
         for rep in reports:
             # stats also holds deselected items and warnings: only test reports have "when"
-            if getattr(rep, "when", None) and "reference" in rep.keywords:
+            # (a collection report, which some plugins leave there, has no keywords)
+            if getattr(rep, "when", None) and "reference" in getattr(rep, "keywords", ()):
                 if rep.outcome != "passed":
                     outcome[rep.nodeid] = rep.outcome
                 elif rep.when == "call":
