@@ -38,6 +38,10 @@ from crackbake.batch.progress import LineReport
 
 #: Least object store Ray accepts; the tasks return small dicts, so more only takes /dev/shm.
 OBJECT_STORE_BYTES = 80 * 2**20
+#: Logical CPUs a local Ray gets beyond the jobs' own: room for the next job's worker to boot.
+SPARE_CPUS = 1
+#: The local Ray's resource counting job slots (``--workers``).
+SLOT = "crackbake_job"
 #: Seconds a cancelled job gets to unwind (remove its staging folder) before its worker is
 #: killed.
 CANCEL_GRACE_S = 10.0
@@ -217,17 +221,34 @@ def _start_ray(plan: Plan):
                                  f"({type(exc).__name__}: {text}); start one with ray start "
                                  "--head or leave --address out") from None
         return ray, False
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    workers = min(plan.workers or cores, cores)
-    per_job = plan.cpus_per_job or max(1, cores // workers)
+    slots, per_job = local_slots(plan)
     # The local workers (children of the raylet started here) import this crackbake, installed
     # or not; no runtime_env, so Ray keeps its pool of prestarted workers.
     here = str(Path(__file__).resolve().parents[2])
     os.environ["PYTHONPATH"] = os.pathsep.join(
         p for p in (here, os.environ.get("PYTHONPATH")) if p)
-    ray.init(num_cpus=max(cores, workers * per_job), object_store_memory=OBJECT_STORE_BYTES,
-             **quiet)
+    # SPARE_CPUS more CPUs than the jobs take, and the job slots as a resource of their own
+    # (which is what holds the jobs at once to ``slots``): with a job queued behind the running
+    # ones, the raylet starts a worker for it on the spare CPU while they run (it prestarts
+    # only up to the free CPUs), so the next job finds a booted worker instead of waiting for a
+    # fresh Python to import Ray.  Each job is still its own process (max_calls=1).
+    ray.init(num_cpus=slots * per_job + SPARE_CPUS, resources={SLOT: slots},
+             object_store_memory=OBJECT_STORE_BYTES, **quiet)
+    plan.ray_info["local"] = True
     return ray, True
+
+
+def local_slots(plan: Plan) -> tuple[int, int]:
+    """Jobs at once and CPUs per job on a local Ray: ``--workers`` (default: the cores over
+    ``--cpus-per-job``, or the cores), each with the cores over the workers."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if plan.workers:
+        slots = plan.workers
+        per_job = plan.cpus_per_job or max(1, cores // min(slots, cores))
+    else:
+        per_job = plan.cpus_per_job or 1
+        slots = max(1, cores // per_job)
+    return slots, per_job
 
 
 def _largest_memory(ray) -> float:
@@ -357,11 +378,20 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
 
     task = ray.remote(max_calls=1)(_run_job)
     largest = _largest_memory(ray)
-    cores = ray.cluster_resources().get("CPU", 1)
-    per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers else 1)
-    slots = plan.workers or max(1, int(cores // per_job))
-    # Twice the slots: the next job is already queued on Ray when one ends.
-    window = plan.workers or slots * 2
+    extra_resources = {}
+    if plan.ray_info.get("local"):
+        # The slot resource holds the jobs at once; twice the slots in flight, so the next job
+        # is queued on Ray (and its worker booting on the spare CPU) when one ends.
+        slots, per_job = local_slots(plan)
+        extra_resources = {"resources": {SLOT: 1}}
+        window = slots * 2
+    else:
+        cores = ray.cluster_resources().get("CPU", 1)
+        per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers
+                                        else 1)
+        slots = plan.workers or max(1, int(cores // per_job))
+        # On a cluster ``--workers`` is held by what is in flight; otherwise twice the slots.
+        window = plan.workers or slots * 2
     queue = deque(todo)
     pending: dict = {}
     done = 0
@@ -394,7 +424,7 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
                     continue
                 ref = task.options(
                     num_cpus=per_job, memory=int(need), max_retries=plan.retries,
-                    retry_exceptions=False, name=f"crackbake:{job.name}",
+                    retry_exceptions=False, name=f"crackbake:{job.name}", **extra_resources,
                 ).remote(job.params, extra)
                 pending[ref] = (i, time.perf_counter())
             report.running(min(len(pending), slots))
