@@ -378,13 +378,14 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
 
     task = ray.remote(max_calls=1)(_run_job)
     largest = _largest_memory(ray)
-    extra_resources = {}
-    if plan.ray_info.get("local"):
-        # The slot resource holds the jobs at once; twice the slots in flight, so the next job
-        # is queued on Ray (and its worker booting on the spare CPU) when one ends.
+    local = bool(plan.ray_info.get("local"))
+    if local:
+        # The slot resource holds the jobs at once; one job more in flight, queued on Ray, so
+        # its worker boots on the spare CPU while the others run.  Its tasks all have one
+        # shape (the memory is held here, not asked of Ray), so Ray starts them in the batch
+        # file's order: tasks of different shapes are queued apart, in no order.
         slots, per_job = local_slots(plan)
-        extra_resources = {"resources": {SLOT: 1}}
-        window = slots * 2
+        window = slots + 1
     else:
         cores = ray.cluster_resources().get("CPU", 1)
         per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers
@@ -414,17 +415,28 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
     try:
         while queue or pending:
             while queue and len(pending) < window:
-                i, job, extra = queue.popleft()
+                i, job, extra = queue[0]
                 need = records[i]["memory_estimate_mb"] * 2**20
                 if largest and need > largest:
+                    queue.popleft()
                     finish(i, {"status": "failed", "exit_code": 2, "error": (
                         f"error: needs an estimated {need / 2**30:.1f} GiB, more than any node "
                         f"offers ({largest / 2**30:.1f} GiB); lower --res, --stress-res or "
                         "--sim-faces")})
                     continue
+                if local:
+                    # The node's memory, held here as Ray would: the jobs in flight (queued
+                    # or running) and this one must fit, or it waits for one to end.
+                    held = sum(records[k]["memory_estimate_mb"] for k, _ in pending.values())
+                    if pending and held * 2**20 + need > largest:
+                        break
+                    shape = {"resources": {SLOT: 1}}
+                else:
+                    shape = {"memory": int(need)}
+                queue.popleft()
                 ref = task.options(
-                    num_cpus=per_job, memory=int(need), max_retries=plan.retries,
-                    retry_exceptions=False, name=f"crackbake:{job.name}", **extra_resources,
+                    num_cpus=per_job, max_retries=plan.retries, retry_exceptions=False,
+                    name=f"crackbake:{job.name}", **shape,
                 ).remote(job.params, extra)
                 pending[ref] = (i, time.perf_counter())
             report.running(min(len(pending), slots))
@@ -438,10 +450,10 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
         # Ray's wait turns the handler's Interrupt into a plain KeyboardInterrupt: the signal
         # that came is what the handler saw.
         plan.ray_info["interrupted"] = received() or getattr(exc, "signum", signal.SIGINT)
-        _cancel(ray, pending, records, plan)
+        _cancel(ray, pending, records, plan, slots)
 
 
-def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
+def _cancel(ray, pending: dict, records: list[dict], plan: Plan, slots: int) -> None:
     """Cancel the tasks in flight.
 
     A running job gets :data:`CANCEL_GRACE_S` (or until another Ctrl-C) to unwind: Ray raises
@@ -455,6 +467,10 @@ def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
         ray.cancel(ref)
     left = dict(pending)
     why = f"cancelled ({_signal_name(plan)})"
+    # Ray starts a local batch's jobs in order: those past the first ``slots`` in flight were
+    # still queued.
+    queued = {i for i, _ in list(pending.values())[slots:]} if plan.ray_info.get("local") \
+        else set()
 
     def gather(timeout: float) -> None:
         end = time.monotonic() + timeout
@@ -465,6 +481,8 @@ def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
                 outcome = _outcome(ray, ref, plan)
                 if outcome.get("exit_code") in (128 + signal.SIGINT, 128 + signal.SIGTERM):
                     outcome = {"status": "cancelled", "error": f"{why} while running"}
+                elif outcome.get("status") == "cancelled" and i in queued:
+                    outcome = {"status": "cancelled", "error": f"{why} before it started"}
                 records[i].update(outcome)
 
     try:
