@@ -4,8 +4,9 @@ A job runs :func:`crackbake.pipeline.run` exactly as the bake command does, into
 folder through the output transaction.  Its task declares ``num_cpus`` (and the worker's
 ``NUMBA_NUM_THREADS`` follows it) and ``memory``, the run's estimated peak
 (:func:`crackbake.memory.estimate_peak`), so Ray never packs more big jobs on a node than its
-memory holds.  ``max_calls=1``: the worker process exits after its job, so no GL context, numba
-state or leaked memory passes from one asset to the next.
+memory holds (a local Ray's driver holds the memory itself, so that every task has one shape
+and Ray starts them in order; see :func:`_drive`).  ``max_calls=1``: the worker process exits
+after its job, so no GL context, numba state or leaked memory passes from one asset to the next.
 
 numba's kernel cache is a folder on each node's own disk, seeded from the package's precompiled
 kernels (:mod:`crackbake.batch.numba_cache`): nodes never write the same cache files over a
