@@ -631,3 +631,15 @@ def test_an_unreachable_address_is_one_line_at_once(tmp_path):
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and f"127.0.0.1:{port}" in lines[0] and "ray start" in lines[0]
         assert not (tmp_path / "out").exists()
+
+
+def test_local_slots():
+    """A local Ray's job slots and CPUs per job: --workers (the cores shared among them), else
+    the cores over --cpus-per-job."""
+    from crackbake.batch.run import Plan, local_slots
+
+    cores = len(os.sched_getaffinity(0))
+    assert local_slots(Plan(workers=1)) == (1, cores)
+    assert local_slots(Plan()) == (cores, 1)
+    assert local_slots(Plan(workers=2, cpus_per_job=3)) == (2, 3)
+    assert local_slots(Plan(cpus_per_job=cores)) == (1, cores)

@@ -4,8 +4,9 @@ A job runs :func:`crackbake.pipeline.run` exactly as the bake command does, into
 folder through the output transaction.  Its task declares ``num_cpus`` (and the worker's
 ``NUMBA_NUM_THREADS`` follows it) and ``memory``, the run's estimated peak
 (:func:`crackbake.memory.estimate_peak`), so Ray never packs more big jobs on a node than its
-memory holds.  ``max_calls=1``: the worker process exits after its job, so no GL context, numba
-state or leaked memory passes from one asset to the next.
+memory holds (a local Ray's driver holds the memory itself, so that every task has one shape
+and Ray starts them in order; see :func:`_drive`).  ``max_calls=1``: the worker process exits
+after its job, so no GL context, numba state or leaked memory passes from one asset to the next.
 
 numba's kernel cache is a folder on each node's own disk, seeded from the package's precompiled
 kernels (:mod:`crackbake.batch.numba_cache`): nodes never write the same cache files over a
@@ -38,6 +39,10 @@ from crackbake.batch.progress import LineReport
 
 #: Least object store Ray accepts; the tasks return small dicts, so more only takes /dev/shm.
 OBJECT_STORE_BYTES = 80 * 2**20
+#: Logical CPUs a local Ray gets beyond the jobs' own: room for the next job's worker to boot.
+SPARE_CPUS = 1
+#: The local Ray's resource counting job slots (``--workers``).
+SLOT = "crackbake_job"
 #: Seconds a cancelled job gets to unwind (remove its staging folder) before its worker is
 #: killed.
 CANCEL_GRACE_S = 10.0
@@ -217,17 +222,34 @@ def _start_ray(plan: Plan):
                                  f"({type(exc).__name__}: {text}); start one with ray start "
                                  "--head or leave --address out") from None
         return ray, False
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    workers = min(plan.workers or cores, cores)
-    per_job = plan.cpus_per_job or max(1, cores // workers)
+    slots, per_job = local_slots(plan)
     # The local workers (children of the raylet started here) import this crackbake, installed
     # or not; no runtime_env, so Ray keeps its pool of prestarted workers.
     here = str(Path(__file__).resolve().parents[2])
     os.environ["PYTHONPATH"] = os.pathsep.join(
         p for p in (here, os.environ.get("PYTHONPATH")) if p)
-    ray.init(num_cpus=max(cores, workers * per_job), object_store_memory=OBJECT_STORE_BYTES,
-             **quiet)
+    # SPARE_CPUS more CPUs than the jobs take, and the job slots as a resource of their own
+    # (which is what holds the jobs at once to ``slots``): with a job queued behind the running
+    # ones, the raylet starts a worker for it on the spare CPU while they run (it prestarts
+    # only up to the free CPUs), so the next job finds a booted worker instead of waiting for a
+    # fresh Python to import Ray.  Each job is still its own process (max_calls=1).
+    ray.init(num_cpus=slots * per_job + SPARE_CPUS, resources={SLOT: slots},
+             object_store_memory=OBJECT_STORE_BYTES, **quiet)
+    plan.ray_info["local"] = True
     return ray, True
+
+
+def local_slots(plan: Plan) -> tuple[int, int]:
+    """Jobs at once and CPUs per job on a local Ray: ``--workers`` (default: the cores over
+    ``--cpus-per-job``, or the cores), each with the cores over the workers."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if plan.workers:
+        slots = plan.workers
+        per_job = plan.cpus_per_job or max(1, cores // min(slots, cores))
+    else:
+        per_job = plan.cpus_per_job or 1
+        slots = max(1, cores // per_job)
+    return slots, per_job
 
 
 def _largest_memory(ray) -> float:
@@ -357,11 +379,21 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
 
     task = ray.remote(max_calls=1)(_run_job)
     largest = _largest_memory(ray)
-    cores = ray.cluster_resources().get("CPU", 1)
-    per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers else 1)
-    slots = plan.workers or max(1, int(cores // per_job))
-    # Twice the slots: the next job is already queued on Ray when one ends.
-    window = plan.workers or slots * 2
+    local = bool(plan.ray_info.get("local"))
+    if local:
+        # The slot resource holds the jobs at once; one job more in flight, queued on Ray, so
+        # its worker boots on the spare CPU while the others run.  Its tasks all have one
+        # shape (the memory is held here, not asked of Ray), so Ray starts them in the batch
+        # file's order: tasks of different shapes are queued apart, in no order.
+        slots, per_job = local_slots(plan)
+        window = slots + 1
+    else:
+        cores = ray.cluster_resources().get("CPU", 1)
+        per_job = plan.cpus_per_job or (max(1, int(cores) // plan.workers) if plan.workers
+                                        else 1)
+        slots = plan.workers or max(1, int(cores // per_job))
+        # On a cluster ``--workers`` is held by what is in flight; otherwise twice the slots.
+        window = plan.workers or slots * 2
     queue = deque(todo)
     pending: dict = {}
     done = 0
@@ -384,17 +416,28 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
     try:
         while queue or pending:
             while queue and len(pending) < window:
-                i, job, extra = queue.popleft()
+                i, job, extra = queue[0]
                 need = records[i]["memory_estimate_mb"] * 2**20
                 if largest and need > largest:
+                    queue.popleft()
                     finish(i, {"status": "failed", "exit_code": 2, "error": (
                         f"error: needs an estimated {need / 2**30:.1f} GiB, more than any node "
                         f"offers ({largest / 2**30:.1f} GiB); lower --res, --stress-res or "
                         "--sim-faces")})
                     continue
+                if local:
+                    # The node's memory, held here as Ray would: the jobs in flight (queued
+                    # or running) and this one must fit, or it waits for one to end.
+                    held = sum(records[k]["memory_estimate_mb"] for k, _ in pending.values())
+                    if pending and held * 2**20 + need > largest:
+                        break
+                    shape = {"resources": {SLOT: 1}}
+                else:
+                    shape = {"memory": int(need)}
+                queue.popleft()
                 ref = task.options(
-                    num_cpus=per_job, memory=int(need), max_retries=plan.retries,
-                    retry_exceptions=False, name=f"crackbake:{job.name}",
+                    num_cpus=per_job, max_retries=plan.retries, retry_exceptions=False,
+                    name=f"crackbake:{job.name}", **shape,
                 ).remote(job.params, extra)
                 pending[ref] = (i, time.perf_counter())
             report.running(min(len(pending), slots))
@@ -408,10 +451,10 @@ def _drive(ray, todo, records, plan: Plan, report: LineReport) -> None:
         # Ray's wait turns the handler's Interrupt into a plain KeyboardInterrupt: the signal
         # that came is what the handler saw.
         plan.ray_info["interrupted"] = received() or getattr(exc, "signum", signal.SIGINT)
-        _cancel(ray, pending, records, plan)
+        _cancel(ray, pending, records, plan, slots)
 
 
-def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
+def _cancel(ray, pending: dict, records: list[dict], plan: Plan, slots: int) -> None:
     """Cancel the tasks in flight.
 
     A running job gets :data:`CANCEL_GRACE_S` (or until another Ctrl-C) to unwind: Ray raises
@@ -425,6 +468,10 @@ def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
         ray.cancel(ref)
     left = dict(pending)
     why = f"cancelled ({_signal_name(plan)})"
+    # Ray starts a local batch's jobs in order: those past the first ``slots`` in flight were
+    # still queued.
+    queued = {i for i, _ in list(pending.values())[slots:]} if plan.ray_info.get("local") \
+        else set()
 
     def gather(timeout: float) -> None:
         end = time.monotonic() + timeout
@@ -435,6 +482,8 @@ def _cancel(ray, pending: dict, records: list[dict], plan: Plan) -> None:
                 outcome = _outcome(ray, ref, plan)
                 if outcome.get("exit_code") in (128 + signal.SIGINT, 128 + signal.SIGTERM):
                     outcome = {"status": "cancelled", "error": f"{why} while running"}
+                elif outcome.get("status") == "cancelled" and i in queued:
+                    outcome = {"status": "cancelled", "error": f"{why} before it started"}
                 records[i].update(outcome)
 
     try:
