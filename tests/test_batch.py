@@ -216,16 +216,18 @@ def test_killed_worker_is_retried(tmp_path, local_ray):
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
 
 
-def _ray_processes() -> set[int]:
-    """Pids of Ray's own daemons on this machine (raylet, gcs_server)."""
+def _ray_processes(cwd: Path | None = None) -> set[int]:
+    """Pids of Ray's own daemons on this machine (raylet, gcs_server); with ``cwd``, only those
+    working there (a batch's daemons keep its current folder; other Rays may run beside it)."""
     pids = set()
     for d in Path("/proc").iterdir():
         try:
             name = (d / "comm").read_text().strip()
+            if name in ("raylet", "gcs_server") and (
+                    cwd is None or os.readlink(d / "cwd") == str(cwd)):
+                pids.add(int(d.name))
         except OSError:
             continue
-        if name in ("raylet", "gcs_server"):
-            pids.add(int(d.name))
     return pids
 
 
@@ -250,7 +252,6 @@ def test_the_documented_batch_on_a_pipe_leaves_nothing_running(tmp_path):
     (tmp_path / "examples").mkdir()
     for name in ("batch.toml", "spot.obj"):
         shutil.copy(SPOT.parent / name, tmp_path / "examples" / name)
-    before = _ray_processes()
     env = {**os.environ, "PYTHONPATH": str(SPOT.parents[1])}
 
     def run(cmd: str) -> subprocess.CompletedProcess:
@@ -264,7 +265,7 @@ def test_the_documented_batch_on_a_pipe_leaves_nothing_running(tmp_path):
     assert sorted(line.split()[2] for line in lines if line.startswith("[")) == names
     assert lines[-1].startswith("4 jobs: 4 ok")
     assert "\r" not in first.stderr  # a pipe: no progress bar
-    assert _ray_processes() <= before
+    assert not _ray_processes(cwd=tmp_path)
     out = tmp_path / "spot_batch"
     doc = json.loads((out / "batch.json").read_text())
     assert doc["ray"]["cpus"] >= 1 and doc["ray"]["start_s"] > 0
