@@ -255,7 +255,7 @@ def open_node(s, w, c):
         centers[ncen] = tip[side]
         ncen += 1
         # A tip that lay on a boundary is pinched by the cut: mend it; its crack is finished.
-        m = separate(s, w, tip[side], -1, -1)
+        m = separate(s, w, tip[side], np.int64(-1), np.int64(-1))
         w.free_tip[side] = m == 0
         for q in range(m):
             centers[ncen] = w.buf[q]

@@ -9,6 +9,7 @@ segments and cast their shadow, :func:`update_ring`, :func:`end_near_tips`,
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from crackbake.simulate.solver.iben.constants import CROSS_CLEAR, GROWTH_REF_STEPS
@@ -62,6 +63,10 @@ from crackbake.simulate.solver.iben.vec import dot3, norm3, wrap
 from crackbake.simulate.solver.topology import on_boundary
 
 _WIDEN = 2  # crack_event: the table needs widening
+# Constants passed to other kernels are numpy scalars: a plain -1 or True is typed as a literal,
+# and numba compiles the callee once more for it (node_update three times: 9 % of the I&O
+# kernels' compile time).
+_NO_CRACK = np.int64(-1)
 
 
 @njit(cache=True)
@@ -225,7 +230,7 @@ def crack_event(s, p, w, c):
         # No new crack right beside an existing one (permanently: cracks never heal), nor
         # where the near-crack rule would end both its tips at once; such starts only
         # multiplied short cracks as the mesh refined.
-        near = near_other(s, w, c, -1, w.geo[2, 0], w.geo[2, 1], w.geo[2, 2],
+        near = near_other(s, w, c, _NO_CRACK, w.geo[2, 0], w.geo[2, 1], w.geo[2, 2],
                           p.near_rad * _scale(s, c), p.near_cos, p.nuc_any)
         if near > 0:
             s.nver[c] += 1
@@ -426,7 +431,7 @@ def update_region(s, p, w, nrn):
             for a in range(3):
                 for b in range(3):
                     rho[n, a, b] = 0.0
-            node_update(s, n, False, grain, seed, sc, acc, ev)
+            node_update(s, n, np.bool_(False), grain, seed, sc, acc, ev)
             cnt[TIPS_NEAR] += 1
         push(s, n, p.tip_first)
 
@@ -475,7 +480,7 @@ def cross_shells(s, p, w, c, cid, excess):
             continue
         d0, d1, d2, n0, n1, n2 = d0 / ld, d1 / ld, d2 / ld, n0 / ln, n1 / ln, n2 / ln
         near_rad = p.near_rad * _scale(s, m)
-        if near_other(s, w, m, -1, d0, d1, d2, near_rad, p.near_cos,
+        if near_other(s, w, m, _NO_CRACK, d0, d1, d2, near_rad, p.near_cos,
                       max(p.nuc_any, CROSS_CLEAR * s.hn[m])) > 0:
             continue
         s.crack_of[m] = cid
@@ -491,7 +496,7 @@ def cross_shells(s, p, w, c, cid, excess):
                     s.rho[m, i, j] += a_eff * excess * nn[i] * nn[j]
         if s.G.shape[0] >= 2:
             _update_faces(s, w, NF[m], NFc[m])
-        _node_update(s, w, p, m, True)
+        _node_update(s, w, p, m, np.bool_(True))
         s.nevl[m] = s.cnt[DEPOSITS]
         s.cnt[CROSSED] += 1
         push(s, m, p.tip_first)
