@@ -55,6 +55,7 @@ CASES: dict[str, tuple[str, tuple[float, float, float]]] = {
     "bunny-ear": ("stanford-bunny.obj", (-0.0175, 0.1873, -0.0198)),
     "teapot-spout": ("teapot.obj", (3.434, 2.4729, 0.0)),
     "suzanne-ear": ("suzanne.obj", (-3.8612, 1.5486, 3.6039)),
+    "suzanne-brow": ("suzanne.obj", (-2.49, 1.2, 4.7)),  # a web on folds, not thin
     "fandisk-corner": ("fandisk.obj", (4.8279, 17.85, 0.0)),
     "spot-horn": ("spot.obj", (0.17745, 0.953646, -0.260405)),  # highest vertex
     "spot-leg": ("spot.obj", (0.229681, -0.733842, 0.0266899)),  # a front hoof's lowest

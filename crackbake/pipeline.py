@@ -489,9 +489,17 @@ def _warn_once(first: list, second: list) -> None:
 def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
     """One warning for the impacts that grew no star (too few radial arms cross the circle at
     0.3 of their reach, :func:`crackbake.metrics.star.missing_stars`, over touching shells
-    as one surface), when impacts are the
-    only stress: shrinkage, tension or curvature terms grow cell webs on purpose."""
-    from crackbake.metrics.star import STAR_MIN_ARMS, STAR_MIN_EDGES, impact_reach, missing_stars
+    as one surface) and one for those whose arms wander (a web of cells, not a star:
+    :func:`crackbake.metrics.star.web_stars`), when impacts are the only stress: shrinkage,
+    tension or curvature terms grow cell webs on purpose."""
+    from crackbake.metrics.star import (
+        STAR_MIN_ARMS,
+        STAR_MIN_EDGES,
+        impact_reach,
+        missing_stars,
+        star_checks,
+        web_stars,
+    )
     from crackbake.simulate.stress import CurvatureSource, DirectionalSource, ShrinkSource
 
     if not network.impacts or any(
@@ -500,7 +508,9 @@ def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
         return
     # Over touching shells as one surface, as the solver cracks them: an eye's own short
     # cracks crossing the circle where its shell ends must not count as a star's arms.
-    missing = missing_stars(network, sim.vertices, sim.faces, link=float(sim.edge_length))
+    checks = star_checks(network, sim.vertices, sim.faces, link=float(sim.edge_length))
+    _warn_web(web_stars(network, checks=checks))
+    missing = missing_stars(network, checks=checks)
     if not missing:
         return
     said = "; ".join(
@@ -523,6 +533,23 @@ def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
         CrackbakeWarning,
         stacklevel=3,
     )
+
+
+def _warn_web(webs: list) -> None:
+    """One line per impact whose arms wander (``web_stars``' entries): a web of cells grew
+    where a star should.  Seen where the surface folds sharply within the star's reach
+    (suzanne's low-poly brow between the eyes; subdivided, the same point grows a star)."""
+    from crackbake.metrics.star import STAR_MIN_RADIAL
+
+    for imp, _, radial in webs:
+        at = ",".join(f"{float(x) + 0.0:.4g}" for x in imp["point"])
+        warnings.warn(
+            f"the impact at ({at}) grew a web of cells, not a star: its arms wander (straightness "
+            f"{radial:.2f}, a star's over {STAR_MIN_RADIAL:.2f}) where the surface folds sharply; "
+            "give a point on a smoother part, or subdivide the mesh",
+            CrackbakeWarning,
+            stacklevel=4,
+        )
 
 
 def _grow(sim, field, sp):

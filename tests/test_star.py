@@ -18,9 +18,12 @@ from crackbake.metrics.star import (
     impact_reach,
     length_beyond,
     radial_arms,
+    star_checks,
     star_metrics,
     surface_distance,
     tangential_share,
+    trimmed_mean,
+    web_stars,
 )
 from crackbake.params import Impact, RunParams, parse_impact
 from crackbake.pipeline import solve
@@ -91,6 +94,37 @@ def test_arms_that_wander_or_run_beyond():
     # A tangential ring at 0.3 reach crosses no circle: no arm.
     ring = [_ring(0.5)]
     assert radial_arms(ring, _dists(ring), reach) == []
+
+
+def _spiral(phi: float, slant: float, r0: float, r1: float, n: int = 200) -> np.ndarray:
+    """A log spiral from radius r0 to r1 round C, running ``slant`` radians off radial."""
+    b = 1.0 / np.tan(slant)  # r = r0 exp(b t): tan(angle to radial) = 1 / b
+    t = np.linspace(0.0, np.log(r1 / r0) / b, n)
+    r = r0 * np.exp(b * t)
+    return C + np.stack([r * np.cos(phi + t), r * np.sin(phi + t), 0 * t], 1)
+
+
+@pytest.mark.parametrize("slant", [15.0, 35.0])
+def test_arms_that_wander_make_a_web(slant):
+    # 12 arms running a constant angle off radial (log spirals) from 0.05 to 0.8 reach: each
+    # gains cos(angle) of its length in distance from the impact, which is its geodesic
+    # straightness.  15 degrees (0.966) is a star, 35 degrees (0.819) a web of cells (issue 18
+    # §3: suzanne's low-poly brow, 0.81).
+    reach, n = 0.4, 12
+    arms = [_spiral(2 * np.pi * k / n, np.radians(slant), 0.05 * reach, 0.8 * reach)
+            for k in range(n)]
+    network = {"cracks": [{"points": p} for p in arms],
+               "impacts": [{"point": list(C), "radius": reach / (0.5 * np.pi)}]}
+    [(_, arms_n, radial)] = star_checks(network)
+    assert arms_n == n
+    assert radial == pytest.approx(np.cos(np.radians(slant)), abs=2e-3)
+    assert len(web_stars(network)) == (slant > 30)
+
+
+def test_trimmed_mean_drops_the_extremes():
+    assert trimmed_mean(np.array([0.2, 0.9, 0.95, 0.97, 1.0])) == pytest.approx(0.94)
+    assert trimmed_mean(np.array([0.5, 0.6])) == pytest.approx(0.55)
+    assert np.isnan(trimmed_mean(np.zeros(0)))
 
 
 def test_geodesic_distance_on_a_cylinder():

@@ -46,9 +46,12 @@ __all__ = [
     "own_cracks",
     "polylines",
     "radial_arms",
+    "star_checks",
     "star_metrics",
     "surface_distance",
     "tangential_share",
+    "trimmed_mean",
+    "web_stars",
 ]
 
 #: A star has at least this many radial arms crossing the 0.3-reach circle
@@ -57,6 +60,16 @@ STAR_MIN_ARMS = 5
 #: Below this many sim edges across the 0.3-reach circle's radius the sim mesh itself cannot
 #: space a star's arms (a plate hit with a radius of 3 sim edges grows 3).
 STAR_MIN_EDGES = 4.0
+
+#: A star's arms run straight out from the impact: the trimmed mean (:func:`trimmed_mean`) of
+#: their geodesic straightness (:func:`arm_straightness`, ``geodesic=True``) is 0.90-0.99 on
+#: plates, spot's flank and horn, a finger hit at its tip, a plate lying on a plate and
+#: suzanne's forehead (seeds 0-2).  Below this the arms wander and the pattern is a web of
+#: cells: suzanne's low-poly brow between the eyes, 0.81-0.87 (issue 18 §3; docs/solver.md,
+#: "A web, not a star").
+STAR_MIN_RADIAL = 0.885
+#: The share of the lowest and of the highest values :func:`trimmed_mean` leaves out.
+TRIM = 0.2
 
 #: A segment counts as radial when it runs within this angle of the radial direction (degrees).
 RADIAL_DEG = 45.0
@@ -453,21 +466,33 @@ def star_metrics(
     }
 
 
-def missing_stars(network: Any, vertices: np.ndarray | None = None,
-                  faces: np.ndarray | None = None,
-                  link: float | None = None) -> list[tuple[dict, int]]:
-    """The impacts of ``network`` whose cracks hold no star.
+def trimmed_mean(values: np.ndarray, trim: float = TRIM) -> float:
+    """Mean of ``values`` (K,) without the ``floor(trim K)`` lowest and highest; ``nan`` when
+    empty.  One crack following a crease (straightness 0.3) does not sink a star's mean, and
+    two straight arms do not lift a web's median."""
+    v = np.sort(np.asarray(values, dtype=np.float64).reshape(-1))
+    if len(v) == 0:
+        return float("nan")
+    cut = int(np.floor(trim * len(v)))
+    return float(v[cut:len(v) - cut].mean())
 
-    Per impact, its radial arms crossing the circle at 0.3 reach (:func:`radial_arms`, on its
-    own cracks: :func:`own_cracks`), distances over ``vertices``/``faces`` (a fine mesh of the
-    surface, the sim mesh; straight without), across touching shells closer than ``link``
-    (the sim edge; :func:`surface_distance`).  One fast-marching pass per impact, stopped at
-    the reach.
+
+def star_checks(network: Any, vertices: np.ndarray | None = None,
+                faces: np.ndarray | None = None,
+                link: float | None = None) -> list[tuple[dict, int, float]]:
+    """Per impact of ``network``: its radial arms and how straight they run out.
+
+    Per impact, on its own cracks (:func:`own_cracks`), the radial arms crossing the circle at
+    0.3 reach (:func:`radial_arms`) and the :func:`trimmed_mean` of their geodesic
+    straightness inside 0.6 reach (:func:`arm_straightness`), distances over
+    ``vertices``/``faces`` (a fine mesh of the surface, the sim mesh; straight without),
+    across touching shells closer than ``link`` (the sim edge; :func:`surface_distance`).
+    One fast-marching pass per impact, stopped at the reach.
 
     Returns
     -------
-    list of (impact dict, arms)
-        The impacts (``network.impacts`` entries) with fewer than :data:`STAR_MIN_ARMS`.
+    list of (impact dict, arms, radial)
+        In ``network.impacts`` order; ``radial`` in (0, 1], ``nan`` without arms.
     """
     impacts = list(network.impacts if hasattr(network, "impacts") else network["impacts"])
     polys = polylines(network)
@@ -479,13 +504,52 @@ def missing_stars(network: Any, vertices: np.ndarray | None = None,
         others = [(o["point"], impact_reach(o["radius"]))
                   for i, o in enumerate(impacts) if i != k]
         own = own_cracks(polys, imp["point"], reach, others)
-        arms = 0
+        arms, radial = 0, float("nan")
         if own:
             flat = np.concatenate(own)
             d = surface_distance(flat, imp["point"], vertices, faces, max_distance=reach,
                                  link=link)
             dists = np.split(d, np.cumsum([len(p) for p in own])[:-1])
             arms = len(radial_arms(own, dists, reach))
-        if arms < STAR_MIN_ARMS:
-            out.append((imp, arms))
+            radial = trimmed_mean(arm_straightness(own, dists, reach, geodesic=True))
+        out.append((imp, arms, radial))
     return out
+
+
+def missing_stars(network: Any, vertices: np.ndarray | None = None,
+                  faces: np.ndarray | None = None,
+                  link: float | None = None,
+                  checks: list | None = None) -> list[tuple[dict, int]]:
+    """The impacts of ``network`` whose cracks hold no star.
+
+    Parameters as :func:`star_checks` (``checks``: its result, when already measured).
+
+    Returns
+    -------
+    list of (impact dict, arms)
+        The impacts (``network.impacts`` entries) with fewer than :data:`STAR_MIN_ARMS` radial
+        arms crossing the circle at 0.3 reach.
+    """
+    if checks is None:
+        checks = star_checks(network, vertices, faces, link)
+    return [(imp, arms) for imp, arms, _ in checks if arms < STAR_MIN_ARMS]
+
+
+def web_stars(network: Any, vertices: np.ndarray | None = None,
+              faces: np.ndarray | None = None,
+              link: float | None = None,
+              checks: list | None = None) -> list[tuple[dict, int, float]]:
+    """The impacts of ``network`` whose arms are enough for a star but wander: a web of cells.
+
+    Parameters as :func:`star_checks` (``checks``: its result, when already measured).
+
+    Returns
+    -------
+    list of (impact dict, arms, radial)
+        The impacts with at least :data:`STAR_MIN_ARMS` arms whose trimmed-mean geodesic
+        straightness is below :data:`STAR_MIN_RADIAL`.
+    """
+    if checks is None:
+        checks = star_checks(network, vertices, faces, link)
+    return [(imp, arms, radial) for imp, arms, radial in checks
+            if arms >= STAR_MIN_ARMS and radial < STAR_MIN_RADIAL]
