@@ -3,13 +3,14 @@
 Why not the OpenEXR bindings for these: the 4096² crack master is 0.47 GB of planes, and
 OpenEXR's ZIP path spent about 1.3 CPU-s on it (quiet 2-core machine; 2.9 s loaded), 40 % in
 its byte reordering and predictor and 53 % in deflate, at every zip level: the write stage's
-critical path.  The same transform as one fused numba pass (GIL released) and zlib-ng's deflate
-take about a quarter of that (the gather 0.1, the transform 0.2, deflate 0.35 CPU-s on a
-loaded machine where the bindings took 2.9), split over threads (``benchmarks/bench_write.py``).  The files
-are standard OpenEXR 2.0 single-part scanline images: the same header attributes, channel list
-and pixels as the bindings write (``tests/test_exrzip.py`` reads them back with OpenEXR and
-OpenImageIO, Blender in the reference checks); only the deflate streams differ.  No compression,
-PIZ, RLE and ZSTD are left to the bindings (:func:`crackbake.exchange.exr.write_exr`).
+critical path.  The same transform as one fused numba pass (GIL released) and zlib-ng's
+deflate take about a quarter of that (the gather 0.1, the transform 0.2, deflate 0.35 CPU-s
+on a loaded machine where the bindings took 2.9), split over threads
+(``benchmarks/bench_write.py``).  The files are standard OpenEXR 2.0 single-part scanline
+images: the same header attributes, channel list and pixels as the bindings write
+(``tests/test_exrzip.py`` reads them back with OpenEXR and OpenImageIO, Blender in the
+reference checks); only the deflate streams differ.  No compression, PIZ, RLE and ZSTD are
+left to the bindings (:func:`crackbake.exchange.exr.write_exr`).
 
 The layout, from the OpenEXR file-layout specification: magic ``76 2f 31 01``, version 2 (bit
 10 set when a name is longer than 31 bytes), the header's attributes (name, type name, size,
