@@ -141,3 +141,25 @@ def test_long_names_flag(tmp_path):
 def test_unwritable_path_is_one_clear_error(tmp_path):
     with pytest.raises(CrackbakeError, match="cannot write EXR .*folder exists"):
         write_exr(tmp_path / "missing" / "x.exr", _planes(), compression="zip")
+
+
+@pytest.mark.reference
+def test_blender_decodes_every_chunk(tmp_path):
+    """Blender's own EXR reader (bpy 5.0) gives back each plane of a multi-chunk ZIP file whose
+    last chunk is short and one of whose planes is random bits, pass by pass."""
+    from tests.blender_runner import run_blender
+
+    planes = {k: v for k, v in _planes(9).items() if v.dtype != np.uint32}  # no UINT passes
+    path = tmp_path / "zip.exr"
+    write_exr(path, planes, ATTRS)
+    out = tmp_path / "blender"
+    out.mkdir()
+    got = run_blender("exr_passes.py", str(path), str(out))
+    assert sorted(got["layers"]) == ["a", "crack"]
+    seen = set()
+    for info in got["passes"]:
+        name = f"{info['layer']}.{info['pass']}.V"
+        (plane,) = read_exr(info["file"])[0].values()
+        np.testing.assert_array_equal(plane, planes[name].astype(np.float32), err_msg=name)
+        seen.add(name)
+    assert seen == set(planes)
