@@ -21,10 +21,14 @@ Two tables:
 On a busy machine the CPU figures are the steadier comparison (the write's CPU / cores is its
 wall time on an idle one).  The numba cache must be warm (``python -m crackbake.precompile``).
 
+``--writers crackbake bindings`` runs each repeat with crackbake's EXR encoder and with the
+OpenEXR bindings (what wrote ZIP EXRs before it) in turn, so both see the same load.
+
 Usage::
 
     python benchmarks/bench_write.py [--maps readme|random] [--res 4096] [--repeat 5]
-                                     [--exr-compression zip] [--keep DIR]
+                                     [--writers crackbake bindings] [--exr-compression zip]
+                                     [--keep DIR]
 """
 
 from __future__ import annotations
@@ -34,7 +38,6 @@ import json
 import os
 import sys
 import tempfile
-import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -178,6 +181,24 @@ def _traced_main(module, name: str, label):
     setattr(module, name, timed)
 
 
+def use_writer(name: str) -> None:
+    """``crackbake``: ZIP/ZIPS EXRs by crackbake's encoder (the default); ``bindings``: by the
+    OpenEXR bindings, as before it (the same pixels and header), for an A/B in one process."""
+    import OpenEXR
+
+    import crackbake.exchange.exrzip as ez
+
+    if not hasattr(ez, "_own_write_scanline"):
+        ez._own_write_scanline = ez.write_scanline
+
+    def bindings(path, planes, attributes, compression="zip", threads=0, level=None):
+        code = getattr(OpenEXR, f"{compression.upper()}_COMPRESSION")
+        header = {"compression": code, "type": OpenEXR.scanlineimage, **attributes}
+        OpenEXR.File(header, dict(planes)).write(str(path))
+
+    ez.write_scanline = ez._own_write_scanline if name == "crackbake" else bindings
+
+
 def per_file(s: dict, ctx, out: Path, compression: str) -> list[tuple[str, float, float, int]]:
     """Each file's job alone, one after the other, on the calling thread."""
     import crackbake.exchange.bundle as b
@@ -233,8 +254,9 @@ def per_file(s: dict, ctx, out: Path, compression: str) -> list[tuple[str, float
     return [tuple(r) for r in rows]
 
 
-def whole(s: dict, ctx, repeat: int, keep: Path | None):
-    """The concurrent write ``repeat`` times: (walls, cpus, gantt of the median, records)."""
+def whole(s: dict, ctx, repeat: int, keep: Path | None, writers: list[str]) -> dict:
+    """The concurrent write ``repeat`` times per writer, the writers in turn within each
+    repeat: writer -> (walls, cpus, gantt of each repeat, records)."""
     import crackbake.exchange.bundle as b
     from crackbake.transaction.stage import OutputStage
 
@@ -243,24 +265,30 @@ def whole(s: dict, ctx, repeat: int, keep: Path | None):
     _traced_main(b, "write_sidecar", "cracks.json (main thread)")
     _traced_main(b, "write_obj", "cracks.obj (main thread)")
     _traced_main(b, "_write_glb", lambda a: f"{Path(a[0]).name} (main thread, waits)")
-    walls, cpus, gantts = [], [], []
+    out = {w: ([], [], [], None) for w in writers}
     for i in range(repeat):
-        last = keep is not None and i == repeat - 1
-        out = keep if last else Path(tempfile.mkdtemp(prefix="bench-write-")) / "o"
-        _Traced.lines = []
-        with OutputStage(out) as stage:
-            _Traced.t0 = t = time.perf_counter()
-            cpu = time.process_time()
-            b.write_outputs(stage, s["stem"], s["params"], s["mesh"], s["uvmesh"], s["network"],
-                            s["maps"], ctx, s["stress"], s["effective"])  # fmt: skip
-            records = stage.records()  # in the pipeline's write stage: the files' SHA-256
-            walls.append(time.perf_counter() - t)
-            cpus.append(time.process_time() - cpu)
-            _Traced.lines.append(("(SHA-256 records)", walls[-1] - 0.0, walls[-1]))
-            gantts.append(sorted(_Traced.lines, key=lambda x: x[1]))
-            if last:
-                stage.commit()
-    return walls, cpus, gantts, records
+        for w in writers:
+            use_writer(w)
+            walls, cpus, gantts, _ = out[w]
+            last = keep is not None and i == repeat - 1
+            folder = keep / w if last else Path(tempfile.mkdtemp(prefix="bench-write-")) / "o"
+            _Traced.lines = []
+            with OutputStage(folder) as stage:
+                _Traced.t0 = t = time.perf_counter()
+                cpu = time.process_time()
+                b.write_outputs(stage, s["stem"], s["params"], s["mesh"], s["uvmesh"],
+                                s["network"], s["maps"], ctx, s["stress"],
+                                s["effective"])  # fmt: skip
+                records = stage.records()  # in the pipeline's write stage: the files' SHA-256
+                walls.append(time.perf_counter() - t)
+                cpus.append(time.process_time() - cpu)
+                _Traced.lines.append(("(SHA-256 records)", walls[-1], walls[-1]))
+                gantts.append(sorted(_Traced.lines, key=lambda x: x[1]))
+                if last:
+                    stage.commit()
+            out[w] = (walls, cpus, gantts, records)
+    use_writer("crackbake")
+    return out
 
 
 def main() -> None:
@@ -273,6 +301,10 @@ def main() -> None:
     ap.add_argument("--exr-compression", default=None,
                     help="override the run's EXR compression (both EXRs)")  # fmt: skip
     ap.add_argument("--no-per-file", action="store_true", help="only the concurrent write")
+    ap.add_argument("--writers", nargs="+", default=["crackbake"],
+                    choices=("crackbake", "bindings"),
+                    help="EXR ZIP encoders to compare, run by run in turn (bindings: the "
+                         "OpenEXR bindings, as before crackbake's encoder)")  # fmt: skip
     ap.add_argument("--keep", type=Path, help="commit the last write into KEEP")
     args = ap.parse_args()
     ctx = create_context()
@@ -286,32 +318,44 @@ def main() -> None:
               f"load {os.getloadavg()[0]:.1f}"
               + (f", the pipeline's own write {s['pipeline_write']:.2f} s"
                  if "pipeline_write" in s else ""))  # fmt: skip
-        files = []
+        files = {}
         if not args.no_per_file:
-            out = Path(tempfile.mkdtemp(prefix="bench-write-")) / "alone"
-            files = per_file(s, ctx, out, compression)
-            print("\n| file (job alone, one thread) | wall s | CPU s | MB |\n|---|---:|---:|---:|")
-            for name, wall, cpu, size in files:
-                print(f"| {name} | {wall:.3f} | {cpu:.3f} | {size / 1e6:.2f} |")
-            tw, tc = sum(r[1] for r in files), sum(r[2] for r in files)
-            mb = sum(r[3] for r in files) / 1e6
-            print(f"| **sum** | {tw:.3f} | {tc:.3f} | {mb:.1f} |")
-        walls, cpus, gantts, records = whole(s, ctx, args.repeat, args.keep)
-        rest = slice(1 if len(walls) > 1 else 0, None)
-        med = float(np.median(walls[rest]))
-        k = rest.start + int(np.argsort(walls[rest])[len(walls[rest]) // 2])
+            for w in args.writers:
+                use_writer(w)
+                out = Path(tempfile.mkdtemp(prefix="bench-write-")) / "alone"
+                files[w] = per_file(s, ctx, out, compression)
+            use_writer("crackbake")
+            head = " | ".join(f"{w}: wall s / CPU s / MB" for w in args.writers)
+            print(f"\n| file (job alone, one thread) | {head} |")
+            print("|---|" + "---:|" * len(args.writers))
+            names = [r[0] for r in files[args.writers[0]]]
+            for k, name in enumerate([*names, "**sum**"]):
+                cells = []
+                for w in args.writers:
+                    rows = files[w]
+                    r = rows[k] if k < len(rows) else (
+                        name, *(sum(x[j] for x in rows) for j in (1, 2, 3)))  # fmt: skip
+                    cells.append(f"{r[1]:.3f} / {r[2]:.3f} / {r[3] / 1e6:.2f}")
+                print(f"| {name} | {' | '.join(cells)} |")
+        runs = whole(s, ctx, args.repeat, args.keep, args.writers)
         print("\n| write stage (concurrent) | first | best | median | CPU best / median |")
         print("|---|---:|---:|---:|---:|")
-        print(f"| {len(records)} files, {sum(r['bytes'] for r in records) / 1e6:.1f} MB "
-              f"| {walls[0]:.2f} | {min(walls[rest]):.2f} | {med:.2f} "
-              f"| {min(cpus[rest]):.2f} / {float(np.median(cpus[rest])):.2f} |")  # fmt: skip
-        print(f"\njobs of the median repeat ({walls[k]:.2f} s; start -> end, s):")
-        for name, t0, t1 in gantts[k]:
-            print(f"  {t0:6.3f} -> {t1:6.3f}  {name}")
-        summary.append({"maps": args.maps, "res": res, "compression": compression,
-                        "walls": walls, "cpus": cpus, "files": files,
-                        "load_avg": os.getloadavg()[0], "cores": os.cpu_count(),
-                        "thread": threading.active_count()})  # fmt: skip
+        for w, (walls, cpus, _gantts, records) in runs.items():
+            rest = slice(1 if len(walls) > 1 else 0, None)
+            med = float(np.median(walls[rest]))
+            print(f"| {w}: {len(records)} files, {sum(r['bytes'] for r in records) / 1e6:.1f} MB "
+                  f"| {walls[0]:.2f} | {min(walls[rest]):.2f} | {med:.2f} "
+                  f"| {min(cpus[rest]):.2f} / {float(np.median(cpus[rest])):.2f} |")  # fmt: skip
+        for w, (walls, cpus, gantts, _records) in runs.items():
+            rest = slice(1 if len(walls) > 1 else 0, None)
+            k = rest.start + int(np.argsort(walls[rest])[len(walls[rest]) // 2])
+            print(f"\n{w}: jobs of the median repeat ({walls[k]:.2f} s; start -> end, s):")
+            for name, t0, t1 in gantts[k]:
+                print(f"  {t0:6.3f} -> {t1:6.3f}  {name}")
+            summary.append({"maps": args.maps, "res": res, "compression": compression,
+                            "writer": w, "walls": walls, "cpus": cpus,
+                            "files": files.get(w, []), "load_avg": os.getloadavg()[0],
+                            "cores": os.cpu_count()})  # fmt: skip
     ctx.release()
     print(json.dumps(summary))
 
