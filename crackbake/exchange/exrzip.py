@@ -30,7 +30,10 @@ import zlib
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+from llvmlite import ir
 from numba import njit
+from numba.core import types
+from numba.extending import intrinsic
 
 try:  # the same module pngenc uses; stdlib zlib writes valid (slower) files too
     from zlib_ng import zlib_ng as _zlib
@@ -66,6 +69,42 @@ def _reorder_predict(raw, out):  # pragma: no cover - compiled
     for k in range(h1 + 1, n):
         j = 2 * (k - h1) + 1
         out[k] = np.uint8((np.int32(raw[j]) - np.int32(raw[j - 2]) + 128) & 255)
+
+
+@intrinsic
+def _half_bits(typingctx, x):  # pragma: no cover - compiled
+    """IEEE float32 -> binary16 bits, rounded to nearest even: LLVM's ``fptrunc`` (one F16C
+    instruction where the CPU has it)."""
+    if x != types.float32:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(builder.fptrunc(args[0], ir.HalfType()), ir.IntType(16))
+
+    return types.uint16(types.float32), codegen
+
+
+@njit(cache=True, nogil=True)
+def _to_half(src, out):  # pragma: no cover - compiled
+    for i in range(src.shape[0]):
+        out[i] = _half_bits(src[i])
+
+
+def to_half(plane: np.ndarray) -> np.ndarray:
+    """``plane.astype(np.float16)`` for float32 planes, 5-10x faster, the GIL released.
+
+    numpy converts float32 to half one element at a time (0.12 CPU-s per 4096² plane here);
+    this is the hardware conversion (0.01 s).  It gives numpy's half bits for every float32
+    but signalling NaNs, which come out quiet (``tests/test_exrzip.py`` checks every upper
+    16 bits with the low bits rounding turns on, and 16M random patterns).
+    """
+    plane = np.asarray(plane)
+    if plane.dtype != np.float32:
+        return plane.astype(np.float16)
+    src = np.ascontiguousarray(plane)
+    out = np.empty(src.shape, np.uint16)
+    _to_half(src.reshape(-1), out.reshape(-1))
+    return out.view(np.float16)
 
 
 def _attribute(name: str, kind: str, value: bytes) -> bytes:
