@@ -138,6 +138,12 @@ def test_long_names_flag(tmp_path):
     assert struct.unpack_from("<I", short.read_bytes(), 4)[0] == 2
 
 
+def test_names_beyond_255_bytes_refused(tmp_path):
+    with pytest.raises(CrackbakeError, match="cannot write EXR .* at most 255"):
+        write_exr(tmp_path / "x.exr", {"v.V": np.ones((4, 4), np.float16)}, {"c:" + "x" * 300: 1})
+    assert not (tmp_path / "x.exr").exists()
+
+
 def test_unwritable_path_is_one_clear_error(tmp_path):
     with pytest.raises(CrackbakeError, match="cannot write EXR .*folder exists"):
         write_exr(tmp_path / "missing" / "x.exr", _planes(), compression="zip")

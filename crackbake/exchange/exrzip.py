@@ -144,6 +144,8 @@ def header_bytes(names: list[str], dtypes: list[np.dtype], width: int, height: i
     for key, value in attributes.items():
         attrs[key] = _value(key, value)
     longest = max(len(s.encode()) for s in [*attrs, *names])
+    if longest > 255:  # what readers accept even with the long-names flag
+        raise ValueError(f"an EXR attribute or channel name is {longest} bytes; at most 255")
     body = b"".join(_attribute(k, *attrs[k]) for k in sorted(attrs)) + b"\0"
     version = 2 | (_LONG_NAMES if longest > 31 else 0)
     return _MAGIC + struct.pack("<I", version) + body, longest > 31
