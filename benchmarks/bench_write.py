@@ -1,20 +1,34 @@
-"""Write-stage benchmark: every file of a run (EXR, the target's PNGs, GLB, preview) against the
-bake that produced the maps.
+"""Write-stage benchmark (issue 25: the 13 default files at 4096² in ≤ 1.0 s): the stage as a
+whole and every file of it.
 
-Spot (its own UVs) with a crack network of about 1,000 segments is baked once at each
-resolution; then :func:`crackbake.exchange.bundle.write_outputs` writes the full set into an
-output stage ``--repeat`` times (the first write pays first-use costs: the preview's shader
-compile, page faults; the best of the rest is the warm figure).  Normal and occlusion maps and
-tangents come from the real bake when the installed crackbake has them, else from a stand-in
-of the same shapes and types (image-space depth gradient, occlusion 1 - 0.7 mask, per-vertex
-UV-gradient tangents), so the write has every map to encode either way.
+``--maps readme`` (default) runs the README example in this process (``spot.obj --preset glass
+--impact 0.334,0.044,0.287 --res 4096``, default formats), captures what the pipeline hands to
+:func:`crackbake.exchange.bundle.write_outputs` (crack maps, stress maps, meshes, network) and
+then writes that set ``--repeat`` times into fresh output stages, timed as the pipeline times its
+``write`` stage (``write_outputs`` plus the files' SHA-256 records).  ``--maps random`` bakes
+spot with a random network of about 1,000 segments at each ``--res`` instead (no stress file).
 
-Each row gives wall and CPU seconds (all threads, this process): on a busy machine the CPU
-figures are the steadier comparison (the write's CPU / cores is its wall time on an idle one).
+Two tables:
+
+1. **per file** -- each file's job run alone, one after the other, on one thread (OpenEXR's
+   worker threads off): wall and CPU seconds, bytes.  The CPU seconds are each job's own cost;
+   their sum over the number of cores bounds the concurrent write from below.
+2. **the stage** -- the real concurrent write: wall and CPU seconds (all threads, this
+   process) of each repeat, first (first-use costs: the preview's shader, page faults), best
+   and median of the rest, and the jobs' Gantt lines of the median repeat (start/end seconds
+   from the stage's start; the critical path is the job that ends last).
+
+On a busy machine the CPU figures are the steadier comparison (the write's CPU / cores is its
+wall time on an idle one).  The numba cache must be warm (``python -m crackbake.precompile``).
+
+``--writers crackbake bindings`` runs each repeat with crackbake's EXR encoder and with the
+OpenEXR bindings (what wrote ZIP EXRs before it) in turn, so both see the same load.
 
 Usage::
 
-    python benchmarks/bench_write.py [--res 2048 4096] [--target gltf unreal] [--repeat 3]
+    python benchmarks/bench_write.py [--maps readme|random] [--res 4096] [--repeat 5]
+                                     [--writers crackbake bindings] [--exr-compression zip]
+                                     [--keep DIR]
 """
 
 from __future__ import annotations
@@ -25,6 +39,7 @@ import os
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,6 +47,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
+IMPACT = "0.334,0.044,0.287"
 
 
 def stand_in_tangents(uvm) -> np.ndarray:
@@ -64,90 +80,284 @@ def stand_in_surface(maps):
     return n.astype(np.float32), occ
 
 
-def prepared(res: int):
-    """Spot, its UV mesh (with tangents), the network and the maps (with normal, occlusion)."""
+def random_set(res: int) -> dict:
+    """write_outputs' arguments for spot with a random network baked at ``res`` (no stress)."""
     from bench_bake import random_network, spot_path
 
     from crackbake.bake.raster import bake_cracks
     from crackbake.bake.uv import prepare_uvs
     from crackbake.io.mesh import load_mesh
     from crackbake.network import segments
+    from crackbake.params import RunParams
 
     mesh = load_mesh(spot_path())
     network = random_network(mesh)
     uvm = prepare_uvs(mesh, mode="keep", res=res, cache=False)
-    real = False
     try:
         from crackbake.bake.tangents import with_tangents
 
         uvm = with_tangents(uvm)
-        real = True
     except ImportError:
         uvm = replace(uvm, tangents=stand_in_tangents(uvm))
-    t, cpu = time.perf_counter(), time.process_time()
     try:
         maps = bake_cracks(uvm.vertices, uvm.faces, uvm.uv, segments(network), res,
                            tangents=uvm.tangents)  # fmt: skip
     except TypeError:
         maps = bake_cracks(uvm.vertices, uvm.faces, uvm.uv, segments(network), res)
-    bake = (time.perf_counter() - t, time.process_time() - cpu)
     if maps.normal is None:
-        real = False
         maps.normal, maps.occlusion = stand_in_surface(maps)
-    return mesh, uvm, network, maps, bake, real
+    params = RunParams(mesh=Path(mesh.source), res=res)
+    return {"stem": "spot", "params": params, "mesh": mesh, "uvmesh": uvm, "network": network,
+            "maps": maps, "stress": None, "effective": None}  # fmt: skip
+
+
+def readme_set(res: int) -> dict:
+    """write_outputs' arguments of the README run at ``res``, captured from the pipeline."""
+    import crackbake.exchange.bundle as bundle
+    captured: dict = {}
+    real = bundle.write_outputs
+
+    def capture(stage, stem, params, mesh, uvmesh, network, maps, ctx=None, stress=None,
+                effective=None):  # fmt: skip
+        captured.update(stem=stem, params=params, mesh=mesh, uvmesh=uvmesh, network=network,
+                        maps=maps, stress=stress, effective=effective)  # fmt: skip
+        real(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
+
+    out = Path(tempfile.mkdtemp(prefix="bench-write-")) / "run"
+    argv = [str(ROOT / "examples" / "spot.obj"), "--preset", "glass", "--impact", IMPACT,
+            "--res", str(res), "-o", str(out), "--quiet"]  # fmt: skip
+    from crackbake.cli import main as command
+
+    bundle.write_outputs = capture
+    try:
+        command(argv, standalone_mode=False)
+    finally:
+        bundle.write_outputs = real
+    manifest = json.loads((out / "manifest.json").read_text())
+    captured["pipeline_write"] = manifest["timings_s"]["write"]
+    return captured
+
+
+class _Traced(ThreadPoolExecutor):
+    """The write's pool, recording each job's name, start and end (seconds from ``t0``)."""
+
+    t0 = 0.0
+    lines: list = []
+
+    def submit(self, fn, /, *args, **kwargs):
+        name = _job_name(fn, args)
+
+        def timed():
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                _Traced.lines.append((name, t - _Traced.t0, time.perf_counter() - _Traced.t0))
+
+        return super().submit(timed)
+
+
+def _job_name(fn, args) -> str:
+    if args and isinstance(args[0], Path | str):
+        return Path(args[0]).name
+    if getattr(fn, "__name__", "") == "_job" and len(args) >= 2:
+        key, paths = args[0], args[1]
+        return ", ".join(Path(p).name for p in paths) or f"{key[0]} {key[3]} (GLB)"
+    return getattr(fn, "__name__", str(fn))
+
+
+def _traced_main(module, name: str, label):
+    """Wrap ``module.name`` (a main-thread step of the write) so it adds a Gantt line."""
+    real = getattr(module, name)
+
+    def timed(*args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return real(*args, **kwargs)
+        finally:
+            what = label(args) if callable(label) else label
+            _Traced.lines.append((what, t - _Traced.t0, time.perf_counter() - _Traced.t0))
+
+    setattr(module, name, timed)
+
+
+def use_writer(name: str) -> None:
+    """``crackbake``: ZIP/ZIPS EXRs by crackbake's encoder (the default); ``bindings``: by the
+    OpenEXR bindings, as before it (the same pixels and header), for an A/B in one process."""
+    import OpenEXR
+
+    import crackbake.exchange.exrzip as ez
+
+    if not hasattr(ez, "_own_write_scanline"):
+        ez._own_write_scanline = ez.write_scanline
+
+    def bindings(path, planes, attributes, compression="zip", threads=0, level=None):
+        code = getattr(OpenEXR, f"{compression.upper()}_COMPRESSION")
+        header = {"compression": code, "type": OpenEXR.scanlineimage, **attributes}
+        OpenEXR.File(header, dict(planes)).write(str(path))
+
+    ez.write_scanline = ez._own_write_scanline if name == "crackbake" else bindings
+
+
+def per_file(s: dict, ctx, out: Path, compression: str) -> list[tuple[str, float, float, int]]:
+    """Each file's job alone, one after the other, on the calling thread."""
+    import crackbake.exchange.bundle as b
+    from crackbake import __version__
+    from crackbake.exchange.exr import exr_threads
+    from crackbake.exchange.layers import run_attributes
+    from crackbake.exchange.materials import GLB_TEXTURE_MAX
+    from crackbake.exchange.targets import TARGETS, normal_convention
+    from crackbake.io.texture import base_color_texture
+    from crackbake.transaction.stage import OutputStage
+
+    params, maps, stem = s["params"], s["maps"], s["stem"]
+    exr = {"compression": compression, "run": run_attributes(__version__, s["effective"])}
+    rows = []
+
+    def timed(label, fn, *args):
+        t, cpu = time.perf_counter(), time.process_time()
+        value = fn(*args)
+        wall, cpu = time.perf_counter() - t, time.process_time() - cpu
+        rows.append([label, wall, cpu])
+        return value
+
+    with OutputStage(out) as stage, exr_threads(0), ThreadPoolExecutor(1) as pool:
+        texture = timed("(asset texture)", base_color_texture, s["mesh"].source, maps.res,
+                        params.allow_outside_textures)  # fmt: skip
+        timed(f"{stem}_cracks.exr", b._write_exr, stage.path(f"{stem}_cracks.exr"), maps,
+              params.float32, *exr.values())  # fmt: skip
+        if s["stress"] is not None:
+            timed(f"{stem}_stress.exr", b._write_stress_exr, stage.path(f"{stem}_stress.exr"),
+                  s["stress"], *exr.values())  # fmt: skip
+        enc = b._Encoder(pool, maps, texture)
+        normal_y = normal_convention(params.target, params.normal_y)
+        for f in TARGETS[params.target].files:
+            ny = normal_y if f.content == "normal" else "gl"
+            enc.want((f.content, f.bits, ny, maps.res), stage.path(f.name.format(stem=stem)))
+        size = min(maps.res, GLB_TEXTURE_MAX)
+        keys = {k: enc.want((k, 8, "gl", size)) for k in ("base_color", "normal", "orm")}
+        encoded = {}
+        for key, paths in enc.requests.items():
+            label = ", ".join(Path(p).name for p in paths) or f"{key[0]} {key[3]} (GLB)"
+            data = timed(label, enc._job, key, paths, True)
+            encoded[key] = pool.submit(lambda d=data: d)
+        timed("preview.png", b._write_preview, stage, s["mesh"], s["uvmesh"], s["network"],
+              maps, texture, ctx, params.up)  # fmt: skip
+        timed("cracks.json", b.write_sidecar, s["network"], stage.path("cracks.json"))
+        timed("cracks.obj", b.write_obj, s["network"], stage.path("cracks.obj"))
+        timed(f"{stem}.glb", b._write_glb, stage.path(f"{stem}.glb"), stem, s["uvmesh"], maps,
+              encoded, keys)  # fmt: skip
+        records = timed("(SHA-256 records)", stage.records)
+    sizes = {r["name"]: r["bytes"] for r in records}
+    for row in rows:
+        row.append(sum(sizes.get(n.strip(), 0) for n in row[0].split(",")))
+    return [tuple(r) for r in rows]
+
+
+def whole(s: dict, ctx, repeat: int, keep: Path | None, writers: list[str]) -> dict:
+    """The concurrent write ``repeat`` times per writer, the writers in turn within each
+    repeat: writer -> (walls, cpus, gantt of each repeat, records)."""
+    import crackbake.exchange.bundle as b
+    from crackbake.transaction.stage import OutputStage
+
+    b.ThreadPoolExecutor = _Traced
+    _traced_main(b, "_write_preview", "preview.png (main thread)")
+    _traced_main(b, "write_sidecar", "cracks.json (main thread)")
+    _traced_main(b, "write_obj", "cracks.obj (main thread)")
+    _traced_main(b, "_write_glb", lambda a: f"{Path(a[0]).name} (main thread, waits)")
+    out = {w: ([], [], [], None) for w in writers}
+    for i in range(repeat):
+        for w in writers:
+            use_writer(w)
+            walls, cpus, gantts, _ = out[w]
+            last = keep is not None and i == repeat - 1
+            folder = keep / w if last else Path(tempfile.mkdtemp(prefix="bench-write-")) / "o"
+            _Traced.lines = []
+            with OutputStage(folder) as stage:
+                _Traced.t0 = t = time.perf_counter()
+                cpu = time.process_time()
+                b.write_outputs(stage, s["stem"], s["params"], s["mesh"], s["uvmesh"],
+                                s["network"], s["maps"], ctx, s["stress"],
+                                s["effective"])  # fmt: skip
+                records = stage.records()  # in the pipeline's write stage: the files' SHA-256
+                walls.append(time.perf_counter() - t)
+                cpus.append(time.process_time() - cpu)
+                _Traced.lines.append(("(SHA-256 records)", walls[-1], walls[-1]))
+                gantts.append(sorted(_Traced.lines, key=lambda x: x[1]))
+                if last:
+                    stage.commit()
+            out[w] = (walls, cpus, gantts, records)
+    use_writer("crackbake")
+    return out
 
 
 def main() -> None:
     from crackbake.bake.context import create_context
-    from crackbake.exchange.bundle import write_outputs
-    from crackbake.params import RunParams
-    from crackbake.transaction.stage import OutputStage
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--maps", choices=("readme", "random"), default="readme")
     ap.add_argument("--res", type=int, nargs="+", default=[4096])
-    ap.add_argument("--target", nargs="+", default=["gltf"])
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--keep", type=Path, help="write the last set into KEEP/<res>-<target>")
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--exr-compression", default=None,
+                    help="override the run's EXR compression (both EXRs)")  # fmt: skip
+    ap.add_argument("--no-per-file", action="store_true", help="only the concurrent write")
+    ap.add_argument("--writers", nargs="+", default=["crackbake"],
+                    choices=("crackbake", "bindings"),
+                    help="EXR ZIP encoders to compare, run by run in turn (bindings: the "
+                         "OpenEXR bindings, as before crackbake's encoder)")  # fmt: skip
+    ap.add_argument("--keep", type=Path, help="commit the last write into KEEP")
     args = ap.parse_args()
     ctx = create_context()
-    rows = []
-    print("| res | target | bake s wall / CPU | write s (first) | write s warm wall / CPU "
-          "| warm median wall / CPU | files | MB | maps | load |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    summary = []
     for res in args.res:
-        mesh, uvm, network, maps, bake, real = prepared(res)
-        for target in args.target:
-            params = RunParams(mesh=Path(mesh.source), res=res, target=target)
-            times, cpus = [], []
-            for i in range(args.repeat):
-                last = args.keep is not None and i == args.repeat - 1
-                out = args.keep / f"{res}-{target}" if last else Path(tempfile.mkdtemp()) / "o"
-                with OutputStage(out) as stage:
-                    t, cpu = time.perf_counter(), time.process_time()
-                    write_outputs(stage, "spot", params, mesh, uvm, network, maps, ctx)
-                    times.append(time.perf_counter() - t)
-                    cpus.append(time.process_time() - cpu)
-                    records = stage.records()
-                    if last:
-                        stage.commit()
-            mb = sum(r["bytes"] for r in records) / 1e6
-            warm = 1 + int(np.argmin(times[1:])) if len(times) > 1 else 0
-            rest = slice(1 if len(times) > 1 else 0, None)
-            med, med_cpu = float(np.median(times[rest])), float(np.median(cpus[rest]))
-            row = {"res": res, "target": target, "bake": bake[0], "bake_cpu": bake[1],
-                   "write_first": times[0], "write_warm": times[warm],
-                   "write_warm_cpu": cpus[warm], "write_median": med,
-                   "write_median_cpu": med_cpu, "files": len(records), "MB": mb,
-                   "real_maps": real, "cores": os.cpu_count(),
-                   "load_avg": os.getloadavg()[0]}  # fmt: skip
-            rows.append(row)
-            print(f"| {res} | {target} | {bake[0]:.2f} / {bake[1]:.2f} | {times[0]:.2f} "
-                  f"| {times[warm]:.2f} / {cpus[warm]:.2f} | {med:.2f} / {med_cpu:.2f} "
-                  f"| {len(records)} | {mb:.1f} "
-                  f"| {'baked' if real else 'stand-in'} | {row['load_avg']:.1f} |",
-                  flush=True)  # fmt: skip
+        s = readme_set(res) if args.maps == "readme" else random_set(res)
+        if args.exr_compression:
+            s["params"] = replace(s["params"], exr_compression=args.exr_compression)
+        compression = s["params"].exr_compression
+        print(f"\n## {args.maps} maps, {res}², EXR {compression}, {os.cpu_count()} cores, "
+              f"load {os.getloadavg()[0]:.1f}"
+              + (f", the pipeline's own write {s['pipeline_write']:.2f} s"
+                 if "pipeline_write" in s else ""))  # fmt: skip
+        files = {}
+        if not args.no_per_file:
+            for w in args.writers:
+                use_writer(w)
+                out = Path(tempfile.mkdtemp(prefix="bench-write-")) / "alone"
+                files[w] = per_file(s, ctx, out, compression)
+            use_writer("crackbake")
+            head = " | ".join(f"{w}: wall s / CPU s / MB" for w in args.writers)
+            print(f"\n| file (job alone, one thread) | {head} |")
+            print("|---|" + "---:|" * len(args.writers))
+            names = [r[0] for r in files[args.writers[0]]]
+            for k, name in enumerate([*names, "**sum**"]):
+                cells = []
+                for w in args.writers:
+                    rows = files[w]
+                    r = rows[k] if k < len(rows) else (
+                        name, *(sum(x[j] for x in rows) for j in (1, 2, 3)))  # fmt: skip
+                    cells.append(f"{r[1]:.3f} / {r[2]:.3f} / {r[3] / 1e6:.2f}")
+                print(f"| {name} | {' | '.join(cells)} |")
+        runs = whole(s, ctx, args.repeat, args.keep, args.writers)
+        print("\n| write stage (concurrent) | first | best | median | CPU best / median |")
+        print("|---|---:|---:|---:|---:|")
+        for w, (walls, cpus, _gantts, records) in runs.items():
+            rest = slice(1 if len(walls) > 1 else 0, None)
+            med = float(np.median(walls[rest]))
+            print(f"| {w}: {len(records)} files, {sum(r['bytes'] for r in records) / 1e6:.1f} MB "
+                  f"| {walls[0]:.2f} | {min(walls[rest]):.2f} | {med:.2f} "
+                  f"| {min(cpus[rest]):.2f} / {float(np.median(cpus[rest])):.2f} |")  # fmt: skip
+        for w, (walls, cpus, gantts, _records) in runs.items():
+            rest = slice(1 if len(walls) > 1 else 0, None)
+            k = rest.start + int(np.argsort(walls[rest])[len(walls[rest]) // 2])
+            print(f"\n{w}: jobs of the median repeat ({walls[k]:.2f} s; start -> end, s):")
+            for name, t0, t1 in gantts[k]:
+                print(f"  {t0:6.3f} -> {t1:6.3f}  {name}")
+            summary.append({"maps": args.maps, "res": res, "compression": compression,
+                            "writer": w, "walls": walls, "cpus": cpus,
+                            "files": files.get(w, []), "load_avg": os.getloadavg()[0],
+                            "cores": os.cpu_count()})  # fmt: skip
     ctx.release()
-    print(json.dumps(rows))
+    print(json.dumps(summary))
 
 
 if __name__ == "__main__":

@@ -63,10 +63,11 @@ PREVIEW_TEXTURE_MAX = 2048
 #: (warm write at 4096², median 1.56 s against 1.73 s): the jobs are bound by memory traffic,
 #: and fewer at once evict each other's data less.
 WRITE_THREADS = max(3, min(6, os.cpu_count() or 1))
-#: OpenEXR's compression threads while the crack master is written (the library default is
-#: none: the calling thread compresses alone).  The master is the longest job; with workers it
-#: takes the cores the texture jobs leave when they finish instead of ending alone on one
-#: (warm write at 4096² on 2 cores: best 1.6 s against 2.0 s, the same CPU seconds).
+#: Worker threads of the EXR encoders while the EXRs are written (OpenEXR's global count, which
+#: :mod:`crackbake.exchange.exrzip` follows too; the library default is none: the calling
+#: thread compresses alone).  The master is the longest job; with workers it takes the cores
+#: the texture jobs leave when they finish instead of ending alone on one (warm write at 4096²
+#: on 2 cores: best 1.6 s against 2.0 s, the same CPU seconds, with the bindings' encoder).
 EXR_THREADS = max(2, min(4, os.cpu_count() or 1))
 
 
