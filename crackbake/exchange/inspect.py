@@ -19,7 +19,6 @@ import numpy as np
 
 from crackbake.exchange.exr import read_exr
 from crackbake.exchange.layers import layer_of
-from crackbake.exchange.pngenc import png_bytes, write_bytes
 
 _TYPES = {np.dtype(np.float16): "half", np.dtype(np.float32): "float", np.dtype(np.uint32): "uint"}
 
@@ -118,6 +117,19 @@ def _stats(name: str, arr: np.ndarray, meta: dict) -> ChannelStats:
     )  # fmt: skip
 
 
+def _all_stats(channels: dict[str, np.ndarray], table: dict) -> list[ChannelStats]:
+    """One row per channel, sorted by name; the planes on a few threads (numpy's reductions
+    release the GIL: each plane's statistics are its own, the rows the same as one by one)."""
+    names = sorted(channels)
+    workers = min(len(names), 4, os.cpu_count() or 1)
+    if workers < 2:
+        return [_stats(n, channels[n], table.get(n, {})) for n in names]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(workers) as pool:
+        return list(pool.map(lambda n: _stats(n, channels[n], table.get(n, {})), names))
+
+
 def _attribute_text(value) -> str:
     return value if isinstance(value, str) else repr(value)
 
@@ -147,7 +159,7 @@ def inspect_exr(path: str | os.PathLike) -> tuple[Inspection, dict[str, np.ndarr
             table = {}
     skip = {"channels", "compression"}
     attributes = {k: _attribute_text(v) for k, v in sorted(header.items()) if k not in skip}
-    rows = [_stats(n, channels[n], table.get(n, {})) for n in sorted(channels)]
+    rows = _all_stats(channels, table)
     h, w = next(iter(channels.values())).shape if channels else (0, 0)
     info = Inspection(
         os.fspath(path), int(w), int(h), str(header.get("compression", "")), attributes, rows
@@ -427,6 +439,7 @@ def write_pictures(
     ``crack.*`` (the crack maps themselves stay readable).  ``prefix`` starts every file name
     (a UDIM tile's number).
     """
+    from crackbake.exchange.pngenc import png_bytes, write_bytes  # zlib-ng: pictures only
     from crackbake.exchange.targets import quantise  # numba: only for the pictures
 
     out = Path(out_dir)
