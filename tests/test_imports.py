@@ -32,19 +32,43 @@ def test_simulate_does_not_import_metrics():
 _CLI = """
 import sys
 import crackbake.cli
-print(" ".join(sorted(m for m in sys.modules if m.startswith("crackbake."))))
+before = " ".join(sorted(m for m in sys.modules if m.startswith("crackbake.")))
+try:
+    crackbake.cli.main(sys.argv[1:], prog_name="crackbake")
+except SystemExit:
+    pass
+print(before, file=sys.stderr)
+print(" ".join(sorted(m for m in sys.modules if m.startswith("crackbake."))), file=sys.stderr)
 """
+
+
+def _cli_loads(*args: str) -> tuple[set[str], set[str]]:
+    """The crackbake modules loaded by ``import crackbake.cli``, then after running ``args``."""
+    r = subprocess.run([sys.executable, "-c", _CLI, *args], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    before, after = r.stderr.splitlines()[-2:]  # after the command's own output
+    return set(before.split()), set(after.split())
 
 
 def test_the_command_group_loads_no_command_module_and_no_pipeline():
     """``crackbake MESH`` parses its options with only the bake command loaded: the other
-    commands are imported when named, the pipeline (GL, numba) once the options are valid."""
-    r = subprocess.run([sys.executable, "-c", _CLI], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    loaded = set(r.stdout.split())
+    commands are imported when named, the pipeline (GL, numba) once the options are valid;
+    the group itself loads no command until it routes."""
+    before, loaded = _cli_loads("--help")
+    assert "crackbake.cli.bake" not in before
     assert "crackbake.cli.bake" in loaded
     for heavy in ("crackbake.cli.inspect", "crackbake.decals", "crackbake.tile", "crackbake.batch",
                   "crackbake.pipeline", "crackbake.bake", "crackbake.simulate"):
+        assert heavy not in loaded, heavy
+
+
+def test_inspect_loads_no_bake_options():
+    """``crackbake inspect`` routes without the bake's options (their presets and defaults,
+    about 0.1 s of the 0.5 s inspect floor, issue 25)."""
+    _, loaded = _cli_loads("inspect", "--help")
+    assert "crackbake.cli.inspect" in loaded
+    for heavy in ("crackbake.cli.bake", "crackbake.params", "crackbake.pipeline"):
         assert heavy not in loaded, heavy
 
 

@@ -188,6 +188,36 @@ def test_nan_and_inf_are_counted_not_averaged(tmp_path):
     assert (row.min, row.max, row.mean, row.nonfinite) == (1, 1, 1, 3)
 
 
+@pytest.mark.parametrize("case", ["finite", "nan", "inf", "-inf", "subnormal", "extremes"])
+def test_half_planes_get_the_statistics_of_their_float32_values(tmp_path, case):
+    """Half planes are described from their bit patterns (no float32 copy): min, max, mean,
+    non-zero share and non-finite count must be those of the same values widened to float32
+    and reduced by numpy, NaN and inf anywhere, -0 counted as zero, subnormals as numbers."""
+    rng = np.random.default_rng(3)
+    v = (rng.standard_normal((H, W)) * 100).astype(np.float16)
+    v[rng.random((H, W)) < 0.5] = 0
+    v[1, :4] = np.array([-0.0, -0.0, 0.0, -0.0], np.float16)
+    bad = {"nan": np.nan, "inf": np.inf, "-inf": -np.inf}
+    if case in bad:
+        v[H // 2, W // 3] = bad[case]
+        v[H - 1, W - 1] = bad[case]
+    elif case == "subnormal":
+        v = (rng.integers(-1023, 1024, (H, W)).astype(np.float16) * np.float16(6e-8))
+    elif case == "extremes":
+        v[2, :2] = [65504, -65504]
+    path = tmp_path / "half.exr"
+    write_exr(path, {"data.h.V": v})
+    info, _ = inspect_exr(path)
+    (row,) = info.channels
+    wide = v.astype(np.float32)
+    good = wide[np.isfinite(wide)]
+    assert row.type == "half"
+    assert (row.min, row.max) == (float(good.min()), float(good.max()))
+    assert row.mean == float(good.mean(dtype=np.float64))
+    assert row.nonfinite == wide.size - good.size
+    assert row.nonzero == np.count_nonzero(wide) / wide.size
+
+
 @pytest.mark.parametrize("content", [b"", b"not an exr at all" * 10, b"v/1\x01" + b"\0" * 300])
 def test_bad_files_give_one_line_and_exit_2(tmp_path, content):
     path = tmp_path / "broken.exr"

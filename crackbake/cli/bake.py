@@ -4,19 +4,18 @@ The default command of the ``crackbake`` group (:mod:`crackbake.cli.group`)."""
 
 from __future__ import annotations
 
-import json
 import signal
 import sys
 import threading
 import time
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from crackbake import __version__
 from crackbake.cli.common import CONTEXT, Command, err, silence
-from crackbake.display import Display, display_mode
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.params import (
     CRACK_WIDTH_REL_DEFAULT,
@@ -47,7 +46,6 @@ from crackbake.params import (
     UP_AXES,
     UV_DEFAULT,
     UV_MODES,
-    RunParams,
     load_preset,
     parse_direction,
     parse_impact,
@@ -57,7 +55,12 @@ from crackbake.params import (
     SOLVER_DEFAULTS as D,
 )
 from crackbake.params.speed import MATERIAL_DEFAULT, MATERIALS, THICKNESS_DEFAULT
-from crackbake.transaction.interrupt import RunInterrupted
+
+if TYPE_CHECKING:
+    from crackbake.params import RunParams
+
+# What only a run needs (the display, the interrupt, RunParams' dataclass) is imported in the
+# command's body: ``crackbake --help`` pays for click and the options alone (issue 25).
 
 #: Options that shape only the command's own console output, not the run (:func:`run_params`
 #: never sees them; the batch command refuses them in a job).
@@ -403,6 +406,9 @@ def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, progress: str | 
          **options) -> None:
     """Grow cracks on MESH and bake them into textures (EXR, PNG, GLB)."""
     t0 = time.perf_counter()
+    from crackbake.display import Display, display_mode
+    from crackbake.transaction.interrupt import RunInterrupted
+
     recorded: list[str] = []
     stderr = sys.stderr
     display = Display(stderr, display_mode(stderr, quiet, verbose), t0)
@@ -449,6 +455,8 @@ def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, progress: str | 
     try:
         events.done(result.summary())
         if as_json:
+            import json
+
             click.echo(json.dumps(result.summary(), indent=2))
             sys.stdout.flush()
         if not quiet:
@@ -495,6 +503,7 @@ def run_params(mesh: Path, o: dict) -> RunParams:
     impacts = tuple(parse_impact(t) for t in o.pop("impacts"))
     directions = tuple(parse_direction(d) for d in o.pop("directions"))
     from crackbake.looks import parse_look  # numpy: not loaded for --help and --version
+    from crackbake.params import RunParams
 
     look = parse_look(o.pop("look"))
     return RunParams(

@@ -73,9 +73,22 @@ from crackbake.params.ranges import (
     check_sim_faces,
     is_length,
 )
-from crackbake.params.run import (
-    RunParams,
-)
+
+# RunParams (a frozen dataclass of some sixty fields: its generated methods cost more to build
+# than the rest of the package) is imported on first use: ``crackbake --help`` needs only the
+# defaults and choices above (issue 25).
+_LAZY = {"RunParams": "crackbake.params.run"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'crackbake.params' has no attribute '{name}'")
+
 
 __all__ = [
     "CRACK_WIDTH_REL_DEFAULT",
