@@ -318,11 +318,20 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
         ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
         gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
     screen = gl.keep(ctx.vertex_array(prog, []))
-    buffers = (
-        _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
-    )
-    for binding, data in enumerate(buffers):
-        gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
+    seg_buffer = _segment_buffer(segments)
+    # The crack normals' compute pass reads the segments as a storage buffer (binding 0); the
+    # crack pass reads them, and the lists, as textures (units 3, 4: shaders/crack_bake.frag).
+    gl.keep(ctx.buffer(seg_buffer)).bind_to_storage_buffer(0)
+    _table_texture(gl, seg_buffer.reshape(-1, 4), 4 << SEG_ROW_LOG2, "f4", 4).use(3)
+    row = 1 << LIST_ROW_LOG2
+    lists = np.empty((len(bins.candidates), 2), np.uint32)
+    lists[:, 0] = bins.candidates
+    lists[:, 1] = np.asarray(bins.bounds, np.float32).view(np.uint32)
+    _table_texture(gl, lists, row, "u4", 2).use(4)
+    ranges = np.column_stack([bins.bin_start[:-1], bins.bin_start[1:]]).astype(np.uint32)
+    _table_texture(gl, ranges, row, "u4", 2).use(5)
+    face_bin = np.asarray(bins.face_bin, np.uint32).reshape(-1, 1)
+    _table_texture(gl, face_bin, row, "u4", 1).use(6)
     surface["u_res"].value = float(res)
     prog["u_max_distance"].value = max_distance
     half = 0.5 * float(segments.width.max()) * terms["reach"] if len(segments.a) else 0.0
@@ -336,6 +345,31 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
         prog["u_cell"].value = bins.cell
         prog["u_cells_x"].value = bins.cells_x
     return surface, vao, screen
+
+
+#: Texture table rows of ``shaders/crack_bake.frag``: 2**10 segments (4 texels each), and 2**12
+#: list entries, bins or faces (``crack_surface.frag``) a row.
+SEG_ROW_LOG2 = 10
+LIST_ROW_LOG2 = 12
+
+
+def _table_texture(gl: GLScope, items: np.ndarray, width: int, dtype: str, components: int):
+    """A (rows, width) texture of ``items`` ((N, components), row-major, zero-padded to whole
+    rows), sampled with texelFetch only."""
+    import moderngl
+
+    rows = max(1, -(-len(items) // width))
+    limit = gl.ctx.info["GL_MAX_TEXTURE_SIZE"]
+    if rows > limit:
+        raise CrackbakeError(
+            f"{len(items)} crack segments or candidate entries exceed this OpenGL's texture "
+            f"limit ({limit} rows of {width}); bake fewer cracks or a smaller --res"
+        )
+    table = np.zeros((rows * width, components), items.dtype)
+    table[: len(items)] = items
+    tex = gl.keep(gl.ctx.texture((width, rows), components, table, dtype=dtype))
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    return tex
 
 
 def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...], depth: bool = False):
@@ -404,7 +438,7 @@ def _render(
         # No blending or culling; a camera placement keeps the surface nearest to it.
         gl.ctx.enable_only(moderngl.DEPTH_TEST if projected else moderngl.NOTHING)
         timings["setup"] = time.perf_counter() - t1
-        t_draw = t_read = t_normals = 0.0
+        t_surface = t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
@@ -412,6 +446,10 @@ def _render(
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
             vao.render(moderngl.TRIANGLES)
+            # Finished here only so the profile splits the two passes (the crack pass waits
+            # for the surface targets anyway).
+            gl.ctx.finish()
+            t_surface += time.perf_counter() - ta
             fbo.use()
             if bins.cell:
                 prog_row0.value = y0
@@ -429,6 +467,8 @@ def _render(
             t_read += tc - tb
             t_normals += time.perf_counter() - tc
         timings["render"] = t_draw
+        timings["surface"] = t_surface
+        timings["cracks"] = t_draw - t_surface
         timings["readback"] = t_read
         if with_normals:
             timings["normals"] = t_normals
