@@ -372,10 +372,10 @@ def _table_texture(gl: GLScope, items: np.ndarray, width: int, dtype: str, compo
     return tex
 
 
-def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...], depth: bool = False):
+def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     """Framebuffers of one band: the surface pass's three float targets (bound as textures for
-    the crack pass; with ``depth``, a depth buffer too) and the crack pass's one target per
-    channel."""
+    the crack pass) and the crack pass's one target per channel, sharing one depth buffer (the
+    surface pass's faces: the crack pass shades only where it holds one)."""
     import moderngl
 
     ctx = gl.ctx
@@ -383,10 +383,11 @@ def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...], depth: b
     for unit, tex in enumerate(gbuffer):
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.use(unit)
-    zbuffer = gl.keep(ctx.depth_renderbuffer((res, band))) if depth else None
+    zbuffer = gl.keep(ctx.depth_renderbuffer((res, band)))
     gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer, depth_attachment=zbuffer))
     textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
-    fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
+    fbo = gl.keep(ctx.framebuffer(color_attachments=textures, depth_attachment=zbuffer))
+    fbo.depth_mask = False
     return gfbo, fbo
 
 
@@ -434,9 +435,14 @@ def _render(
             images["normal"][2] = 1.0
             images["occlusion"] = np.ones((res, res), np.float16)
         projected = projection is not None
-        gfbo, fbo = _targets(gl, res, band, dtypes, depth=projected)
-        # No blending or culling; a camera placement keeps the surface nearest to it.
-        gl.ctx.enable_only(moderngl.DEPTH_TEST if projected else moderngl.NOTHING)
+        gfbo, fbo = _targets(gl, res, band, dtypes)
+        # No blending or culling.  The depth test: a camera placement keeps the surface nearest
+        # to it, a UV placement the last face drawn (as without a test); the crack pass's
+        # triangle lies at the far plane and shades only texels nearer, i.e. on a face, so
+        # llvmpipe skips the shader for the blocks off the islands (about half the image) —
+        # those keep the targets' clear, the values crack_bake.frag writes off the faces.
+        gl.ctx.enable_only(moderngl.DEPTH_TEST)
+        surface_test = "<" if projected else "1"
         timings["setup"] = time.perf_counter() - t1
         t_surface = t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
@@ -445,12 +451,15 @@ def _render(
             gfbo.use()
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
+            gl.ctx.depth_func = surface_test
             vao.render(moderngl.TRIANGLES)
             # Finished here only so the profile splits the two passes (the crack pass waits
             # for the surface targets anyway).
             gl.ctx.finish()
             t_surface += time.perf_counter() - ta
             fbo.use()
+            fbo.clear(0.0, 0.0, 0.0, 0.0)
+            gl.ctx.depth_func = ">"
             if bins.cell:
                 prog_row0.value = y0
             _crack_pass(gl.ctx, fbo, screen, res, h, y0, progress)
@@ -466,6 +475,7 @@ def _render(
             t_draw += tb - ta
             t_read += tc - tb
             t_normals += time.perf_counter() - tc
+        gl.ctx.depth_func = "<"  # GL's default, for the run's later draws
         timings["render"] = t_draw
         timings["surface"] = t_surface
         timings["cracks"] = t_draw - t_surface
