@@ -10,6 +10,12 @@
 // (crack_bake.frag: llvmpipe gathers texels for all lanes at once, buffer loads lane by lane).
 layout(binding = 6) uniform usampler2D u_face_bin;
 
+#ifdef CRACK_LIST_DEPTH
+// A UV placement: the depth says whether the face's bin lists any segment (0.25) or none
+// (0.75), so the crack pass shades only the texels with a list to walk (crackbake/bake/raster.py).
+layout(binding = 5) uniform usampler2D u_bins;    // per bin: its list's first, end entry
+#endif
+
 in vec3 v_world;
 
 layout(location = 0) out vec4 o_point;   // xyz world position, w = bin (exact below 2^24)
@@ -19,6 +25,10 @@ layout(location = 2) out vec4 o_dpy;     // xyz d(world)/d(texel y), w = face (n
 void main() {
     uint bin = texelFetch(u_face_bin, ivec2(gl_PrimitiveID & 4095, gl_PrimitiveID >> 12), 0).x;
     o_point = vec4(v_world, float(bin));
+#ifdef CRACK_LIST_DEPTH
+    uvec2 list = texelFetch(u_bins, ivec2(int(bin) & 4095, int(bin) >> 12), 0).xy;
+    gl_FragDepth = list.x < list.y ? 0.25 : 0.75;
+#endif
     o_dpx = vec4(dFdx(v_world), 1.0);
 #ifdef CRACK_NORMALS
     o_dpy = vec4(dFdy(v_world), float(gl_PrimitiveID));  // exact below 2^24 faces

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from crackbake.bake.cells import image_bins
-from crackbake.bake.context import GLScope
+from crackbake.bake.context import GLScope, shader_source
 from crackbake.bake.dilation import dilate
 from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
@@ -293,10 +293,12 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
     placement = "crack_bake.vert" if projection is None else "decal_project.vert"
+    # A UV placement sorts the faces' texels by depth: bin with or without a list.
+    classes = ("CRACK_LIST_DEPTH",) if projection is None else ()
     surface = gl.keep(
         ctx.program(
             vertex_shader=shader_variant(placement, with_normals),
-            fragment_shader=shader_variant("crack_surface.frag", with_normals),
+            fragment_shader=shader_variant("crack_surface.frag", with_normals, classes),
         )
     )
     prog = gl.keep(
@@ -318,6 +320,11 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
         ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
         gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
     screen = gl.keep(ctx.vertex_array(prog, []))
+    inside = gl.keep(ctx.program(vertex_shader=shader_source("crack_screen.vert"),
+                                 fragment_shader=shader_source("crack_inside.frag")))
+    inside["u_depth"].value = 1.0  # every face texel
+    prog["u_depth"].value = 1.0 if projection is not None else 0.0  # ... or the listed ones
+    inside_screen = gl.keep(ctx.vertex_array(inside, []))
     seg_buffer = _segment_buffer(segments)
     # The crack normals' compute pass reads the segments as a storage buffer (binding 0); the
     # crack pass reads them, and the lists, as textures (units 3, 4: shaders/crack_bake.frag).
@@ -344,7 +351,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     if bins.cell:
         prog["u_cell"].value = bins.cell
         prog["u_cells_x"].value = bins.cells_x
-    return surface, vao, screen
+    return surface, vao, screen, inside_screen
 
 
 #: Texture table rows of ``shaders/crack_bake.frag``: 2**10 segments (4 texels each), and 2**12
@@ -375,7 +382,8 @@ def _table_texture(gl: GLScope, items: np.ndarray, width: int, dtype: str, compo
 def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     """Framebuffers of one band: the surface pass's three float targets (bound as textures for
     the crack pass) and the crack pass's one target per channel, sharing one depth buffer (the
-    surface pass's faces: the crack pass shades only where it holds one)."""
+    surface pass's faces: the crack pass shades only where it holds one); one framebuffer per
+    crack target, to clear each to its own value, the inside target's with the depth buffer."""
     import moderngl
 
     ctx = gl.ctx
@@ -388,7 +396,11 @@ def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
     fbo = gl.keep(ctx.framebuffer(color_attachments=textures, depth_attachment=zbuffer))
     fbo.depth_mask = False
-    return gfbo, fbo
+    singles = [gl.keep(ctx.framebuffer(color_attachments=[t])) for t in textures[:-1]]
+    singles.append(gl.keep(ctx.framebuffer(color_attachments=[textures[-1]],
+                                           depth_attachment=zbuffer)))
+    singles[-1].depth_mask = False
+    return gfbo, fbo, singles
 
 
 def _render(
@@ -415,7 +427,7 @@ def _render(
     with_normals = frames is not None
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
-        surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
+        surface, vao, screen, inside_screen = _programs(gl, vertices, faces, uv, segments, res, bins,
                                          max_distance, profile_shape, frames, projection, min_px,
                                          terms)
         prog_row0 = screen.program["u_row0"] if bins.cell else None
@@ -435,14 +447,21 @@ def _render(
             images["normal"][2] = 1.0
             images["occlusion"] = np.ones((res, res), np.float16)
         projected = projection is not None
-        gfbo, fbo = _targets(gl, res, band, dtypes)
+        gfbo, fbo, singles = _targets(gl, res, band, dtypes)
         # No blending or culling.  The depth test: a camera placement keeps the surface nearest
-        # to it, a UV placement the last face drawn (as without a test); the crack pass's
-        # triangle lies at the far plane and shades only texels nearer, i.e. on a face, so
-        # llvmpipe skips the shader for the blocks off the islands (about half the image) —
-        # those keep the targets' clear, the values crack_bake.frag writes off the faces.
+        # to it, a UV placement the last face drawn (as without a test).  The crack pass's
+        # triangle shades only the texels nearer than it (shaders/crack_screen.vert): llvmpipe
+        # skips the shader for the 4x4 blocks with none, which keep the targets' clear.
+        # The clear is what crack_bake.frag writes at a face texel whose list is empty (no
+        # crack within reach), except for the inside target: 0, off the faces; the gutter fill
+        # overwrites every other channel there.  So with a UV placement the full crack shader
+        # runs only at the texels of faces with a list (crack_surface.frag's depth 0.25: about
+        # a fifth of the spot atlas), and a one-output pass marks the other face texels inside.
+        # A camera's placement has no such classes (its depth is the camera's): the crack
+        # shader runs at every face texel.
         gl.ctx.enable_only(moderngl.DEPTH_TEST)
         surface_test = "<" if projected else "1"
+        clear = (0.0, 0.0, 0.0, 0.0, max_distance, -1.0, 0.0)  # _NAMES' order
         timings["setup"] = time.perf_counter() - t1
         t_surface = t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
@@ -457,9 +476,13 @@ def _render(
             # for the surface targets anyway).
             gl.ctx.finish()
             t_surface += time.perf_counter() - ta
-            fbo.use()
-            fbo.clear(0.0, 0.0, 0.0, 0.0)
+            for single, value in zip(singles, clear, strict=True):
+                single.clear(value, value, value, value)
             gl.ctx.depth_func = ">"
+            if not projected:
+                singles[-1].use()
+                inside_screen.render(moderngl.TRIANGLES, vertices=3)
+            fbo.use()
             if bins.cell:
                 prog_row0.value = y0
             _crack_pass(gl.ctx, fbo, screen, res, h, y0, progress)
