@@ -187,7 +187,7 @@ def bake_cracks(
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
         Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
-        texels (69 bytes each on the GL side).
+        texels (73 bytes each on the GL side).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
     normals : (V, 3) float, optional
@@ -427,14 +427,15 @@ def _render(
     with_normals = frames is not None
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
-        surface, vao, screen, inside_screen = _programs(gl, vertices, faces, uv, segments, res, bins,
-                                         max_distance, profile_shape, frames, projection, min_px,
-                                         terms)
+        surface, vao, screen, inside_screen = _programs(
+            gl, vertices, faces, uv, segments, res, bins, max_distance, profile_shape, frames,
+            projection, min_px, terms,
+        )  # fmt: skip
         prog_row0 = screen.program["u_row0"] if bins.cell else None
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (69 bytes a texel: 48 for the surface pass, 21 for the maps; 72 with the normal map,
-        # whose inside target holds the winning segment as R32F).
+        # (73 bytes a texel: 48 for the surface pass, 4 of depth, 21 for the maps; 76 with the
+        # normal map, whose inside target holds the winning segment as R32F).
         band = max(1, min(res, (tile * tile) // res))
         # With the normal map the inside target also says which segment's depth wins (R32F).
         dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
