@@ -3,7 +3,9 @@
 The asset's faces are drawn at their UV positions in two passes: the first records each texel's
 world position, texel footprint and face bin; the second, once per texel, loops over the crack
 segments listed for that bin (:mod:`crackbake.bake.grid`: nearby faces share one list, so memory
-stays linear in faces + segments) and measures world-space distances.  So widths are in mesh
+stays linear in faces + segments) and measures world-space distances; the depth buffer of the
+first pass keeps the second to the texels of faces whose bin lists a segment at all (the others
+take an empty list's values from the targets' clear).  So widths are in mesh
 units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
 images are drawn in bands, and empty texels are then filled from their nearest island
 (dilation) so bilinear filtering and mip-maps never pull in background.  Given tangents, the
@@ -468,8 +470,16 @@ def _render(
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
+            # Before the surface pass writes the depth buffer the inside target shares.
+            for single, value in zip(singles, clear, strict=True):
+                single.clear(value, value, value, value)
             gfbo.use()
+            # The depth only: the passes after read the surface targets only where a face was
+            # drawn (the depth test), so their colours need no clear (805 MB at 4096²).
+            gfbo.color_mask = ((False,) * 4,) * 3
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            gfbo.color_mask = ((True,) * 4,) * 3
+            gfbo.use()
             surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
             gl.ctx.depth_func = surface_test
             vao.render(moderngl.TRIANGLES)
@@ -477,8 +487,6 @@ def _render(
             # for the surface targets anyway).
             gl.ctx.finish()
             t_surface += time.perf_counter() - ta
-            for single, value in zip(singles, clear, strict=True):
-                single.clear(value, value, value, value)
             gl.ctx.depth_func = ">"
             if not projected:
                 singles[-1].use()
