@@ -458,8 +458,9 @@ def _render(
         # The clear is what crack_bake.frag writes at a face texel whose list is empty (no
         # crack within reach), except for the inside target: 0, off the faces; the gutter fill
         # overwrites every other channel there.  So with a UV placement the full crack shader
-        # runs only at the texels of faces with a list (crack_surface.frag's depth 0.25: about
-        # a fifth of the spot atlas), and a one-output pass marks the other face texels inside.
+        # runs only at the texels of faces with a list (crack_surface.frag's depth 0.25: on
+        # spot, 90 % of the face texels take no loop step), and a one-output pass marks the
+        # other face texels inside.
         # A camera's placement has no such classes (its depth is the camera's): the crack
         # shader runs at every face texel.
         gl.ctx.enable_only(moderngl.DEPTH_TEST)
