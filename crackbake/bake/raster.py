@@ -508,7 +508,9 @@ def _render(
             t_draw += tb - ta
             t_read += tc - tb
             t_normals += time.perf_counter() - tc
-        gl.ctx.depth_func = "<"  # GL's default, for the run's later draws
+        # The state a bake left before the depth classes, for the run's later draws.
+        gl.ctx.depth_func = "<"
+        gl.ctx.enable_only(moderngl.DEPTH_TEST if projected else moderngl.NOTHING)
         timings["render"] = t_draw
         timings["surface"] = t_surface
         timings["cracks"] = t_draw - t_surface
