@@ -6,7 +6,15 @@
 // The second pass (crack_bake.frag) measures the cracks once per texel from these: measuring here
 // would repeat the loop for every partly covered 2x2 quad of every small triangle.
 
-layout(std430, binding = 1) readonly buffer FaceBin { uint face_bin[]; };
+// Each face's bin, face f at texel (f % 4096, f / 4096): a texture, as the crack pass's lists
+// (crack_bake.frag: llvmpipe gathers texels for all lanes at once, buffer loads lane by lane).
+layout(binding = 6) uniform usampler2D u_face_bin;
+
+#ifdef CRACK_LIST_DEPTH
+// A UV placement: the depth says whether the face's bin lists any segment (0.25) or none
+// (0.75), so the crack pass shades only the texels with a list to walk (crackbake/bake/raster.py).
+layout(binding = 5) uniform usampler2D u_bins;    // per bin: its list's first, end entry
+#endif
 
 in vec3 v_world;
 
@@ -15,7 +23,12 @@ layout(location = 1) out vec4 o_dpx;     // xyz d(world)/d(texel x), w = 1 on a 
 layout(location = 2) out vec4 o_dpy;     // xyz d(world)/d(texel y), w = face (normal map only)
 
 void main() {
-    o_point = vec4(v_world, float(face_bin[uint(gl_PrimitiveID)]));
+    uint bin = texelFetch(u_face_bin, ivec2(gl_PrimitiveID & 4095, gl_PrimitiveID >> 12), 0).x;
+    o_point = vec4(v_world, float(bin));
+#ifdef CRACK_LIST_DEPTH
+    uvec2 list = texelFetch(u_bins, ivec2(int(bin) & 4095, int(bin) >> 12), 0).xy;
+    gl_FragDepth = list.x < list.y ? 0.25 : 0.75;
+#endif
     o_dpx = vec4(dFdx(v_world), 1.0);
 #ifdef CRACK_NORMALS
     o_dpy = vec4(dFdy(v_world), float(gl_PrimitiveID));  // exact below 2^24 faces

@@ -314,6 +314,22 @@ def test_nearest_island_matches_brute_force_and_scipy():
     assert np.array_equal(limited[~far], before.reshape(-1)[src].reshape(inside.shape)[~far])
 
 
+def test_nearest_island_across_column_chunks():
+    # Wider than several of the column pass's chunks, not a multiple of one: exact EDT anyway.
+    from scipy import ndimage
+
+    from crackbake.bake.dilation import _COLUMN_CHUNK
+
+    rng = np.random.default_rng(5)
+    w = 2 * _COLUMN_CHUNK + 37
+    inside = rng.random((40, w)) < 0.01
+    inside[:, _COLUMN_CHUNK - 1] = False  # a column with no island texel, at a chunk's edge
+    src, dist2 = nearest_island(inside)
+    edt = ndimage.distance_transform_edt(~inside)
+    assert np.array_equal(dist2.reshape(inside.shape), np.rint(edt**2).astype(np.int32))
+    assert inside.reshape(-1)[src].all()
+
+
 def test_dilation_with_no_island_fills_background():
     img = np.ones((8, 8), np.float32)
     dilate([img], np.zeros((8, 8), bool), background=[3.0])

@@ -20,23 +20,37 @@ from numba import njit, prange
 _FAR = np.int32(2**31 - 1)
 
 
+#: Columns one thread sweeps together in the column pass: whole cache lines of each row.
+_COLUMN_CHUNK = 128
+
+
 @njit(parallel=True, cache=True)
 def _nearest_row_per_column(inside: np.ndarray) -> np.ndarray:
-    """For each texel, the row of the nearest island texel in the same column (-1: none)."""
+    """For each texel, the row of the nearest island texel in the same column (-1: none).
+
+    The columns are swept in chunks of :data:`_COLUMN_CHUNK`, row by row: a sweep down one
+    column at a time strides a whole image row per texel (0.6 CPU-s at 4096², 4x this)."""
     h, w = inside.shape
-    near = np.full((h, w), -1, np.int32)
-    for x in prange(w):
-        last = -1
+    near = np.empty((h, w), np.int32)
+    n_chunks = (w + _COLUMN_CHUNK - 1) // _COLUMN_CHUNK
+    for c in prange(n_chunks):
+        x0 = c * _COLUMN_CHUNK
+        m = min(w, x0 + _COLUMN_CHUNK) - x0
+        last = np.full(m, -1, np.int32)
         for y in range(h):
-            if inside[y, x]:
-                last = y
-            near[y, x] = last
-        nxt = -1
+            for i in range(m):
+                if inside[y, x0 + i]:
+                    last[i] = y
+                near[y, x0 + i] = last[i]
+        nxt = np.full(m, -1, np.int32)
         for y in range(h - 1, -1, -1):
-            if inside[y, x]:
-                nxt = y
-            if nxt >= 0 and (near[y, x] < 0 or nxt - y < y - near[y, x]):
-                near[y, x] = nxt
+            for i in range(m):
+                x = x0 + i
+                if inside[y, x]:
+                    nxt[i] = y
+                n = nxt[i]
+                if n >= 0 and (near[y, x] < 0 or n - y < y - near[y, x]):
+                    near[y, x] = n
     return near
 
 

@@ -3,7 +3,9 @@
 The asset's faces are drawn at their UV positions in two passes: the first records each texel's
 world position, texel footprint and face bin; the second, once per texel, loops over the crack
 segments listed for that bin (:mod:`crackbake.bake.grid`: nearby faces share one list, so memory
-stays linear in faces + segments) and measures world-space distances.  So widths are in mesh
+stays linear in faces + segments) and measures world-space distances; the depth buffer of the
+first pass keeps the second to the texels of faces whose bin lists a segment at all (the others
+take an empty list's values from the targets' clear).  So widths are in mesh
 units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
 images are drawn in bands, and empty texels are then filled from their nearest island
 (dilation) so bilinear filtering and mip-maps never pull in background.  Given tangents, the
@@ -23,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from crackbake.bake.cells import image_bins
-from crackbake.bake.context import GLScope
+from crackbake.bake.context import GLScope, shader_source
 from crackbake.bake.dilation import dilate
 from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
@@ -187,7 +189,7 @@ def bake_cracks(
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
         Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
-        texels (69 bytes each on the GL side).
+        texels (73 bytes each on the GL side).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
     normals : (V, 3) float, optional
@@ -293,10 +295,12 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
     placement = "crack_bake.vert" if projection is None else "decal_project.vert"
+    # A UV placement sorts the faces' texels by depth: bin with or without a list.
+    classes = ("CRACK_LIST_DEPTH",) if projection is None else ()
     surface = gl.keep(
         ctx.program(
             vertex_shader=shader_variant(placement, with_normals),
-            fragment_shader=shader_variant("crack_surface.frag", with_normals),
+            fragment_shader=shader_variant("crack_surface.frag", with_normals, classes),
         )
     )
     prog = gl.keep(
@@ -318,11 +322,25 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
         ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
         gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
     screen = gl.keep(ctx.vertex_array(prog, []))
-    buffers = (
-        _segment_buffer(segments), bins.face_bin, bins.bin_start, bins.candidates, bins.bounds
-    )
-    for binding, data in enumerate(buffers):
-        gl.keep(ctx.buffer(data)).bind_to_storage_buffer(binding)
+    inside = gl.keep(ctx.program(vertex_shader=shader_source("crack_screen.vert"),
+                                 fragment_shader=shader_source("crack_inside.frag")))
+    inside["u_depth"].value = 1.0  # every face texel
+    prog["u_depth"].value = 1.0 if projection is not None else 0.0  # ... or the listed ones
+    inside_screen = gl.keep(ctx.vertex_array(inside, []))
+    seg_buffer = _segment_buffer(segments)
+    # The crack normals' compute pass reads the segments as a storage buffer (binding 0); the
+    # crack pass reads them, and the lists, as textures (units 3, 4: shaders/crack_bake.frag).
+    gl.keep(ctx.buffer(seg_buffer)).bind_to_storage_buffer(0)
+    _table_texture(gl, seg_buffer.reshape(-1, 4), 4 << SEG_ROW_LOG2, "f4", 4).use(3)
+    row = 1 << LIST_ROW_LOG2
+    lists = np.empty((len(bins.candidates), 2), np.uint32)
+    lists[:, 0] = bins.candidates
+    lists[:, 1] = np.asarray(bins.bounds, np.float32).view(np.uint32)
+    _table_texture(gl, lists, row, "u4", 2).use(4)
+    ranges = np.column_stack([bins.bin_start[:-1], bins.bin_start[1:]]).astype(np.uint32)
+    _table_texture(gl, ranges, row, "u4", 2).use(5)
+    face_bin = np.asarray(bins.face_bin, np.uint32).reshape(-1, 1)
+    _table_texture(gl, face_bin, row, "u4", 1).use(6)
     surface["u_res"].value = float(res)
     prog["u_max_distance"].value = max_distance
     half = 0.5 * float(segments.width.max()) * terms["reach"] if len(segments.a) else 0.0
@@ -335,13 +353,39 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     if bins.cell:
         prog["u_cell"].value = bins.cell
         prog["u_cells_x"].value = bins.cells_x
-    return surface, vao, screen
+    return surface, vao, screen, inside_screen
 
 
-def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...], depth: bool = False):
+#: Texture table rows of ``shaders/crack_bake.frag``: 2**10 segments (4 texels each), and 2**12
+#: list entries, bins or faces (``crack_surface.frag``) a row.
+SEG_ROW_LOG2 = 10
+LIST_ROW_LOG2 = 12
+
+
+def _table_texture(gl: GLScope, items: np.ndarray, width: int, dtype: str, components: int):
+    """A (rows, width) texture of ``items`` ((N, components), row-major, zero-padded to whole
+    rows), sampled with texelFetch only."""
+    import moderngl
+
+    rows = max(1, -(-len(items) // width))
+    limit = gl.ctx.info["GL_MAX_TEXTURE_SIZE"]
+    if rows > limit:
+        raise CrackbakeError(
+            f"{len(items)} crack segments or candidate entries exceed this OpenGL's texture "
+            f"limit ({limit} rows of {width}); bake fewer cracks or a smaller --res"
+        )
+    table = np.zeros((rows * width, components), items.dtype)
+    table[: len(items)] = items
+    tex = gl.keep(gl.ctx.texture((width, rows), components, table, dtype=dtype))
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    return tex
+
+
+def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     """Framebuffers of one band: the surface pass's three float targets (bound as textures for
-    the crack pass; with ``depth``, a depth buffer too) and the crack pass's one target per
-    channel."""
+    the crack pass) and the crack pass's one target per channel, sharing one depth buffer (the
+    surface pass's faces: the crack pass shades only where it holds one); one framebuffer per
+    crack target, to clear each to its own value, the inside target's with the depth buffer."""
     import moderngl
 
     ctx = gl.ctx
@@ -349,11 +393,16 @@ def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...], depth: b
     for unit, tex in enumerate(gbuffer):
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.use(unit)
-    zbuffer = gl.keep(ctx.depth_renderbuffer((res, band))) if depth else None
+    zbuffer = gl.keep(ctx.depth_renderbuffer((res, band)))
     gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer, depth_attachment=zbuffer))
     textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
-    fbo = gl.keep(ctx.framebuffer(color_attachments=textures))
-    return gfbo, fbo
+    fbo = gl.keep(ctx.framebuffer(color_attachments=textures, depth_attachment=zbuffer))
+    fbo.depth_mask = False
+    singles = [gl.keep(ctx.framebuffer(color_attachments=[t])) for t in textures[:-1]]
+    singles.append(gl.keep(ctx.framebuffer(color_attachments=[textures[-1]],
+                                           depth_attachment=zbuffer)))
+    singles[-1].depth_mask = False
+    return gfbo, fbo, singles
 
 
 def _render(
@@ -380,14 +429,15 @@ def _render(
     with_normals = frames is not None
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
-        surface, vao, screen = _programs(gl, vertices, faces, uv, segments, res, bins,
-                                         max_distance, profile_shape, frames, projection, min_px,
-                                         terms)
+        surface, vao, screen, inside_screen = _programs(
+            gl, vertices, faces, uv, segments, res, bins, max_distance, profile_shape, frames,
+            projection, min_px, terms,
+        )  # fmt: skip
         prog_row0 = screen.program["u_row0"] if bins.cell else None
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (69 bytes a texel: 48 for the surface pass, 21 for the maps; 72 with the normal map,
-        # whose inside target holds the winning segment as R32F).
+        # (73 bytes a texel: 48 for the surface pass, 4 of depth, 21 for the maps; 76 with the
+        # normal map, whose inside target holds the winning segment as R32F).
         band = max(1, min(res, (tile * tile) // res))
         # With the normal map the inside target also says which segment's depth wins (R32F).
         dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
@@ -400,18 +450,48 @@ def _render(
             images["normal"][2] = 1.0
             images["occlusion"] = np.ones((res, res), np.float16)
         projected = projection is not None
-        gfbo, fbo = _targets(gl, res, band, dtypes, depth=projected)
-        # No blending or culling; a camera placement keeps the surface nearest to it.
-        gl.ctx.enable_only(moderngl.DEPTH_TEST if projected else moderngl.NOTHING)
+        gfbo, fbo, singles = _targets(gl, res, band, dtypes)
+        # No blending or culling.  The depth test: a camera placement keeps the surface nearest
+        # to it, a UV placement the last face drawn (as without a test).  The crack pass's
+        # triangle shades only the texels nearer than it (shaders/crack_screen.vert): llvmpipe
+        # skips the shader for the 4x4 blocks with none, which keep the targets' clear.
+        # The clear is what crack_bake.frag writes at a face texel whose list is empty (no
+        # crack within reach), except for the inside target: 0, off the faces; the gutter fill
+        # overwrites every other channel there.  So with a UV placement the full crack shader
+        # runs only at the texels of faces with a list (crack_surface.frag's depth 0.25: on
+        # spot, 90 % of the face texels take no loop step), and a one-output pass marks the
+        # other face texels inside.
+        # A camera's placement has no such classes (its depth is the camera's): the crack
+        # shader runs at every face texel.
+        gl.ctx.enable_only(moderngl.DEPTH_TEST)
+        surface_test = "<" if projected else "1"
+        clear = (0.0, 0.0, 0.0, 0.0, max_distance, -1.0, 0.0)  # _NAMES' order
         timings["setup"] = time.perf_counter() - t1
-        t_draw = t_read = t_normals = 0.0
+        t_surface = t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             ta = time.perf_counter()
+            # Before the surface pass writes the depth buffer the inside target shares.
+            for single, value in zip(singles, clear, strict=True):
+                single.clear(value, value, value, value)
             gfbo.use()
+            # The depth only: the passes after read the surface targets only where a face was
+            # drawn (the depth test), so their colours need no clear (805 MB at 4096²).
+            gfbo.color_mask = ((False,) * 4,) * 3
             gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            gfbo.color_mask = ((True,) * 4,) * 3
+            gfbo.use()
             surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
+            gl.ctx.depth_func = surface_test
             vao.render(moderngl.TRIANGLES)
+            # Finished here only so the profile splits the two passes (the crack pass waits
+            # for the surface targets anyway).
+            gl.ctx.finish()
+            t_surface += time.perf_counter() - ta
+            gl.ctx.depth_func = ">"
+            if not projected:
+                singles[-1].use()
+                inside_screen.render(moderngl.TRIANGLES, vertices=3)
             fbo.use()
             if bins.cell:
                 prog_row0.value = y0
@@ -428,7 +508,12 @@ def _render(
             t_draw += tb - ta
             t_read += tc - tb
             t_normals += time.perf_counter() - tc
+        # The state a bake left before the depth classes, for the run's later draws.
+        gl.ctx.depth_func = "<"
+        gl.ctx.enable_only(moderngl.DEPTH_TEST if projected else moderngl.NOTHING)
         timings["render"] = t_draw
+        timings["surface"] = t_surface
+        timings["cracks"] = t_draw - t_surface
         timings["readback"] = t_read
         if with_normals:
             timings["normals"] = t_normals
