@@ -11,7 +11,13 @@ impact).  Measured, each in a fresh process:
   times, per job, for ``--workers 1``; floor: <= 1 s).
 
 Each row also gives CPU seconds (user + system of the process and all its descendants, sampled
-every 0.1 s from ``/proc``: the last 0.1 s of each process is missed).
+every 0.1 s from ``/proc``: the last 0.1 s of each process is missed), and a second table breaks
+them down by process: the jobs' own (the plain processes; in a batch each job's ``cpu_s`` from
+``batch.json``), the workers' boot before their job (``boot_cpu_s``: Python, importing Ray,
+waiting for the task) and the rest of their life (their exit, an idle worker that never got a
+job), the driver (the ``crackbake batch`` process), and Ray's daemons by name (raylet,
+gcs_server, dashboard, its agents, and the log and autoscaler monitors where they run).  CPU
+seconds are steadier than wall times on a busy machine: compare those.
 ``--repeat N`` runs plain and the batches alternately N times (ratios to the fastest plain sum).
 Times on a shared machine are noisy: run it on a quiet one.
 
