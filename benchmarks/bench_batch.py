@@ -11,7 +11,13 @@ impact).  Measured, each in a fresh process:
   times, per job, for ``--workers 1``; floor: <= 1 s).
 
 Each row also gives CPU seconds (user + system of the process and all its descendants, sampled
-every 0.1 s from ``/proc``: the last 0.1 s of each process is missed).
+every 0.1 s from ``/proc``: the last 0.1 s of each process is missed), and a second table breaks
+them down by process: the jobs' own (the plain processes; in a batch each job's ``cpu_s`` from
+``batch.json``), the workers' boot before their job (``boot_cpu_s``: Python, importing Ray,
+waiting for the task) and the rest of their life (their exit, an idle worker that never got a
+job), the driver (the ``crackbake batch`` process), and Ray's daemons by name (raylet,
+gcs_server, dashboard, its agents, and the log and autoscaler monitors where they run).  CPU
+seconds are steadier than wall times on a busy machine: compare those.
 ``--repeat N`` runs plain and the batches alternately N times (ratios to the fastest plain sum).
 Times on a shared machine are noisy: run it on a quiet one.
 
@@ -87,11 +93,35 @@ def _cpu_s(pid: int) -> tuple[str, float] | None:
     return fields[19], (int(fields[11]) + int(fields[12])) / tick
 
 
-def timed(args: list[str], cwd: Path) -> tuple[float, float]:
+#: The breakdown's columns: which process a CPU-second went to, by its command line (Ray's
+#: workers retitle themselves ``ray::IDLE``, ``ray::crackbake:JOB`` ...; its agents
+#: ``ray::DashboardAgent``, ``ray::RuntimeEnvAgent``).
+PARTS = (("gcs_server", "ray/gcs/gcs_server"), ("raylet", "ray/raylet/raylet"),
+         ("dashboard", "ray/dashboard/dashboard.py"), ("dashboard agent", "DashboardAgent"),
+         ("runtime-env agent", "RuntimeEnvAgent"), ("log monitor", "log_monitor.py"),
+         ("autoscaler monitor", "autoscaler/_private/monitor.py"),
+         ("workers", "ray::"), ("workers", "default_worker.py"))
+
+
+def _part(pid: int, root: int) -> str | None:
+    """The breakdown column of ``pid`` (a descendant of the timed process ``root``)."""
+    if pid == root:
+        return "driver"
+    try:
+        cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(
+            errors="replace")
+    except OSError:
+        return None
+    return next((name for name, key in PARTS if key in cmd), "other")
+
+
+def timed(args: list[str], cwd: Path) -> tuple[float, float, dict[str, float]]:
     """Wall seconds and CPU seconds of one ``crackbake`` process and all its descendants (Ray's
     daemons and workers for a batch, which their parents do not all reap): each process's
-    user + system time from ``/proc``, sampled every 0.1 s, the last sample counted."""
+    user + system time from ``/proc``, sampled every 0.1 s, the last sample counted; and those
+    CPU seconds by process (:data:`PARTS`, ``driver`` the timed process itself)."""
     seen: dict[tuple[int, str], float] = {}
+    part: dict[tuple[int, str], str] = {}
     with tempfile.TemporaryFile() as err:  # a file, not a pipe nobody reads meanwhile
         t = time.perf_counter()
         proc = subprocess.Popen([sys.executable, "-m", "crackbake", *args], cwd=cwd, env=ENV,
@@ -100,14 +130,22 @@ def timed(args: list[str], cwd: Path) -> tuple[float, float]:
             for pid in _tree(proc.pid):
                 got = _cpu_s(pid)
                 if got:
-                    seen[(pid, got[0])] = got[1]
+                    key = (pid, got[0])
+                    seen[key] = got[1]
+                    # a new process may not have exec'd or retitled itself yet: look again
+                    if part.get(key, "other") == "other":
+                        part[key] = _part(pid, proc.pid) or "other"
             time.sleep(0.1)
         wall = time.perf_counter() - t
         if proc.returncode != 0:
             err.seek(0)
             text = err.read().decode(errors="replace")
             raise SystemExit(f"crackbake {' '.join(args)} failed:\n{text[-2000:]}")
-    return wall, sum(seen.values())
+    by_part: dict[str, float] = {}
+    for key, cpu in seen.items():
+        by_part[part[key]] = by_part.get(part[key], 0.0) + cpu
+    by_part["worker processes"] = sum(p == "workers" for p in part.values())
+    return wall, sum(seen.values()), by_part
 
 
 def _status(pid: int) -> dict[str, int]:
@@ -182,6 +220,7 @@ def main() -> None:
         return
 
     rows = []
+    breakdowns = []
     with tempfile.TemporaryDirectory(prefix="bench_batch_") as tmp:
         tmp = Path(tmp)
         jobs = batch_file(tmp, a.res, a.presets, a.seeds)
@@ -192,9 +231,9 @@ def main() -> None:
             wall = cpu = 0.0
             for preset in a.presets:
                 for seed in range(1, a.seeds + 1):
-                    w, c = timed([str(SPOT), "--res", str(a.res), "-q",
-                                  "-o", f"plain_{preset}_{seed}_{len(rows)}",
-                                  *job_options(preset, seed)], tmp)
+                    w, c, _ = timed([str(SPOT), "--res", str(a.res), "-q",
+                                     "-o", f"plain_{preset}_{seed}_{len(rows)}",
+                                     *job_options(preset, seed)], tmp)
                     wall, cpu = wall + w, cpu + c
             return wall, cpu
 
@@ -202,16 +241,30 @@ def main() -> None:
             if not a.skip_plain:
                 wall, cpu = run_plain()
                 plain = wall if plain is None else min(plain, wall)
-                rows.append((f"plain, one after another #{rep + 1}", wall, cpu, None, None))
+                name = f"plain, one after another #{rep + 1}"
+                rows.append((name, wall, cpu, None, None))
+                breakdowns.append((name, {"jobs": cpu}))
             for w in a.workers:
                 out = tmp / f"batch_w{w}_{rep}"
-                wall, cpu = timed(["batch", str(jobs), "-o", str(out), "--workers", str(w),
-                                   "-q"], tmp)
+                wall, cpu, parts = timed(["batch", str(jobs), "-o", str(out), "--workers",
+                                          str(w), "-q"], tmp)
                 doc = json.loads((out / "batch.json").read_text())
                 start = doc["ray"]["start_s"]
                 run = sum(j["run_s"] for j in doc["jobs"])
                 overhead = (wall - start - run / w) / n
-                rows.append((f"batch --workers {w} #{rep + 1}", wall, cpu, start, overhead))
+                name = f"batch --workers {w} #{rep + 1}"
+                rows.append((name, wall, cpu, start, overhead))
+                # the workers' CPU: before their job, the job, and the rest (the idle workers
+                # Ray prestarts, a worker's exit after its job)
+                boot = sum(j.get("boot_cpu_s", 0.0) for j in doc["jobs"])
+                job = sum(j.get("cpu_s", 0.0) for j in doc["jobs"])
+                workers = parts.pop("workers", 0.0)
+                started = parts.pop("worker processes")
+                print(f"batch --workers {w}: {started} worker processes for {n} jobs",
+                      file=sys.stderr)
+                parts.update({"worker boot": boot, "jobs": job,
+                              "workers' rest": workers - boot - job})
+                breakdowns.append((name, parts))
 
     head = f"{n} jobs, spot, --res {a.res}"
     if a.markdown:
@@ -228,6 +281,35 @@ def main() -> None:
         else:
             print(f"  {name:<30} {wall:8.1f} s  x{ratio:<5} cpu {cpu:7.1f} s  start {s:>5} s  "
                   f"engine {o:>5} s/job")
+    print_breakdown(breakdowns, a.markdown)
+
+
+#: The breakdown's columns in order (those no run used are left out).
+COLUMNS = ("jobs", "worker boot", "workers' rest", "driver", "raylet", "gcs_server",
+           "dashboard", "dashboard agent", "runtime-env agent", "log monitor",
+           "autoscaler monitor", "other")
+
+
+def print_breakdown(breakdowns: list[tuple[str, dict[str, float]]], markdown: bool) -> None:
+    """Where each run's CPU seconds went, by process: ``jobs`` the plain processes, or the
+    batch's job bodies (``cpu_s`` in ``batch.json``), ``worker boot`` the workers' CPU before
+    their job (``boot_cpu_s``), then Ray's daemons and the driver."""
+    cols = [c for c in COLUMNS if any(abs(p.get(c, 0.0)) >= 0.05 for _, p in breakdowns)]
+    print()
+    if markdown:
+        print("| CPU s by process | " + " | ".join(cols) + " | total |")
+        print("|---|" + "---|" * (len(cols) + 1))
+    else:
+        print("CPU seconds by process")
+        print(f"  {'':<30} " + " ".join(f"{c[:10]:>10}" for c in cols) + f" {'total':>8}")
+    for name, parts in breakdowns:
+        cells = [parts.get(c, 0.0) for c in cols]
+        if markdown:
+            print(f"| {name} | " + " | ".join(f"{v:.1f}" for v in cells)
+                  + f" | {sum(parts.values()):.1f} |")
+        else:
+            print(f"  {name:<30} " + " ".join(f"{v:10.1f}" for v in cells)
+                  + f" {sum(parts.values()):8.1f}")
 
 
 if __name__ == "__main__":
