@@ -81,9 +81,9 @@ def groove_contrast(python: str, glb: Path, where: tuple[str, ...], out: Path) -
     return result
 
 
-#: Widths before the looks, relative to now (mud's crack_width_rel was 0.003, now 0.015;
-#: concrete's 0.0015, now 0.0035).
-WIDTH_BEFORE = {"mud": 0.003 / 0.015, "concrete": 0.0015 / 0.0035}
+#: Widest opening before the looks, of the diagonal (the solver's widest point was exactly
+#: crack_width_rel x diagonal; mud's is now sized by its cells, concrete's is 0.0035).
+WIDTH_BEFORE = {"mud": 0.003, "concrete": 0.0015}
 
 
 def before(out: Path, mesh: Path, preset: str, raw: list, args, folder: Path) -> Path:
@@ -91,7 +91,8 @@ def before(out: Path, mesh: Path, preset: str, raw: list, args, folder: Path) ->
     the preset's old width) re-baked with ``--cracks`` and no preset, i.e. the default look
     (which bakes bit for bit as before: tests/test_looks.py)."""
     side = json.loads((out / "cracks.json").read_text())
-    k = WIDTH_BEFORE.get(preset, 1.0)
+    widest = max(float(np.max(w)) for w in raw)
+    k = WIDTH_BEFORE[preset] * load_mesh(mesh).diagonal / widest if preset in WIDTH_BEFORE else 1.0
     for c, w in zip(side["cracks"], raw, strict=True):
         ratio = np.asarray(c["depth"]) / np.maximum(np.asarray(c["width"]), 1e-300)
         c["width"] = (w * k).tolist()

@@ -21,7 +21,7 @@ import numpy as np
 from crackbake.errors import CrackbakeWarning
 from crackbake.io.mesh import Mesh, load_mesh
 from crackbake.io.sidecar import jsonable, read_sidecar
-from crackbake.looks import WIDTH_NOISE_SCALE, vary_widths
+from crackbake.looks import FEWEST_CELLS, WIDTH_NOISE_SCALE, open_to_cells, vary_widths
 from crackbake.memory import check_memory, estimate_peak, run_sizes
 from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import DECAL_RES_DEFAULT, STRESS_RES_DEFAULT, RunParams
@@ -443,9 +443,30 @@ def solve(
     # network itself so cracks.json, crack.width and the drawn maps agree.
     network = vary_widths(network, look.width_variation, params.seed,
                           WIDTH_NOISE_SCALE * mesh.diagonal)
+    share = relative.get("crack_width_cell")
+    if share is not None and params.crack_width is None:
+        _open_to_cells(network, share, mesh, params.preset)
     stats = {k: v for k, v in result.stats.items() if not k.startswith("time")}
     stats.update({"sim_faces": int(len(sim.faces)), "steps": int(result.steps)})
     return network, jsonable(stats), Solved(sim=sim, field=field, result=result)
+
+
+def _open_to_cells(network: CrackNetwork, share: float, mesh: Mesh, preset: str | None) -> None:
+    """The preset's gaps sized by the cells the cracks cut (:func:`crackbake.looks.open_to_cells`),
+    the sidecar's ``crack_width`` (the solver's widest opening) scaled with them; a warning where
+    too few cells leave the widths at the preset's ``crack_width_rel``."""
+    factor, cells = open_to_cells(network, share, mesh.vertices, mesh.faces)
+    if cells < FEWEST_CELLS:
+        warnings.warn(
+            f"preset {preset} opens its cracks {share:.1%} of the cell size, but they cut only "
+            f"{cells} cell(s) (fewer than {FEWEST_CELLS}): the widths stay at the preset's "
+            "crack_width_rel of the diagonal; give --crack-width to set them",
+            CrackbakeWarning, stacklevel=2)
+        return
+    # The solver's widest opening as it would have been given (--crack-width), before the noise.
+    network.params["crack_width"] = float(network.params["crack_width"]) * factor
+    logger.info("widths sized by %d cells: x %.3g (mean width %.1f %% of the cell size)",
+                cells, factor, 100 * share, extra={"stage": "solve"})
 
 
 def _fitted_sources(sources: list, field) -> list:

@@ -339,8 +339,10 @@ class RunParams:
             Every solver field set (``None`` only where ``None`` is the default).
         relative : dict
             Preset settings relative to the mesh size (``crack_width_rel``,
-            ``impact_radius_rel``: fractions of the bounding-box diagonal), used where the
-            absolute option is unset; ``sim_size_set``: the user gave ``detail`` or
+            ``impact_radius_rel``: fractions of the bounding-box diagonal) or to the crack
+            pattern (``crack_width_cell``: the mean width over the cell size, which then sets
+            the widths after the solve), used where the absolute option is unset;
+            ``sim_size_set``: the user gave ``detail`` or
             ``sim_faces`` (else an impact on a thin feature may refine the sim mesh).
         """
         preset = load_preset(self.preset) if self.preset else {}
@@ -350,10 +352,11 @@ class RunParams:
             if getattr(self, key) is None:
                 changes[key] = preset.get(key, default)
         unknown = set(preset) - names - {"description", "needs_impact", "crack_width_rel",
-                                          "impact_radius_rel"} - {"look"}
+                                          "crack_width_cell", "impact_radius_rel"} - {"look"}
         if unknown:
             raise CrackbakeError(f"preset '{self.preset}' has unknown keys {sorted(unknown)}")
-        relative = {k: preset[k] for k in ("crack_width_rel", "impact_radius_rel") if k in preset}
+        relative = {k: preset[k] for k in ("crack_width_rel", "crack_width_cell",
+                                           "impact_radius_rel") if k in preset}
         relative["needs_impact"] = bool(preset.get("needs_impact", False))
         relative["sim_size_set"] = self.detail is not None or self.sim_faces is not None
         return replace(self, **changes), relative
