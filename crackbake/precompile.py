@@ -41,12 +41,17 @@ CASES: dict[str, list[str]] = {
 }
 
 #: Cases run one after another in one lane; lanes run side by side.  The two I&O cases share
-#: most kernels, so the second waits for the first and finds them cached.  The I&O solver's
-#: kernels are about 106 s of a quiet 2-core machine's 115, the thesis solver and the output
-#: paths about 108 s, so the kernels of ``crackbake.exchange.halving.warm`` (6 s) go to the
-#: first lane.
+#: most kernels, so the second waits for the first and finds them cached.  Measured in a fresh
+#: clone's ``make test`` (2 cores): iben 73 s, shrinkage 17 s, thesis 49 s, decal 23 s, tile
+#: 21 s, and the two warm-ups of kernels only large runs reach: ``halving`` (above 2048²,
+#: about 6 s) and ``collapse`` (the proxy's decimation above 200k faces, about 15 s); so the
+#: lanes take about 96 s and 108 s.
 LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage", "halving"),
-                                      ("thesis", "decal", "tile"))
+                                      ("thesis", "decal", "tile", "collapse"))
+
+#: The warm-ups: kernels no small run reaches, compiled by calling their module's ``warm``.
+WARM_UPS = {"halving": "crackbake.exchange.halving",
+            "collapse": "crackbake.simulate.simmesh.collapse"}
 
 
 def textured_plate_obj(path: Path) -> Path:
@@ -85,11 +90,8 @@ def plate_obj(path: Path, n: int = 12, uv_margin: float = 0.1) -> Path:
 
 
 def _run_case(name: str, folder: Path) -> float:
-    if name == "halving":
-        # kernels only runs above 2048² reach (crackbake.exchange.halving.warm), and the
-        # proxy's decimation, which only assets above 200k faces reach
-        cmd = [sys.executable, "-c", "from crackbake.exchange.halving import warm; warm(); "
-               "from crackbake.simulate.simmesh.collapse import warm; warm()"]
+    if name in WARM_UPS:
+        cmd = [sys.executable, "-c", f"from {WARM_UPS[name]} import warm; warm()"]
     else:
         names = {"plate": folder / "plate.obj", "textured": folder / "textured.obj"}
         args = [a.format(**names) for a in CASES[name]]
