@@ -32,19 +32,24 @@ PRECOMPILED  := $(VENV)/numba-precompiled
 setup: syslibs $(STAMP) $(TSTAMP) $(KSTAMP)
 
 # The package and what a run needs first; the test tools (ray, usd-core, pytest...) after it, in
-# a step of their own, so that `make test` installs them while the kernels compile.  pip does
-# not byte-compile every module it unpacks (--no-compile: 27 -> 9 CPU s for the package); Python
-# compiles the ones a run imports, once, when it first imports them.
+# a step of their own, so that `make test` installs them while the kernels compile.  Every
+# module is byte-compiled once, on all cores (compileall -j 0; pip's own compile is one core):
+# where PYTHONDONTWRITEBYTECODE is set (many containers and CI images) Python never writes a
+# .pyc, and each process would compile numpy, scipy, trimesh and numba from source again (3.0
+# instead of 1.6 CPU s to import them; ray's workers likewise).  A file that does not compile
+# (some packages ship templates) is no reason to stop, hence the leading '-'.
 $(STAMP): pyproject.toml
 	@$(VPY) -m pip --version >/dev/null 2>&1 || { rm -rf $(VENV) && $(PY) -m venv $(VENV); }
 	$(VPY) -m pip install --quiet --upgrade pip
 	$(VPY) -m pip install --quiet --no-compile -e .
+	-$(VPY) -m compileall -qq -j 0 $(VENV)/lib crackbake
 	@touch $(STAMP)
 
 # (the extra's requirements alone: `-e '.[test]'` would reinstall the package under the compile)
 $(TSTAMP): $(STAMP)
 	$(VPY) -c "import tomllib; print('\\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['optional-dependencies']['test']))" > $(VENV)/test-requirements.txt
 	$(VPY) -m pip install --quiet --no-compile -r $(VENV)/test-requirements.txt
+	-$(VPY) -m compileall -qq -j 0 $(VENV)/lib
 	@touch $(TSTAMP)
 
 # numba compiles its kernels once into the on-disk cache here, not in the first run.
@@ -95,6 +100,7 @@ $(BPY_STAMP):
 	@$(BPY) -m pip --version >/dev/null 2>&1 || { rm -rf $(BPY_VENV) && $(PY311) -m venv $(BPY_VENV); }
 	$(BPY) -m pip install --quiet --upgrade pip
 	$(BPY) -m pip install --quiet --no-compile $(BPY_PIN)
+	-$(BPY) -m compileall -qq -j 0 $(BPY_VENV)/lib
 	$(BPY) -c "import bpy"
 	@touch $(BPY_STAMP)
 
