@@ -229,6 +229,60 @@ def test_bad_files_give_one_line_and_exit_2(tmp_path, content):
     assert len(err) == 1 and err[0].startswith("error: cannot read EXR"), proc.stderr
 
 
+def _crack_master(path: Path) -> bytearray:
+    """A crack master of ours (ZIP chunks of noisy half and float planes); its bytes."""
+    rng = np.random.default_rng(5)
+    planes = {f"crack.{k}.V": rng.random((256, 256)).astype(np.float16) for k in "abc"}
+    planes["crack.id.V"] = rng.integers(0, 50, (256, 256)).astype(np.float32)
+    write_exr(path, planes)
+    return bytearray(path.read_bytes())
+
+
+@pytest.mark.parametrize("damage", ["truncated", "chunk data"])
+def test_damaged_crackbake_exr_gives_one_line_and_exit_2(tmp_path, damage):
+    """A crack master cut short or with a damaged chunk: one error line naming the file,
+    exit 2, nothing on stdout (no traceback, no table of half-read planes)."""
+    path = tmp_path / "master.exr"
+    data = _crack_master(path)
+    if damage == "truncated":
+        data = data[: len(data) // 2]
+    else:
+        middle = len(data) // 2
+        data[middle : middle + 64] = bytes(64)
+    path.write_bytes(bytes(data))
+    proc = cli(str(path))
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stdout == ""
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: cannot read EXR '{path}'"), proc.stderr
+
+
+def test_a_damaged_chunk_offset_is_rebuilt_not_trusted(tmp_path):
+    """A chunk offset pointing past the end (the chunks themselves intact): OpenEXR finds
+    the chunks by their own headers, so the table is the intact file's, to the byte."""
+    path = tmp_path / "master.exr"
+    data = _crack_master(path)
+    intact = cli(str(path))
+    assert intact.returncode == 0, intact.stderr
+    last = _header_end(bytes(data)) + 8 * (256 // 16 - 1)  # the last of the 16 offsets
+    data[last : last + 8] = (2**40).to_bytes(8, "little")
+    path.write_bytes(bytes(data))
+    proc = cli(str(path))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == intact.stdout
+
+
+def _header_end(data: bytes) -> int:
+    """The offset just past an EXR header's attributes (its terminating null byte)."""
+    p = 8
+    while data[p] != 0:
+        name_end = data.index(b"\0", p)
+        type_end = data.index(b"\0", name_end + 1)
+        size = int.from_bytes(data[type_end + 1 : type_end + 5], "little")
+        p = type_end + 5 + size
+    return p + 1
+
+
 def test_missing_file_is_a_usage_error(tmp_path):
     proc = cli(str(tmp_path / "nope.exr"))
     assert proc.returncode == 2
