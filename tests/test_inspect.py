@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import cli_forks
@@ -312,6 +313,29 @@ def _header_end(data: bytes) -> int:
         size = int.from_bytes(data[type_end + 1 : type_end + 5], "little")
         p = type_end + 5 + size
     return p + 1
+
+
+def test_the_table_loads_no_numba_and_no_logging(run_files):
+    """``crackbake inspect FILE`` (no pictures) imports neither numba (about 1 CPU-s of
+    start-up before a cached kernel runs: ``benchmarks/bench_inspect.py``) nor
+    ``concurrent.futures`` and the ``logging`` it pulls in: issue 25's 0.5 s floor."""
+    d, _, _ = run_files
+    code = (
+        "import sys\n"
+        "from crackbake.cli import main\n"
+        "try:\n"
+        "    main(['inspect', sys.argv[1]], prog_name='crackbake')\n"
+        "except SystemExit as exc:\n"
+        "    assert not exc.code, exc.code\n"
+        "heavy = ('numba', 'concurrent.futures', 'logging')\n"
+        "print(' '.join(h for h in heavy if h in sys.modules), file=sys.stderr)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    r = subprocess.run([sys.executable, "-c", code, str(d / "a_cracks.exr")], env=env,
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "crack.mask" in r.stdout
+    assert r.stderr.strip() == "", r.stderr
 
 
 def test_missing_file_is_a_usage_error(tmp_path):
