@@ -143,7 +143,7 @@ def case_args(case: str, scratch: Path, tag: str) -> tuple[list[str], Path | Non
 STAGES = {
     "bake": ("start", "load", "simmesh", "stress", "solve", "unwrap", "bake", "stress_bake",
              "write"),
-    "rebake": ("start", "load", "cracks", "bake", "write"),
+    "rebake": ("start", "load", "cracks", "unwrap", "tangents", "bake", "write"),
     "load": ("load",),
 }  # fmt: skip
 

@@ -183,12 +183,13 @@ def run_sizes(params, mesh=None, faces: int | None = None) -> dict:
         The asset's face count when the mesh is not loaded (a batch planning its jobs).
     """
     from crackbake.params import SIM_FACES_DEFAULT
-    from crackbake.simulate.simmesh.proxy import proxy_limit
 
     faces = len(mesh.faces) if mesh is not None else int(faces or 0)
     if params.cracks is not None:
-        sim = 0  # a re-bake solves nothing
+        sim = 0  # a re-bake solves nothing (nor imports the sim-mesh modules)
     else:
+        from crackbake.simulate.simmesh.proxy import proxy_limit
+
         wanted = params.sim_faces or SIM_FACES_DEFAULT
         if params.detail is not None and mesh is not None:
             from crackbake.geometry import face_cross

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+import sys
 from pathlib import Path
 
 import cli_forks
@@ -218,6 +219,37 @@ def test_half_planes_get_the_statistics_of_their_float32_values(tmp_path, case):
     assert row.nonzero == np.count_nonzero(wide) / wide.size
 
 
+def test_half_extremes_from_the_bits_order_every_pattern():
+    """min, max and non-zero count of half planes read from their bit patterns: against a
+    sort of the widened values with -0 below +0, on planes drawn from the edge patterns
+    (both zeros, the smallest subnormals, the largest finite, the infinities and NaNs) and
+    from every finite pattern of each sign."""
+    from crackbake.exchange.inspect import _half_nonzero, _half_range
+
+    edges = np.array([0x0000, 0x8000, 0x0001, 0x8001, 0x03FF, 0x0400, 0x3C00, 0xBC00,
+                      0x7BFF, 0xFBFF, 0x7C00, 0xFC00, 0x7C01, 0x7E00, 0xFE00, 0xFFFF],
+                     np.uint16)  # fmt: skip
+    every = np.arange(0x10000, dtype=np.uint32).astype(np.uint16)
+    pools = [edges, every[:0x7C00], every[0x8000:0xFC00], every]
+    rng = np.random.default_rng(11)
+    checked = 0
+    for trial in range(4000):
+        plane = rng.choice(pools[trial % 4], (1, int(rng.integers(1, 7)))).view(np.float16)
+        wide = plane.astype(np.float32).ravel()
+        got = _half_range(plane)
+        if not np.isfinite(wide).all():
+            assert got is None, plane.view(np.uint16)
+            continue
+        order = sorted(wide.tolist(), key=lambda v: (v, not np.signbit(v)))
+        lo, hi, negative = got
+        assert (lo, np.signbit(lo)) == (order[0], np.signbit(order[0])), plane.view(np.uint16)
+        assert (hi, np.signbit(hi)) == (order[-1], np.signbit(order[-1])), plane.view(np.uint16)
+        assert negative == bool(np.signbit(wide).any())
+        assert _half_nonzero(plane, negative) == np.count_nonzero(wide)
+        checked += 1
+    assert checked > 1500
+
+
 @pytest.mark.parametrize("content", [b"", b"not an exr at all" * 10, b"v/1\x01" + b"\0" * 300])
 def test_bad_files_give_one_line_and_exit_2(tmp_path, content):
     path = tmp_path / "broken.exr"
@@ -227,6 +259,83 @@ def test_bad_files_give_one_line_and_exit_2(tmp_path, content):
     assert proc.stdout == ""
     err = proc.stderr.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: cannot read EXR"), proc.stderr
+
+
+def _crack_master(path: Path) -> bytearray:
+    """A crack master of ours (ZIP chunks of noisy half and float planes); its bytes."""
+    rng = np.random.default_rng(5)
+    planes = {f"crack.{k}.V": rng.random((256, 256)).astype(np.float16) for k in "abc"}
+    planes["crack.id.V"] = rng.integers(0, 50, (256, 256)).astype(np.float32)
+    write_exr(path, planes)
+    return bytearray(path.read_bytes())
+
+
+@pytest.mark.parametrize("damage", ["truncated", "chunk data"])
+def test_damaged_crackbake_exr_gives_one_line_and_exit_2(tmp_path, damage):
+    """A crack master cut short or with a damaged chunk: one error line naming the file,
+    exit 2, nothing on stdout (no traceback, no table of half-read planes)."""
+    path = tmp_path / "master.exr"
+    data = _crack_master(path)
+    if damage == "truncated":
+        data = data[: len(data) // 2]
+    else:
+        middle = len(data) // 2
+        data[middle : middle + 64] = bytes(64)
+    path.write_bytes(bytes(data))
+    proc = cli(str(path))
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stdout == ""
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: cannot read EXR '{path}'"), proc.stderr
+
+
+def test_a_damaged_chunk_offset_is_rebuilt_not_trusted(tmp_path):
+    """A chunk offset pointing past the end (the chunks themselves intact): OpenEXR finds
+    the chunks by their own headers, so the table is the intact file's, to the byte."""
+    path = tmp_path / "master.exr"
+    data = _crack_master(path)
+    intact = cli(str(path))
+    assert intact.returncode == 0, intact.stderr
+    last = _header_end(bytes(data)) + 8 * (256 // 16 - 1)  # the last of the 16 offsets
+    data[last : last + 8] = (2**40).to_bytes(8, "little")
+    path.write_bytes(bytes(data))
+    proc = cli(str(path))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == intact.stdout
+
+
+def _header_end(data: bytes) -> int:
+    """The offset just past an EXR header's attributes (its terminating null byte)."""
+    p = 8
+    while data[p] != 0:
+        name_end = data.index(b"\0", p)
+        type_end = data.index(b"\0", name_end + 1)
+        size = int.from_bytes(data[type_end + 1 : type_end + 5], "little")
+        p = type_end + 5 + size
+    return p + 1
+
+
+def test_the_table_loads_no_numba_and_no_logging(run_files):
+    """``crackbake inspect FILE`` (no pictures) imports neither numba (about 1 CPU-s of
+    start-up before a cached kernel runs: ``benchmarks/bench_inspect.py``) nor
+    ``concurrent.futures`` and the ``logging`` it pulls in: issue 25's 0.5 s floor."""
+    d, _, _ = run_files
+    code = (
+        "import sys\n"
+        "from crackbake.cli import main\n"
+        "try:\n"
+        "    main(['inspect', sys.argv[1]], prog_name='crackbake')\n"
+        "except SystemExit as exc:\n"
+        "    assert not exc.code, exc.code\n"
+        "heavy = ('numba', 'concurrent.futures', 'logging')\n"
+        "print(' '.join(h for h in heavy if h in sys.modules), file=sys.stderr)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    r = subprocess.run([sys.executable, "-c", code, str(d / "a_cracks.exr")], env=env,
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "crack.mask" in r.stdout
+    assert r.stderr.strip() == "", r.stderr
 
 
 def test_missing_file_is_a_usage_error(tmp_path):

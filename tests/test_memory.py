@@ -78,6 +78,25 @@ def test_run_sizes_follow_the_options(tmp_path):
     assert run_sizes(RunParams(mesh=Path("m"), formats=("exr",)), faces=1)["stress_res"] is None
 
 
+def test_a_rebake_sizes_its_run_without_the_sim_mesh_modules():
+    """``--cracks`` solves nothing: sizing its run imports none of the sim-mesh modules
+    (proxy, triangulation, decimation; issue 25's re-bake floor), a solving run does."""
+    code = (
+        "import sys\n"
+        "from pathlib import Path\n"
+        "from crackbake.memory import run_sizes\n"
+        "from crackbake.params import RunParams\n"
+        "run_sizes(RunParams(mesh=Path('m.obj'), cracks=Path(sys.argv[1])), faces=5000)\n"
+        "print('crackbake.simulate.simmesh' in sys.modules)\n"
+        "run_sizes(RunParams(mesh=Path('m.obj')), faces=5000)\n"
+        "print('crackbake.simulate.simmesh' in sys.modules)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code, "c.json"], capture_output=True, text=True,
+                       timeout=120)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "True"]
+
+
 def test_available_memory_reads_the_address_space_cap():
     """Under ``RLIMIT_AS`` (``ulimit -v``, ``prlimit --as``) the cap is the limit, compared with
     the address space (the resident estimate plus the libraries' reservations)."""
