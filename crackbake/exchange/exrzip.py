@@ -10,8 +10,9 @@ each channel's rows where they lie (:func:`_predict_channel`): no gathered copy 
 scanlines (it was 0.09 CPU-s and a pass over the 0.47 GB).  The files are standard
 OpenEXR 2.0 single-part scanline images: the same header attributes, channel list and
 pixels as the bindings write (``tests/test_exrzip.py`` reads them back with OpenEXR and
-OpenImageIO, Blender in the reference checks); only the deflate streams differ.  No compression, PIZ, RLE and ZSTD are
-left to the bindings (:func:`crackbake.exchange.exr.write_exr`).
+OpenImageIO, Blender in the reference checks); only the deflate streams differ.  No
+compression, PIZ, RLE and ZSTD are left to the bindings
+(:func:`crackbake.exchange.exr.write_exr`).
 
 The layout, from the OpenEXR file-layout specification: magic ``76 2f 31 01``, version 2 (bit
 10 set when a name is longer than 31 bytes), the header's attributes (name, type name, size,
