@@ -45,9 +45,13 @@ except ImportError:  # pragma: no cover - zlib-ng is a dependency
 #: Compressions written here, with the scanlines per chunk and the file's compression code.
 SCANLINE_COMPRESSIONS = {"zips": (1, 2), "zip": (16, 3)}
 #: deflate level of the chunks.  On the README run's 4096² crack master (loaded machine, one
-#: thread) zlib-ng's deflate took 0.26 / 0.31 / 0.35 / 0.44 / 0.48 CPU-s at levels 1 / 2 / 3 /
-#: 4 / 6 for 10.6 / 7.06 / 6.99 / 6.99 / 6.92 MB; the bindings wrote 6.84 MB (their level 4).
-ZIP_LEVEL = 3
+#: thread) zlib-ng's deflate took 0.19 / 0.23 / 0.27 / 0.29 / 0.49 CPU-s at levels 1 / 2 / 3 /
+#: 4 / 6 for 10.6 / 7.05 / 6.99 / 6.98 / 6.91 MB, and on its 1024² stress file 0.08 / 0.13 /
+#: 0.14 / 0.16 / 0.19 CPU-s for 7.25 / 6.49 / 6.38 / 6.28 / 6.22 MB
+#: (``benchmarks/bench_write.py --levels``): level 2 costs 1-2 % in size for 10-15 % of the
+#: deflate; level 1 (static codes) grows the master by half.  The bindings wrote 6.84 MB
+#: (their level 4).
+ZIP_LEVEL = 2
 
 _MAGIC = b"\x76\x2f\x31\x01"
 _PIXEL_TYPE = {np.dtype(np.uint32): 0, np.dtype(np.float16): 1, np.dtype(np.float32): 2}

@@ -41,6 +41,12 @@ _FILTER_UP = 2
 #: zlib level of the maps: level 1 is 3-5x faster than level 6 for files about 10 % larger
 #: (a noisy 4096² RGB test image: 0.4 s / 11.4 MB at 1 against 1.9 s / 9.0 MB at 6).
 PNG_LEVEL = 1
+#: Deflate of the 16-bit data texture: (level, Z_RLE).  Its filtered rows hold short varied
+#: runs (width, depth and time inside the cracks), where zlib-ng's default strategy finds
+#: matches run lengths miss: on the README run's 4096² map level 3 wrote 1.26 MB in 0.088
+#: CPU-s against Z_RLE's 1.60 MB in 0.100 (level 2: 1.36 MB, 6: 1.20 MB in 0.130;
+#: ``benchmarks/bench_write.py --levels``).  On the 8-bit maps Z_RLE stays the smallest.
+DATA_DEFLATE = (3, False)
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
@@ -93,10 +99,11 @@ def png_bytes(pixels: np.ndarray, level: int = PNG_LEVEL, srgb: bool = False) ->
 
 def png_rows(
     rows: np.ndarray, width: int, bits: int, channels: int, level: int = PNG_LEVEL,
-    srgb: bool = False,
+    srgb: bool = False, rle: bool = True,
 ) -> bytes:
     """PNG bytes from scanlines already filtered: (H, 1 + W C bits / 8) uint8, each row's
-    filter type byte first (what :func:`png_bytes` builds; fused packers write it directly)."""
+    filter type byte first (what :func:`png_bytes` builds; fused packers write it directly).
+    ``rle``: deflate with Z_RLE (the maps' default), else with zlib's default strategy."""
     h, w, c = rows.shape[0], width, channels
     ihdr = struct.pack(">IIBBBBB", w, h, bits, _COLOUR_TYPE[c], 0, 0, 0)
     parts = [_SIGNATURE, _chunk(b"IHDR", ihdr)]
@@ -105,7 +112,8 @@ def png_rows(
     # Z_RLE: after the Up filter the maps are long runs of zeros; on crackbake's maps it was as
     # fast as the default strategy or faster and 4-25 % smaller (base colour: 4x smaller).
     lib = _rle_zlib if int(level) >= 1 else zlib
-    z = lib.compressobj(int(level), lib.DEFLATED, 15, 9, lib.Z_RLE)
+    strategy = lib.Z_RLE if rle else lib.Z_DEFAULT_STRATEGY
+    z = lib.compressobj(int(level), lib.DEFLATED, 15, 9, strategy)
     parts.append(_chunk(b"IDAT", z.compress(memoryview(rows).cast("B")) + z.flush()))
     parts.append(_chunk(b"IEND", b""))
     return b"".join(parts)
