@@ -114,16 +114,7 @@ def render_preview(
     return np.ascontiguousarray(np.flipud(pixels))
 
 
-#: Anisotropic filtering of the base colour and of the normal map.  On llvmpipe anisotropic
-#: lookups are most of the draw's cost (spot's README preview: 0.50 CPU-s with both at 8x,
-#: 0.37 with the normal map trilinear, 0.25 with both); the normal map's barely shows (230 of
-#: 1M pixels change, by at most 11 levels of 255), the base colour's does (8,300 pixels, up to
-#: 18), so only the colour keeps it.
-ANISOTROPY = {"color": 8.0, "normal": 1.0}
-
-
-def _texture(gl: GLScope, image: np.ndarray, unit: int, dtype: str = "f1",
-             anisotropy: float = ANISOTROPY["color"]):  # fmt: skip
+def _texture(gl: GLScope, image: np.ndarray, unit: int, dtype: str = "f1"):
     """Upload an (H, W, 3) image, bottom row first (GL's first row is v = 0), mip-mapped."""
     import moderngl
 
@@ -131,7 +122,7 @@ def _texture(gl: GLScope, image: np.ndarray, unit: int, dtype: str = "f1",
     tex = gl.keep(gl.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype=dtype))
     tex.build_mipmaps()
     tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-    tex.anisotropy = anisotropy
+    tex.anisotropy = 8.0
     tex.use(unit)
     return tex
 
@@ -172,7 +163,7 @@ def _draw(gl: GLScope, mesh, color, normal_map, size, mvp, key, fill) -> np.ndar
         nm = np.asarray(normal_map)
         if nm.dtype != np.uint8:
             nm = np.clip(nm * 127.5 + 128.0, 0, 255).astype(np.uint8)
-        _texture(gl, nm, 1, anisotropy=ANISOTROPY["normal"])
+        _texture(gl, nm, 1)
         prog["u_normal_map"].value = 1
     prog["u_mvp"].write(mvp.T.tobytes())  # GLSL matrices are column-major
     prog["u_key"].value = tuple(key.astype(np.float32))
