@@ -241,9 +241,13 @@ def test_quantise_float_equals_numpy(bits, scale):
     got = quantise_float(x, bits, scale)
     assert got.dtype == want.dtype
     np.testing.assert_array_equal(got, want)
-    plane = x[: 300 * 300].reshape(300, 300)
-    np.testing.assert_array_equal(targets.quantise(plane, bits, scale),
-                                  quantise_numpy(plane, bits, scale))  # fmt: skip
+    depth = x[: 300 * 300].reshape(300, 300)
+    maps = SimpleNamespace(mask=np.zeros((300, 300), np.float16), depth=depth,
+                           width=np.zeros((300, 300), np.float32), normal=None,
+                           occlusion=None)  # fmt: skip
+    depth_scale = targets.data_scales(maps)["depth"]
+    np.testing.assert_array_equal(targets.pack("depth", maps, bits),
+                                  quantise_numpy(depth, bits, depth_scale))  # fmt: skip
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, ">u2", np.float32])

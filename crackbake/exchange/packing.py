@@ -358,7 +358,8 @@ def _quantise(src, gain, top, swap, out):
 
 
 def quantise_float(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
-    """``plane / scale`` in [0, 1] rounded to uint8 or big-endian uint16, one pass, GIL released.
+    """``plane / scale`` in [0, 1] rounded to uint8 or big-endian uint16, one pass, GIL released
+    (the depth PNG; :func:`~crackbake.exchange.targets.quantise` keeps numpy for the rest).
 
     The numpy expression it replaces (``q = x * (top / scale); q += 0.5``, NaN to 0, clipped,
     truncated) made five passes over the plane and held the GIL between them: 0.13 s for a
