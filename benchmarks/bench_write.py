@@ -269,9 +269,10 @@ def per_file(s: dict, ctx, out: Path, compression: str,
 def levels(s: dict, repeat: int = 2) -> list[tuple[str, str, float, int]]:
     """Deflate settings per file: (file, setting, least CPU seconds of the deflate alone,
     bytes of the deflated data).  The EXRs' chunks (the transform done once beforehand) at
-    zlib-ng levels 1-4 and 6; each PNG's filtered scanlines with zlib-ng's Z_RLE (what
-    :mod:`crackbake.exchange.pngenc` writes; the level changes nothing) and its default
-    strategy at levels 1, 2, 3 and 6.  Every setting is lossless: only size and time differ."""
+    zlib-ng levels 1-4 and 6 and ISA-L levels 0-2; each PNG's filtered scanlines with
+    zlib-ng's Z_RLE (what :mod:`crackbake.exchange.pngenc` writes for the 8-bit maps; the
+    level changes nothing), its default strategy at levels 1, 2, 3 and 6, and ISA-L level 1
+    (the data map's).  Every setting is lossless: only size and time differ."""
     import zlib
 
     from zlib_ng import zlib_ng
@@ -301,6 +302,13 @@ def levels(s: dict, repeat: int = 2) -> list[tuple[str, str, float, int]]:
             return total
         return run
 
+    def isal_all(chunks, level):
+        return lambda: sum(len(isal_zlib.compress(c, level)) for c in chunks)
+
+    try:
+        from isal import isal_zlib
+    except ImportError:
+        isal_zlib = None
     rows = []
     maps, params, stem = s["maps"], s["params"], s["stem"]
     exrs = [(f"{stem}_cracks.exr", crack_planes(maps.channels(), float32=params.float32))]
@@ -324,7 +332,10 @@ def levels(s: dict, repeat: int = 2) -> list[tuple[str, str, float, int]]:
             chunks.append(out)
         for level in (1, 2, 3, 4, 6):
             cpu, size = best_cpu(deflate_all(chunks, level, zlib.Z_DEFAULT_STRATEGY))
-            rows.append((name, f"zip level {level}", cpu, size))
+            rows.append((name, f"zlib-ng level {level}", cpu, size))
+        for level in (0, 1, 2) if isal_zlib is not None else ():
+            cpu, size = best_cpu(isal_all(chunks, level))
+            rows.append((name, f"ISA-L level {level}", cpu, size))
     texture = base_color_texture(s["mesh"].source, maps.res, params.allow_outside_textures)
     enc = b._Encoder(None, maps, texture)
     normal_y = normal_convention(params.target, params.normal_y)
@@ -341,10 +352,13 @@ def levels(s: dict, repeat: int = 2) -> list[tuple[str, str, float, int]]:
             data = np.frombuffer(zlib.decompress(blob[blob.index(b"IDAT") + 4:-16]), np.uint8)
         view = [memoryview(np.ascontiguousarray(data)).cast("B")]
         cpu, size = best_cpu(deflate_all(view, 1, zlib_ng.Z_RLE))
-        rows.append((name, "Z_RLE (written)", cpu, size))
+        rows.append((name, "zlib-ng Z_RLE", cpu, size))
         for level in (1, 2, 3, 6):
             cpu, size = best_cpu(deflate_all(view, level, zlib.Z_DEFAULT_STRATEGY))
-            rows.append((name, f"default level {level}", cpu, size))
+            rows.append((name, f"zlib-ng level {level}", cpu, size))
+        if isal_zlib is not None:
+            cpu, size = best_cpu(isal_all(view, 1))
+            rows.append((name, "ISA-L level 1", cpu, size))
     return rows
 
 

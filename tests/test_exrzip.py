@@ -230,3 +230,24 @@ def test_each_chunk_is_the_transform_of_its_scanlines(tmp_path, compression):
         np.testing.assert_array_equal(np.frombuffer(zlib.decompress(data), np.uint8),
                                       _zip_transform(raw))  # fmt: skip
     assert deflated > 0
+
+
+@pytest.mark.parametrize("level", [None, 1, 2, 6])
+def test_every_deflate_gives_the_same_pixels(tmp_path, level):
+    """The default chunks' deflate (ISA-L where installed, zlib-ng without it) and zlib-ng's
+    explicit levels: different streams, the same file for OpenEXR and OpenImageIO."""
+    planes = _planes(13)
+    path = tmp_path / f"l{level}.exr"
+    write_scanline(path, planes, ATTRS, "zip", level=level)
+    _same(read_exr(path)[0], planes)
+    _same(_oiio(path), planes)
+
+
+def test_deflate_is_a_zlib_stream():
+    import zlib
+
+    from crackbake.exchange import exrzip
+
+    data = np.random.default_rng(2).integers(0, 3, 200_000, dtype=np.uint8).tobytes()
+    for level in (None, 1, 2):
+        assert zlib.decompress(exrzip.deflate(data, level)) == data

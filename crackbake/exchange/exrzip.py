@@ -1,4 +1,4 @@
-"""Scanline EXR files with ZIP or ZIPS compression, encoded here: numba + zlib-ng.
+"""Scanline EXR files with ZIP or ZIPS compression, encoded here: numba + ISA-L (or zlib-ng).
 
 Why not the OpenEXR bindings for these: the 4096² crack master is 0.47 GB of planes, and
 OpenEXR's ZIP path spent about 1.3 CPU-s on it (quiet 2-core machine; 2.9 s loaded), 40 % in
@@ -41,10 +41,15 @@ try:  # the same module pngenc uses; stdlib zlib writes valid (slower) files too
     from zlib_ng import zlib_ng as _zlib
 except ImportError:  # pragma: no cover - zlib-ng is a dependency
     _zlib = zlib
+try:  # ISA-L's deflate (the default chunks' encoder, below); zlib-ng where it is missing
+    from isal import isal_zlib as _isal
+except ImportError:  # pragma: no cover - isal is a dependency
+    _isal = None
 
 #: Compressions written here, with the scanlines per chunk and the file's compression code.
 SCANLINE_COMPRESSIONS = {"zips": (1, 2), "zip": (16, 3)}
-#: deflate level of the chunks.  On the README run's 4096² crack master (loaded machine, one
+#: zlib-ng's deflate level of the chunks where ISA-L is missing (or for an explicit level).
+#: On the README run's 4096² crack master (loaded machine, one
 #: thread) zlib-ng's deflate took 0.19 / 0.23 / 0.27 / 0.29 / 0.49 CPU-s at levels 1 / 2 / 3 /
 #: 4 / 6 for 10.6 / 7.05 / 6.99 / 6.98 / 6.91 MB, and on its 1024² stress file 0.08 / 0.13 /
 #: 0.14 / 0.16 / 0.19 CPU-s for 7.25 / 6.49 / 6.38 / 6.28 / 6.22 MB
@@ -52,6 +57,23 @@ SCANLINE_COMPRESSIONS = {"zips": (1, 2), "zip": (16, 3)}
 #: deflate; level 1 (static codes) grows the master by half.  The bindings wrote 6.84 MB
 #: (their level 4).
 ZIP_LEVEL = 2
+#: ISA-L's deflate level of the chunks when it is installed (``level=None``, the default).
+#: Intel's ISA-L (the ``isal`` package: x86-64 and ARM assembly, the ``zlib`` API, the GIL
+#: released) took 0.12 CPU-s for 7.50 MB on the README run's crack master, against zlib-ng's
+#: 0.27 s for 7.06 MB at level 2, and 0.04 s for 6.20 MB on its stress file (zlib-ng: 0.14 s
+#: for 6.49 MB); its levels 0 and 2 gave 11.5 / 7.49 MB for about the same time, level 3 was
+#: 15x slower (loaded machine, ``benchmarks/bench_write.py --levels``).
+ISAL_LEVEL = 1
+
+
+def deflate(data, level: int | None = None) -> bytes:
+    """zlib stream of ``data`` (a buffer): ISA-L at :data:`ISAL_LEVEL` when ``level`` is None
+    and it is installed, else zlib-ng (stdlib zlib without it) at ``level`` (None:
+    :data:`ZIP_LEVEL`)."""
+    if level is None and _isal is not None:
+        return _isal.compress(data, ISAL_LEVEL)
+    return _zlib.compress(data, ZIP_LEVEL if level is None else int(level))
+
 
 _MAGIC = b"\x76\x2f\x31\x01"
 _PIXEL_TYPE = {np.dtype(np.uint32): 0, np.dtype(np.float16): 1, np.dtype(np.float32): 2}
@@ -190,7 +212,7 @@ def _chunks(rows: list[np.ndarray], starts: range, lines: int, height: int,
             pred, shift = (words[c - 1], 0) if c else (words[-1], 1)
             _predict_channel(r, pred, shift, y0, y1, int(offsets[c]) // 2, line_bytes // 2,
                              n // 2, first_odd, out)  # fmt: skip
-        data = _zlib.compress(memoryview(out[:n]), level)
+        data = deflate(memoryview(out[:n]), level)
         if len(data) >= n:  # stored as it is: the scanlines' bytes, channel after channel
             data = np.concatenate([r[y0:y1] for r in rows], axis=1).tobytes()
         done.append((struct.pack("<ii", y0, len(data)), data))
@@ -199,7 +221,7 @@ def _chunks(rows: list[np.ndarray], starts: range, lines: int, height: int,
 
 def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attributes: dict,
                    compression: str = "zip", threads: int = 0,
-                   level: int = ZIP_LEVEL) -> None:  # fmt: skip
+                   level: int | None = None) -> None:  # fmt: skip
     """Write one part of (H, W) planes as a scanline EXR with ZIP or ZIPS compression.
 
     Parameters
@@ -214,8 +236,8 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
     threads : int
         Worker threads besides the calling one (0: the calling thread alone); the chunks are
         split among them in contiguous runs, so the file is the same for any count.
-    level : int
-        deflate level 1..9.
+    level : int, optional
+        zlib-ng's deflate level 1..9; None: :func:`deflate`'s default (ISA-L where installed).
 
     Raises
     ------
@@ -235,7 +257,7 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
     groups = max(1, min(int(threads) + 1, len(starts)))
     cut = np.linspace(0, len(starts), groups + 1).round().astype(int)
     parts = [starts[a:b] for a, b in zip(cut[:-1], cut[1:], strict=True)]
-    args = (lines, height, line_bytes, int(level))
+    args = (lines, height, line_bytes, None if level is None else int(level))
     if groups == 1:
         chunks = _chunks(rows, parts[0], *args)
     else:
