@@ -17,6 +17,8 @@ from crackbake.exchange.packing import (
     half_max,
     lut_planes,
     normal_q,
+    quantise_float,
+    take_half,
 )
 
 RES = 96
@@ -211,3 +213,48 @@ def test_fused_data_texture_equals_numpy_quantise():
                     axis=-1)
     np.testing.assert_array_equal(got, want)
     assert int(got[..., 1].max()) == 65535  # the widest texel reaches full scale
+
+
+def quantise_numpy(plane: np.ndarray, bits: int, scale: float) -> np.ndarray:
+    """Test oracle for :func:`quantise_float`: the numpy expression it replaced."""
+    top = 255 if bits == 8 else 65535
+    with np.errstate(all="ignore"):
+        q = np.asarray(plane, np.float32) * np.float32(top / scale)
+        q += np.float32(0.5)
+    np.nan_to_num(q, copy=False, nan=0.0)
+    np.clip(q, 0, top, out=q)
+    return q.astype(np.uint8 if bits == 8 else ">u2")
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+@pytest.mark.parametrize("scale", [1.0, 0.37, 7.0, 1e-30])
+def test_quantise_float_equals_numpy(bits, scale):
+    rng = np.random.default_rng(bits)
+    edges = np.array([np.nan, np.inf, -np.inf, 0.0, -0.0, 1.0, np.nextafter(1, 0),
+                      np.nextafter(1, 2), 0.5 / 255, 254.5 / 255, 3e38, -3e38], np.float32)
+    x = np.concatenate([
+        edges,
+        rng.standard_normal(50_000).astype(np.float32) * 2,
+        rng.integers(0, 2**32, 50_000, dtype=np.uint64).astype(np.uint32).view(np.float32),
+    ])  # fmt: skip
+    want = quantise_numpy(x, bits, scale)
+    got = quantise_float(x, bits, scale)
+    assert got.dtype == want.dtype
+    np.testing.assert_array_equal(got, want)
+    depth = x[: 300 * 300].reshape(300, 300)
+    maps = SimpleNamespace(mask=np.zeros((300, 300), np.float16), depth=depth,
+                           width=np.zeros((300, 300), np.float32), normal=None,
+                           occlusion=None)  # fmt: skip
+    depth_scale = targets.data_scales(maps)["depth"]
+    np.testing.assert_array_equal(targets.pack("depth", maps, bits),
+                                  quantise_numpy(depth, bits, depth_scale))  # fmt: skip
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, ">u2", np.float32])
+def test_take_half_equals_numpy_take(dtype):
+    rng = np.random.default_rng(3)
+    lut = rng.integers(0, 255, 65536).astype(dtype)
+    plane = _halves(rng)
+    got = take_half(lut, plane)
+    assert got.dtype == lut.dtype and got.shape == plane.shape
+    np.testing.assert_array_equal(got, np.take(lut, plane.view(np.uint16)))

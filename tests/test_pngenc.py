@@ -150,3 +150,26 @@ def test_zlib_ng_writes_the_bytes_stdlib_zlib_writes(monkeypatch, shape, dtype):
     raw = np.cumsum(rows[:, 1:], axis=0, dtype=np.uint8)  # wraps mod 256, as the filter did
     want = np.ascontiguousarray(img.astype(img.dtype.newbyteorder(">"))).view(np.uint8)
     assert np.array_equal(raw, want.reshape(shape[0], -1))
+
+
+@pytest.mark.parametrize("isal", [True, False])
+def test_data_deflate_round_trips(monkeypatch, isal):
+    """The data texture's deflate (ISA-L where installed, zlib-ng level 3 without it) writes a
+    PNG whose IDAT inflates to the very filtered rows the Z_RLE path deflates."""
+    from crackbake.exchange import pngenc
+    from crackbake.exchange.pngenc import data_deflate, png_rows
+
+    if isal:
+        pytest.importorskip("isal")
+    else:
+        monkeypatch.setattr(pngenc, "_isal", None)
+    img = _map_like(np.random.default_rng(9), (200, 300, 4), np.uint16)
+    plain = png_bytes(img)
+    idat = plain[plain.index(b"IDAT") + 4 : plain.index(b"IEND") - 8]
+    rows = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(200, -1)
+    ours = png_rows(rows, 300, 16, 4, deflate=data_deflate)
+    assert ours[: ours.index(b"IDAT") - 4] == plain[: plain.index(b"IDAT") - 4]  # same header
+    got = ours[ours.index(b"IDAT") + 4 : ours.index(b"IEND") - 8]
+    assert zlib.decompress(got) == rows.tobytes()
+    assert zlib.crc32(ours[ours.index(b"IDAT") : ours.index(b"IEND") - 8]) == int.from_bytes(
+        ours[ours.index(b"IEND") - 8 : ours.index(b"IEND") - 4], "big")

@@ -38,7 +38,7 @@ from crackbake.exchange.materials import (
     base_color_table,
     downsample,
 )
-from crackbake.exchange.pngenc import png_bytes, png_rows, write_bytes
+from crackbake.exchange.pngenc import data_deflate, png_bytes, png_rows, write_bytes
 from crackbake.exchange.targets import (
     TARGETS,
     data16_filtered,
@@ -121,7 +121,7 @@ class _Encoder:
         maps = _smaller(self.maps, size)
         rows = data16_filtered(maps) if (content, bits) == ("data", 16) else None
         if rows is not None:  # packed straight into filtered scanlines: one array less
-            data = png_rows(rows, rows.shape[1] // 8, 16, 4)
+            data = png_rows(rows, rows.shape[1] // 8, 16, 4, deflate=data_deflate)
         else:
             pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
             data = png_bytes(pixels, srgb=content == "base_color")

@@ -1,16 +1,18 @@
-"""Scanline EXR files with ZIP or ZIPS compression, encoded here: numba + zlib-ng.
+"""Scanline EXR files with ZIP or ZIPS compression, encoded here: numba + ISA-L (or zlib-ng).
 
 Why not the OpenEXR bindings for these: the 4096² crack master is 0.47 GB of planes, and
 OpenEXR's ZIP path spent about 1.3 CPU-s on it (quiet 2-core machine; 2.9 s loaded), 40 % in
 its byte reordering and predictor and 53 % in deflate, at every zip level: the write stage's
-critical path.  The same transform as one fused numba pass (GIL released) and zlib-ng's
-deflate take about a quarter of that (the gather 0.1, the transform 0.2, deflate 0.35 CPU-s
-on a loaded machine where the bindings took 2.9), split over threads
-(``benchmarks/bench_write.py``).  The files are standard OpenEXR 2.0 single-part scanline
-images: the same header attributes, channel list and pixels as the bindings write
-(``tests/test_exrzip.py`` reads them back with OpenEXR and OpenImageIO, Blender in the
-reference checks); only the deflate streams differ.  No compression, PIZ, RLE and ZSTD are
-left to the bindings (:func:`crackbake.exchange.exr.write_exr`).
+critical path.  The same transform as numba passes (GIL released) and zlib-ng's deflate take
+about a quarter of that (the transform 0.25, deflate 0.27 CPU-s on a loaded machine where the
+bindings took 2.9), split over threads (``benchmarks/bench_write.py``).  The transform reads
+each channel's rows where they lie (:func:`_predict_channel`): no gathered copy of the
+scanlines (it was 0.09 CPU-s and a pass over the 0.47 GB).  The files are standard
+OpenEXR 2.0 single-part scanline images: the same header attributes, channel list and
+pixels as the bindings write (``tests/test_exrzip.py`` reads them back with OpenEXR and
+OpenImageIO, Blender in the reference checks); only the deflate streams differ.  No
+compression, PIZ, RLE and ZSTD are left to the bindings
+(:func:`crackbake.exchange.exr.write_exr`).
 
 The layout, from the OpenEXR file-layout specification: magic ``76 2f 31 01``, version 2 (bit
 10 set when a name is longer than 31 bytes), the header's attributes (name, type name, size,
@@ -39,13 +41,39 @@ try:  # the same module pngenc uses; stdlib zlib writes valid (slower) files too
     from zlib_ng import zlib_ng as _zlib
 except ImportError:  # pragma: no cover - zlib-ng is a dependency
     _zlib = zlib
+try:  # ISA-L's deflate (the default chunks' encoder, below); zlib-ng where it is missing
+    from isal import isal_zlib as _isal
+except ImportError:  # pragma: no cover - isal is a dependency
+    _isal = None
 
 #: Compressions written here, with the scanlines per chunk and the file's compression code.
 SCANLINE_COMPRESSIONS = {"zips": (1, 2), "zip": (16, 3)}
-#: deflate level of the chunks.  On the README run's 4096² crack master (loaded machine, one
-#: thread) zlib-ng's deflate took 0.26 / 0.31 / 0.35 / 0.44 / 0.48 CPU-s at levels 1 / 2 / 3 /
-#: 4 / 6 for 10.6 / 7.06 / 6.99 / 6.99 / 6.92 MB; the bindings wrote 6.84 MB (their level 4).
-ZIP_LEVEL = 3
+#: zlib-ng's deflate level of the chunks where ISA-L is missing (or for an explicit level).
+#: On the README run's 4096² crack master (loaded machine, one
+#: thread) zlib-ng's deflate took 0.19 / 0.23 / 0.27 / 0.29 / 0.49 CPU-s at levels 1 / 2 / 3 /
+#: 4 / 6 for 10.6 / 7.05 / 6.99 / 6.98 / 6.91 MB, and on its 1024² stress file 0.08 / 0.13 /
+#: 0.14 / 0.16 / 0.19 CPU-s for 7.25 / 6.49 / 6.38 / 6.28 / 6.22 MB
+#: (``benchmarks/bench_write.py --levels``): level 2 costs 1-2 % in size for 10-15 % of the
+#: deflate; level 1 (static codes) grows the master by half.  The bindings wrote 6.84 MB
+#: (their level 4).
+ZIP_LEVEL = 2
+#: ISA-L's deflate level of the chunks when it is installed (``level=None``, the default).
+#: Intel's ISA-L (the ``isal`` package: x86-64 and ARM assembly, the ``zlib`` API, the GIL
+#: released) took 0.12 CPU-s for 7.50 MB on the README run's crack master, against zlib-ng's
+#: 0.27 s for 7.06 MB at level 2, and 0.04 s for 6.20 MB on its stress file (zlib-ng: 0.14 s
+#: for 6.49 MB); its levels 0 and 2 gave 11.5 / 7.49 MB for about the same time, level 3 was
+#: 15x slower (loaded machine, ``benchmarks/bench_write.py --levels``).
+ISAL_LEVEL = 1
+
+
+def deflate(data, level: int | None = None) -> bytes:
+    """zlib stream of ``data`` (a buffer): ISA-L at :data:`ISAL_LEVEL` when ``level`` is None
+    and it is installed, else zlib-ng (stdlib zlib without it) at ``level`` (None:
+    :data:`ZIP_LEVEL`)."""
+    if level is None and _isal is not None:
+        return _isal.compress(data, ISAL_LEVEL)
+    return _zlib.compress(data, ZIP_LEVEL if level is None else int(level))
+
 
 _MAGIC = b"\x76\x2f\x31\x01"
 _PIXEL_TYPE = {np.dtype(np.uint32): 0, np.dtype(np.float16): 1, np.dtype(np.float32): 2}
@@ -53,22 +81,40 @@ _LONG_NAMES = 0x400
 
 
 @njit(cache=True, nogil=True)
-def _reorder_predict(raw, out):  # pragma: no cover - compiled
-    """``out`` = ZIP's transform of ``raw``: the even bytes then the odd bytes, each byte
-    minus the one before it plus 128 (mod 256), the first kept.  Written without a carried
-    variable so that LLVM vectorises the two loops."""
-    n = raw.shape[0]
-    if n == 0:
-        return
-    h1 = (n + 1) // 2
-    out[0] = raw[0]
-    for k in range(1, h1):
-        out[k] = np.uint8((np.int32(raw[2 * k]) - np.int32(raw[2 * k - 2]) + 128) & 255)
-    if n > 1:
-        out[h1] = np.uint8((np.int32(raw[1]) - np.int32(raw[2 * h1 - 2]) + 128) & 255)
-    for k in range(h1 + 1, n):
-        j = 2 * (k - h1) + 1
-        out[k] = np.uint8((np.int32(raw[j]) - np.int32(raw[j - 2]) + 128) & 255)
+def _predict_channel(cur, pred, shift, y0, y1, e0, half_line, h1, first_odd,
+                     out):  # pragma: no cover - compiled
+    """ZIP's transform of one channel's rows ``y0:y1`` written into the chunk ``out``, without
+    gathering the scanlines first.
+
+    The chunk's bytes ``t`` (each scanline's channel rows one after the other) become its even
+    bytes then its odd bytes, each minus the one before it plus 128 (mod 256), ``t[0]`` kept.
+    A row holds whole 16-bit words (``cur``, (H, B/2) uint16, little-endian: the low byte is
+    the even one), so its even bytes go to ``out[e:e + B/2]`` and its odd ones to
+    ``out[h1 + e:...]``, ``e`` = ``e0`` + (y - y0) ``half_line``.  The word before a row's
+    first one in ``t`` is the last word of ``pred``'s row ``y - shift`` (the previous channel,
+    shift 0; the previous line's last channel, shift 1); before the chunk's first odd byte
+    comes its last even byte, ``first_odd``.  Word-wise, both predictions of word ``i`` are
+    the low and high bytes of ``w[i] - w[i - 1]`` (+ 128): one pass of contiguous loads.
+    """
+    m = cur.shape[1]
+    pb = pred.shape[1]
+    for y in range(y0, y1):
+        e = e0 + (y - y0) * half_line
+        o = h1 + e
+        row = cur[y]
+        w = np.int32(row[0])
+        if y - shift < y0:  # the chunk's first row: t[0] is kept
+            out[e] = np.uint8(w & 255)
+            out[o] = np.uint8(((w >> 8) - np.int32(first_odd) + 128) & 255)
+        else:
+            p = np.int32(pred[y - shift, pb - 1])
+            out[e] = np.uint8((w - p + 128) & 255)
+            out[o] = np.uint8(((w >> 8) - (p >> 8) + 128) & 255)
+        for i in range(1, m):  # one store stream per loop: LLVM vectorises each
+            out[e + i] = np.uint8((np.int32(row[i]) - np.int32(row[i - 1]) + 128) & 255)
+        for i in range(1, m):
+            out[o + i] = np.uint8(((np.int32(row[i]) >> 8) - (np.int32(row[i - 1]) >> 8) + 128)
+                                  & 255)  # fmt: skip
 
 
 @intrinsic
@@ -154,27 +200,28 @@ def header_bytes(names: list[str], dtypes: list[np.dtype], width: int, height: i
 def _chunks(rows: list[np.ndarray], starts: range, lines: int, height: int,
             line_bytes: int, level: int) -> list[tuple[bytes, bytes]]:  # fmt: skip
     """Each chunk's (y and size, data) for the chunks starting at the rows ``starts``."""
-    raw = np.empty(lines * line_bytes, np.uint8)
-    out = np.empty_like(raw)
+    out = np.empty(lines * line_bytes, np.uint8)
     offsets = np.cumsum([0] + [r.shape[1] for r in rows])
+    words = [r.view(np.uint16) for r in rows]  # every pixel type is whole 16-bit words
     done = []
     for y0 in starts:
         y1 = min(y0 + lines, height)
         n = (y1 - y0) * line_bytes
-        block = raw[:n].reshape(y1 - y0, line_bytes)
-        for r, a, b in zip(rows, offsets[:-1], offsets[1:], strict=True):
-            block[:, a:b] = r[y0:y1]  # numpy's copy releases the GIL
-        _reorder_predict(raw[:n], out[:n])
-        data = _zlib.compress(memoryview(out[:n]), level)
-        if len(data) >= n:  # stored as it is
-            data = raw[:n].tobytes()
+        first_odd = int(rows[-1][y1 - 1, -2])
+        for c, r in enumerate(words):  # nogil kernels: no gathered copy of the scanlines
+            pred, shift = (words[c - 1], 0) if c else (words[-1], 1)
+            _predict_channel(r, pred, shift, y0, y1, int(offsets[c]) // 2, line_bytes // 2,
+                             n // 2, first_odd, out)  # fmt: skip
+        data = deflate(memoryview(out[:n]), level)
+        if len(data) >= n:  # stored as it is: the scanlines' bytes, channel after channel
+            data = np.concatenate([r[y0:y1] for r in rows], axis=1).tobytes()
         done.append((struct.pack("<ii", y0, len(data)), data))
     return done
 
 
 def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attributes: dict,
                    compression: str = "zip", threads: int = 0,
-                   level: int = ZIP_LEVEL) -> None:  # fmt: skip
+                   level: int | None = None) -> None:  # fmt: skip
     """Write one part of (H, W) planes as a scanline EXR with ZIP or ZIPS compression.
 
     Parameters
@@ -189,8 +236,8 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
     threads : int
         Worker threads besides the calling one (0: the calling thread alone); the chunks are
         split among them in contiguous runs, so the file is the same for any count.
-    level : int
-        deflate level 1..9.
+    level : int, optional
+        zlib-ng's deflate level 1..9; None: :func:`deflate`'s default (ISA-L where installed).
 
     Raises
     ------
@@ -210,7 +257,7 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
     groups = max(1, min(int(threads) + 1, len(starts)))
     cut = np.linspace(0, len(starts), groups + 1).round().astype(int)
     parts = [starts[a:b] for a, b in zip(cut[:-1], cut[1:], strict=True)]
-    args = (lines, height, line_bytes, int(level))
+    args = (lines, height, line_bytes, None if level is None else int(level))
     if groups == 1:
         chunks = _chunks(rows, parts[0], *args)
     else:

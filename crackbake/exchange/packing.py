@@ -309,3 +309,79 @@ def half_max(plane: np.ndarray) -> float:
     float16 reduction is scalar code, 20x slower on a 4096² map."""
     table = np.arange(65536, dtype=np.uint16).view(np.float16).astype(np.float32)
     return float(_half_max(np.ascontiguousarray(plane).view(np.uint16).reshape(-1), table))
+
+
+@njit(cache=True, nogil=True)
+def _take(lut, idx, out):
+    for i in range(idx.shape[0]):
+        out[i] = lut[idx[i]]
+
+
+def take_half(lut: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """``np.take(lut, plane.view(np.uint16))`` for a float16 plane, the GIL released.
+
+    numpy's gather holds the GIL (0.05 s per 4096² plane here), so the texture jobs of the
+    write stage queued behind each other on it.
+
+    Parameters
+    ----------
+    lut : (65536,) ndarray
+        Indexed by the float16 bit pattern (native byte order); any dtype of 1, 2 or 4 bytes,
+        ``>u2`` included (its bytes are copied as they are).
+    plane : (H, W) float16
+
+    Returns
+    -------
+    (H, W) array of ``lut``'s dtype
+    """
+    lut = np.asarray(lut)
+    store = {1: np.uint8, 2: np.uint16, 4: np.uint32}[lut.dtype.itemsize]
+    idx = np.ascontiguousarray(plane, np.float16).view(np.uint16)
+    out = np.empty(idx.shape, store)
+    _take(np.ascontiguousarray(lut).view(store), idx.reshape(-1), out.reshape(-1))
+    return out.view(lut.dtype)
+
+
+@njit(cache=True, nogil=True)
+def _quantise(src, gain, top, swap, out):
+    for i in range(src.shape[0]):
+        d = src[i] * gain
+        d = d + np.float32(0.5)  # two roundings, as numpy's multiply then add
+        v = np.uint32(0)
+        if d >= top:
+            v = np.uint32(top)
+        elif d > np.float32(0.0):  # NaN compares false: 0
+            v = np.uint32(d)
+        if swap:  # big-endian samples, the byte order PNG stores
+            v = ((v >> 8) | (v << 8)) & 0xFFFF
+        out[i] = v
+
+
+def quantise_float(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
+    """``plane / scale`` in [0, 1] rounded to uint8 or big-endian uint16, one pass, GIL released
+    (the depth PNG; :func:`~crackbake.exchange.targets.quantise` keeps numpy for the rest).
+
+    The numpy expression it replaces (``q = x * (top / scale); q += 0.5``, NaN to 0, clipped,
+    truncated) made five passes over the plane and held the GIL between them: 0.13 s for a
+    4096² 16-bit depth map here against 0.02 s.  Same values for every float32 input, NaN and
+    infinities included (``tests/test_packing.py``).
+
+    Parameters
+    ----------
+    plane : (H, W) float
+        Converted to float32 first, as numpy's expression does.
+    bits : {8, 16}
+    scale : float
+        The value that maps to the top code, > 0.
+
+    Returns
+    -------
+    (H, W) uint8, or ``>u2``
+    """
+    top = 255 if bits == 8 else 65535
+    src = np.ascontiguousarray(plane, np.float32)
+    store = np.uint8 if bits == 8 else np.uint16
+    out = np.empty(src.shape, store)
+    _quantise(src.reshape(-1), np.float32(top / scale), np.float32(top), bits == 16,
+              out.reshape(-1))  # fmt: skip
+    return out if bits == 8 else out.view(">u2")

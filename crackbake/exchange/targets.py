@@ -35,6 +35,8 @@ from crackbake.exchange.packing import (
     half_max,
     lut_planes,
     normal_q,
+    quantise_float,
+    take_half,
 )
 from crackbake.params import NORMAL_Y
 from crackbake.params import TARGETS as TARGET_NAMES
@@ -163,8 +165,11 @@ def quantise(plane: np.ndarray, bits: int, scale: float = 1.0) -> np.ndarray:
     """``plane / scale`` in [0, 1] rounded to uint8 or uint16 (clipped; NaN -> 0)."""
     top = _full(bits)
     dtype = _dtype(bits)
+    plane = np.asarray(plane)
     if plane.dtype == np.float16:  # one gather through a table of every half value
-        return np.take(_quant_lut(bits, scale), plane.view(np.uint16))
+        return take_half(_quant_lut(bits, scale), plane)
+    # numpy here (inspect's pictures, tiles): a kernel would be compiled on their first use;
+    # the write's full-size planes take :func:`quantise_float` (:func:`pack`).
     q = np.asarray(plane, np.float32) * np.float32(top / scale)
     q += np.float32(0.5)
     np.nan_to_num(q, copy=False, nan=0.0)
@@ -194,7 +199,7 @@ def _rough_lut(bits: int, smooth: bool = False, look=None) -> np.ndarray:
 
 
 def _roughness(mask: np.ndarray, bits: int, smooth: bool = False, look=None) -> np.ndarray:
-    return np.take(_rough_lut(bits, smooth, look), np.asarray(mask, np.float16).view(np.uint16))
+    return take_half(_rough_lut(bits, smooth, look), np.asarray(mask, np.float16))
 
 
 def _packed(content: str, maps, bits: int) -> np.ndarray | None:
@@ -258,7 +263,10 @@ def pack(content: str, maps, bits: int, normal_y: str = "gl", base=None) -> np.n
     if content == "mask":
         return quantise(maps.mask, bits)
     if content == "depth":
-        return quantise(maps.depth, bits, data_scales(maps)["depth"])
+        scale = data_scales(maps)["depth"]
+        if np.asarray(maps.depth).dtype == np.float32:  # one pass, GIL released
+            return quantise_float(maps.depth, bits, scale)
+        return quantise(maps.depth, bits, scale)
     if content == "occlusion":
         return occlusion()
     if content == "roughness":
