@@ -176,11 +176,14 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     ctx = create_context()
+    targets = _prefetch(ctx, params, tiles)
+    gutter = None
     try:
         uvmesh = _uvs(ctx, mesh, params, timings)
+        gutter = _plan_gutter(ctx, uvmesh, params, timings)
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
-        maps = _bake(ctx, uvmesh, network, params, timings)
+        maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
         stress = _bake_stress(ctx, uvmesh, solved, params, timings)
         logger.info("writing %s", params.out_dir, extra={"stage": "write"})
         t = time.perf_counter()
@@ -200,6 +203,9 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
+        for ahead in (targets, gutter):  # their threads end before the context
+            if ahead is not None:
+                ahead.close()
         ctx.release()
     return RunResult(
         out_dir=Path(params.out_dir),
@@ -249,8 +255,40 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
     return uvmesh
 
 
+def _prefetch(ctx, params: RunParams, tiles: int):
+    """The crack bake's render targets, allocated on a thread of their own while the UV,
+    solver and other CPU stages run (:mod:`crackbake.bake.prefetch`); None for a UDIM set."""
+    if tiles > 1:
+        return None
+    from crackbake.bake.prefetch import TargetPrefetch
+    from crackbake.bake.raster import target_specs
+
+    # The page is always baked with tangents (_uvs): the normal map's targets.
+    return TargetPrefetch(ctx, target_specs(params.res, params.tile, with_normals=True))
+
+
+def _plan_gutter(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
+    """The crack maps' gutter fill, planned on a thread of its own from the faces' coverage
+    while the solver runs (:class:`crackbake.bake.dilation.PlanAhead`), the coverage draw
+    timed as ``coverage``; None for a UDIM set."""
+    if uvmesh.udim is not None:
+        return None
+    from crackbake.bake.dilation import PlanAhead
+    from crackbake.bake.raster import coverage
+    from crackbake.bake.uv.uvmesh import bake_arrays
+
+    t = time.perf_counter()
+    arrays = bake_arrays(uvmesh)
+    inside = coverage(ctx, arrays["uv"], arrays["faces"], params.res, params.tile,
+                      with_normals=arrays["tangents"] is not None)  # fmt: skip
+    gutter = PlanAhead(inside, params.dilate)
+    timings["coverage"] = time.perf_counter() - t
+    return gutter
+
+
 def _bake(
-    ctx, uvmesh: UVMesh, network: CrackNetwork, params: RunParams, timings: dict[str, float]
+    ctx, uvmesh: UVMesh, network: CrackNetwork, params: RunParams, timings: dict[str, float],
+    targets=None, gutter=None,
 ) -> CrackMaps:
     """The GPU bake, timed as ``bake``."""
     from crackbake.bake.raster import bake_cracks
@@ -287,6 +325,8 @@ def _bake(
         tangents=arrays["tangents"],
         look=params.crack_look(),
         seed=params.seed,
+        targets=targets,
+        gutter=gutter,
     )
     timings["bake"] = time.perf_counter() - t
     return maps
