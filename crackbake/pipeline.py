@@ -256,15 +256,17 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
 
 
 def _prefetch(ctx, params: RunParams, tiles: int):
-    """The crack bake's render targets, allocated on a thread of their own while the UV,
-    solver and other CPU stages run (:mod:`crackbake.bake.prefetch`); None for a UDIM set."""
+    """The crack bake's render targets and readback images, allocated on a thread of their own
+    while the UV, solver and other CPU stages run (:mod:`crackbake.bake.prefetch`); None for a
+    UDIM set."""
     if tiles > 1:
         return None
     from crackbake.bake.prefetch import TargetPrefetch
-    from crackbake.bake.raster import target_specs
+    from crackbake.bake.raster import image_specs, target_specs
 
     # The page is always baked with tangents (_uvs): the normal map's targets.
-    return TargetPrefetch(ctx, target_specs(params.res, params.tile, with_normals=True))
+    return TargetPrefetch(ctx, target_specs(params.res, params.tile, with_normals=True),
+                          image_specs(params.res, with_normals=True))
 
 
 def _plan_gutter(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):

@@ -10,7 +10,7 @@ from conftest import plate_mesh
 
 from crackbake.bake.context import GLScope
 from crackbake.bake.prefetch import TargetPrefetch
-from crackbake.bake.raster import bake_cracks, target_specs
+from crackbake.bake.raster import bake_cracks, image_specs, target_specs
 from crackbake.network import Segments
 
 
@@ -60,6 +60,16 @@ def test_the_allocation_runs_without_the_gil(gl_ctx):
     assert spins == 0 or spins > 100
 
 
+def test_prefetched_images_are_zeroed_and_taken_once(gl_ctx):
+    prefetch = TargetPrefetch(gl_ctx, [], [((3, 40, 50), "<f4"), ((40, 50), "|u1")])
+    image = prefetch.take_array((3, 40, 50), np.float32)
+    assert image.shape == (3, 40, 50) and image.dtype == np.float32 and not image.any()
+    assert prefetch.take_array((3, 40, 50), np.float32) is None
+    assert prefetch.take_array((40, 50), np.uint8) is not None
+    assert prefetch.take_array((40, 50), np.float16) is None  # never asked for
+    prefetch.close()
+
+
 def test_close_frees_what_the_bake_did_not_take(gl_ctx):
     prefetch = TargetPrefetch(gl_ctx, [((128, 128), 4, "f4")] * 3)
     with GLScope(gl_ctx) as gl:
@@ -80,9 +90,13 @@ def test_bake_into_prefetched_targets_gives_the_same_pixels(gl_ctx, tile):
     segs = _segments(30, 5)
     kw = dict(max_distance=0.05, tile=tile, ctx=gl_ctx, normals=normals, tangents=tangents)
     own = bake_cracks(v, f, uv, segs, res, **kw)
-    prefetch = TargetPrefetch(gl_ctx, target_specs(res, tile, with_normals=True))
+    prefetch = TargetPrefetch(gl_ctx, target_specs(res, tile, with_normals=True),
+                              image_specs(res, with_normals=True))
     try:
         taken = bake_cracks(v, f, uv, segs, res, targets=prefetch, **kw)
+        # The bake took every texture and image prefetched for it.
+        assert prefetch._ready == {k: [] for k in prefetch._ready}
+        assert prefetch._arrays == {k: [] for k in prefetch._arrays}
     finally:
         prefetch.close()
     assert own.mask.any() and own.normal is not None

@@ -9,8 +9,10 @@ own, while the UVs, the simulation mesh, the stress field and the solver run on 
 moderngl holds the GIL in every call; this thread calls EGL and GL through :mod:`ctypes`, which
 releases it, so the main thread's Python and numba are never held up by it.
 
-The bake (:func:`crackbake.bake.raster.bake_cracks`, ``targets=``) then takes each texture of the
-size, components and type it needs, wrapped as a moderngl texture of the run context
+The same thread also allocates the numpy images the bake reads the targets back into, and touches
+every page of them (``ndarray.fill`` releases the GIL): 0.1-0.5 CPU-s of page faults the readback
+paid.  The bake (:func:`crackbake.bake.raster.bake_cracks`, ``targets=``) then takes each texture
+of the size, components and type it needs, wrapped as a moderngl texture of the run context
 (``Context.external_texture``).  The storage has the internal format ``ctx.texture`` gives and
 the same zero contents, so the pixels are those of targets created in place.  Where the second
 context cannot be had (no ``libEGL.so.1``/``libOpenGL.so.0`` by those names, a driver without
@@ -24,10 +26,14 @@ import logging
 import threading
 from ctypes import POINTER, byref, c_int, c_uint, c_void_p
 
+import numpy as np
+
 logger = logging.getLogger(__name__)
 
 #: (width, height), components, dtype: a texture as ``ctx.texture(size, components, dtype=...)``.
 Spec = tuple[tuple[int, int], int, str]
+#: shape, numpy dtype: an image the readback fills.
+ArraySpec = tuple[tuple[int, ...], str]
 
 # GL and EGL enums.
 _TEXTURE_2D = 0x0DE1
@@ -93,8 +99,9 @@ def _shared_context(egl) -> tuple[c_void_p, c_void_p] | None:
 
 class TargetPrefetch:
     """Textures of the given specs, created on a thread of their own in a context that shares
-    ``ctx``'s objects; :meth:`take` hands them to the bake, :meth:`close` frees what was not
-    taken.  Create it on the thread where ``ctx`` is current (the run's main thread).
+    ``ctx``'s objects, and zero-filled numpy images; :meth:`take` and :meth:`take_array` hand
+    them to the bake, :meth:`close` frees what was not taken.  Create it on the thread where
+    ``ctx`` is current (the run's main thread).
 
     Parameters
     ----------
@@ -103,25 +110,36 @@ class TargetPrefetch:
     specs : list of ((width, height), components, dtype)
         The textures to create, each as ``ctx.texture(size, components, dtype=dtype)`` would;
         (components, dtype) one of (1, "f1"), (1, "f2"), (1, "f4"), (4, "f4").
+    arrays : list of (shape, dtype), optional
+        numpy images to allocate and zero-fill (every page touched) on the thread too.
     """
 
-    def __init__(self, ctx, specs: list[Spec]) -> None:
+    def __init__(self, ctx, specs: list[Spec], arrays: list[ArraySpec] = ()) -> None:
         self.ctx = ctx
         self._ready: dict[Spec, list[int]] = {}
+        self._arrays: dict[ArraySpec, list[np.ndarray]] = {}
         self._error: str | None = None
         self._thread: threading.Thread | None = None
         self._lib = _libraries()
         shared = None if self._lib is None else _shared_context(self._lib[0])
         if shared is None:
             self._error = "no shared EGL context"
-            return
         specs = [s for s in specs if (s[1], s[2]) in _FORMATS]
-        self._thread = threading.Thread(target=self._allocate, args=(shared, specs),
+        self._thread = threading.Thread(target=self._allocate, args=(shared, specs, arrays),
                                         name="crackbake-targets", daemon=True)  # fmt: skip
         self._thread.start()
 
-    def _allocate(self, shared: tuple, specs: list[Spec]) -> None:
-        """The thread: make the shared context current, create every texture, finish."""
+    def _allocate(self, shared: tuple, specs: list[Spec], arrays: list[ArraySpec]) -> None:
+        """The thread: make the shared context current, create every texture, finish; then
+        the images."""
+        if shared is not None:
+            self._textures(shared, specs)
+        for shape, dtype in arrays:
+            image = np.empty(shape, dtype)
+            image.fill(0)  # faults every page in here, not in the bake's readback
+            self._arrays.setdefault((tuple(shape), np.dtype(dtype).str), []).append(image)
+
+    def _textures(self, shared: tuple, specs: list[Spec]) -> None:
         egl, gl = self._lib
         display, context = shared
         egl.eglBindAPI(_EGL_OPENGL_API)  # per thread
@@ -152,7 +170,7 @@ class TargetPrefetch:
             egl.eglDestroyContext(display, context)
 
     def wait(self) -> None:
-        """Block until the thread has created every texture."""
+        """Block until the thread has created every texture and image."""
         if self._thread is not None:
             self._thread.join()
             self._thread = None
@@ -171,6 +189,12 @@ class TargetPrefetch:
         gl.keep(_Delete(self._lib[1], name))  # released after the wrapper (reverse order)
         return gl.keep(self.ctx.external_texture(name, tuple(size), components, 0, dtype))
 
+    def take_array(self, shape: tuple[int, ...], dtype) -> np.ndarray | None:
+        """A prefetched zero-filled image of that shape and dtype, or None."""
+        self.wait()
+        images = self._arrays.get((tuple(shape), np.dtype(dtype).str))
+        return images.pop() if images else None
+
     def close(self) -> None:
         """Wait for the thread and delete the textures no bake took (the run's context is
         current on this thread)."""
@@ -179,6 +203,7 @@ class TargetPrefetch:
             for name in names:
                 _Delete(self._lib[1], name).release()
         self._ready.clear()
+        self._arrays.clear()
 
 
 class _Delete:

@@ -29,7 +29,7 @@ from crackbake.bake.context import GLScope, shader_source
 from crackbake.bake.dilation import PlanAhead, dilate
 from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
-from crackbake.bake.prefetch import Spec, TargetPrefetch
+from crackbake.bake.prefetch import ArraySpec, Spec, TargetPrefetch
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import DEFAULT_MAX_DISTANCE_FRACTION, MIN_PX_DEFAULT, TILE_DEFAULT
@@ -403,6 +403,25 @@ def target_specs(res: int, tile: int, with_normals: bool) -> list[Spec]:
     return [(size, 4, "f4")] * 3 + [(size, 1, d) for d in _dtypes(with_normals)]
 
 
+def image_specs(res: int, with_normals: bool) -> list[ArraySpec]:
+    """The numpy images a UV-placed bake of ``res`` texels reads its targets back into, for a
+    :class:`TargetPrefetch` (``arrays``): one per channel, and the normal's three planes."""
+    images = [((res, res), np.dtype(_NUMPY[d]).str) for d in _dtypes(with_normals)]
+    if with_normals:
+        images += [((3, res, res), "<f4"), ((res, res), "<f2")]  # normal, occlusion
+    return images
+
+
+def _image(prefetch: TargetPrefetch | None, shape: tuple[int, ...], dtype,
+           zeros: bool = False) -> np.ndarray:
+    """A prefetched (zeroed, paged-in) image when there is one left, else a new one (empty, or
+    zeroed when ``zeros``)."""
+    image = None if prefetch is None else prefetch.take_array(shape, dtype)
+    if image is None:
+        image = np.zeros(shape, dtype) if zeros else np.empty(shape, dtype)
+    return image
+
+
 def _dtypes(with_normals: bool) -> tuple[str, ...]:
     # With the normal map the inside target also says which segment's depth wins (R32F).
     return (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
@@ -527,14 +546,16 @@ def _render(
         # normal map, whose inside target holds the winning segment as R32F).
         band = band_rows(res, tile)
         dtypes = _dtypes(with_normals)
-        images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
+        images = {n: _image(prefetch, (res, res), _NUMPY[d])
+                  for n, d in zip(_NAMES, dtypes, strict=True)}  # fmt: skip
         if with_normals:
             normal_pass = NormalPass(gl, profile_shape, min_px, terms)
             # Flat and open wherever no crack's depth reaches.  Planar storage: each component
             # dilates as its own image and EXR writers take the planes without a copy.
-            images["normal"] = np.zeros((3, res, res), np.float32)
+            images["normal"] = _image(prefetch, (3, res, res), np.float32, zeros=True)
             images["normal"][2] = 1.0
-            images["occlusion"] = np.ones((res, res), np.float16)
+            images["occlusion"] = _image(prefetch, (res, res), np.float16)
+            images["occlusion"][:] = 1.0
         projected = projection is not None
         gfbo, fbo, singles = _targets(gl, res, band, dtypes, prefetch)
         # No blending or culling.  The depth test: a camera placement keeps the surface nearest
