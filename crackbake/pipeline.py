@@ -176,11 +176,10 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     ctx = create_context()
-    targets = _prefetch(ctx, params, tiles)
-    gutter = None
+    targets = gutter = None
     try:
         uvmesh = _uvs(ctx, mesh, params, timings)
-        gutter = _plan_gutter(ctx, uvmesh, params, timings)
+        targets, gutter = _bake_ahead(ctx, uvmesh, params, timings)
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
         maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
@@ -255,37 +254,30 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
     return uvmesh
 
 
-def _prefetch(ctx, params: RunParams, tiles: int):
-    """The crack bake's render targets and readback images, allocated on a thread of their own
-    while the UV, solver and other CPU stages run (:mod:`crackbake.bake.prefetch`); None for a
-    UDIM set."""
-    if tiles > 1:
-        return None
-    from crackbake.bake.prefetch import TargetPrefetch
-    from crackbake.bake.raster import image_specs, target_specs
-
-    # The page is always baked with tangents (_uvs): the normal map's targets.
-    return TargetPrefetch(ctx, target_specs(params.res, params.tile, with_normals=True),
-                          image_specs(params.res, with_normals=True))
-
-
-def _plan_gutter(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
-    """The crack maps' gutter fill, planned on a thread of its own from the faces' coverage
-    while the solver runs (:class:`crackbake.bake.dilation.PlanAhead`), the coverage draw
-    timed as ``coverage``; None for a UDIM set."""
+def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
+    """What the crack bake needs that no crack network changes, started on threads of their own
+    to run beside the solver: its render targets and readback images
+    (:class:`crackbake.bake.prefetch.TargetPrefetch`) and its gutter fill, planned from the
+    faces' coverage (:class:`crackbake.bake.dilation.PlanAhead`; the coverage draw timed as
+    ``coverage``).  Started after the last GL call before the bake: llvmpipe zero-fills a
+    texture holding Mesa's shared texture lock, which this thread's GL calls would wait for.
+    (None, None) for a UDIM set."""
     if uvmesh.udim is not None:
-        return None
+        return None, None
     from crackbake.bake.dilation import PlanAhead
-    from crackbake.bake.raster import coverage
+    from crackbake.bake.prefetch import TargetPrefetch
+    from crackbake.bake.raster import coverage, image_specs, target_specs
     from crackbake.bake.uv.uvmesh import bake_arrays
 
     t = time.perf_counter()
     arrays = bake_arrays(uvmesh)
-    inside = coverage(ctx, arrays["uv"], arrays["faces"], params.res, params.tile,
-                      with_normals=arrays["tangents"] is not None)  # fmt: skip
+    with_normals = arrays["tangents"] is not None
+    inside = coverage(ctx, arrays["uv"], arrays["faces"], params.res, params.tile, with_normals)
     gutter = PlanAhead(inside, params.dilate)
     timings["coverage"] = time.perf_counter() - t
-    return gutter
+    targets = TargetPrefetch(ctx, target_specs(params.res, params.tile, with_normals),
+                             image_specs(params.res, with_normals))  # fmt: skip
+    return targets, gutter
 
 
 def _bake(
