@@ -217,6 +217,9 @@ class PlanAhead:
         self._thread.start()
 
     def _work(self) -> None:
+        from crackbake.bake.prefetch import background
+
+        background()
         near = _nearest_row_per_column_serial(self.inside)
         src, dist2 = _nearest_source_serial(near)
         del near

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import logging
+import os
 import threading
 from ctypes import POINTER, byref, c_int, c_uint, c_void_p
 
@@ -97,6 +98,20 @@ def _shared_context(egl) -> tuple[c_void_p, c_void_p] | None:
     return (display, context) if context else None
 
 
+#: How much nicer than the run the threads working ahead are: they should take an idle core, not
+#: the solver's (on Linux a thread's nice value is its own).
+BACKGROUND_NICE = 5
+
+
+def background() -> None:
+    """Lower the calling thread's priority by :data:`BACKGROUND_NICE` (where the OS allows)."""
+    try:
+        nice = os.getpriority(os.PRIO_PROCESS, 0)  # Linux: the calling thread
+        os.setpriority(os.PRIO_PROCESS, 0, min(19, nice + BACKGROUND_NICE))
+    except (AttributeError, OSError):
+        pass
+
+
 class TargetPrefetch:
     """Textures of the given specs, created on a thread of their own in a context that shares
     ``ctx``'s objects, and zero-filled numpy images; :meth:`take` and :meth:`take_array` hand
@@ -132,6 +147,7 @@ class TargetPrefetch:
     def _allocate(self, shared: tuple, specs: list[Spec], arrays: list[ArraySpec]) -> None:
         """The thread: make the shared context current, create every texture, finish; then
         the images."""
+        background()
         if shared is not None:
             self._textures(shared, specs)
         for shape, dtype in arrays:
