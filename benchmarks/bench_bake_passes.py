@@ -11,7 +11,13 @@ and its passes from ``CrackMaps.timings``:
 - ``cracks``: the per-texel crack measure (GL; ``ctx.finish`` fenced, so GL time lands here);
   ``render`` is the two (older trees time only that);
 - ``readback``: the channels into numpy; ``normals``: the compute pass at the crack texels;
-- ``dilate``: the gutter fill (``edt``: its nearest-island transform; the rest the copies).
+- ``dilate``: the gutter fill (``edt``: its nearest-island transform and plan when the bake
+  works it out itself; the rest the copies); ``plan_wait``: the time the bake waited for the
+  plan worked out ahead (``crackbake.bake.dilation.PlanAhead``);
+- done ahead, outside the bake stage (newer trees): ``coverage`` (the stage drawing the faces'
+  coverage before the solver, wall s), and the CPU-s of the two threads that run beside the
+  solver, ``targets_thread`` (the render targets' allocation, ``crackbake.bake.prefetch``) and
+  ``plan_thread`` (the gutter plan).
 
 ``--cpu`` times the passes in CPU seconds of the whole process (all threads: llvmpipe's
 rasteriser threads and numba's included) instead of wall seconds: on a shared machine wall
@@ -41,7 +47,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 IMPACT = "0.334,0.044,0.287"  # on spot's flank, as the issue's command
 PASSES = ("candidates", "setup", "surface", "cracks", "render", "readback", "normals", "dilate",
-          "edt")
+          "edt", "plan_wait", "coverage", "targets_thread", "plan_thread")
 
 
 def child(res: int, cpu: bool) -> dict:
@@ -55,15 +61,28 @@ def child(res: int, cpu: bool) -> dict:
     clock = time.process_time if cpu else time.perf_counter
     raster.time = types.SimpleNamespace(perf_counter=clock)  # the passes' clock
     extra: dict[str, float] = {}
-    nearest = dilation.nearest_island
 
-    def timed_nearest(*args):
-        t = clock()
-        out = nearest(*args)
-        extra.setdefault("edt", clock() - t)  # the crack maps' (the stress bake's comes next)
-        return out
+    def timed(module, name, key, timer=clock):
+        """Wrap ``module.name`` to record its first call's time as ``key``."""
+        inner = getattr(module, name)
 
-    dilation.nearest_island = timed_nearest
+        def wrapper(*args, **kw):
+            t = timer()
+            out = inner(*args, **kw)
+            extra.setdefault(key, timer() - t)
+            return out
+
+        setattr(module, name, wrapper)
+
+    if hasattr(dilation, "fill_plan"):  # the crack maps' plan, when worked out in the bake
+        timed(dilation, "fill_plan", "edt")
+        timed(dilation.PlanAhead, "plan_for", "plan_wait")
+        timed(dilation.PlanAhead, "_work", "plan_thread", time.thread_time)
+        from crackbake.bake import prefetch
+
+        timed(prefetch.TargetPrefetch, "_allocate", "targets_thread", time.thread_time)
+    else:  # older trees: the crack maps' transform (the stress bake's comes next)
+        timed(dilation, "nearest_island", "edt")
     results = []
     run = pipeline.run
 
@@ -80,6 +99,8 @@ def child(res: int, cpu: bool) -> dict:
     row = {k: float(v) for k, v in result.maps.timings.items()}
     row.update(extra)
     row["bake_stage_wall"] = float(result.manifest["timings_s"]["bake"])
+    if "coverage" in result.manifest["timings_s"]:
+        row["coverage"] = float(result.manifest["timings_s"]["coverage"])
     row["renderer"] = result.manifest.get("renderer", {}).get("renderer", "")
     return row
 

@@ -176,11 +176,13 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     ctx = create_context()
+    targets = gutter = None
     try:
         uvmesh = _uvs(ctx, mesh, params, timings)
+        targets, gutter = _bake_ahead(ctx, uvmesh, params, timings)
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
-        maps = _bake(ctx, uvmesh, network, params, timings)
+        maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
         stress = _bake_stress(ctx, uvmesh, solved, params, timings)
         logger.info("writing %s", params.out_dir, extra={"stage": "write"})
         t = time.perf_counter()
@@ -200,6 +202,9 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
+        for ahead in (targets, gutter):  # their threads end before the context
+            if ahead is not None:
+                ahead.close()
         ctx.release()
     return RunResult(
         out_dir=Path(params.out_dir),
@@ -249,8 +254,35 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
     return uvmesh
 
 
+def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
+    """What the crack bake needs that no crack network changes, started on threads of their own
+    to run beside the solver: its render targets and readback images
+    (:class:`crackbake.bake.prefetch.TargetPrefetch`) and its gutter fill, planned from the
+    faces' coverage (:class:`crackbake.bake.dilation.PlanAhead`; the coverage draw timed as
+    ``coverage``).  Started after the last GL call before the bake: llvmpipe zero-fills a
+    texture holding Mesa's shared texture lock, which this thread's GL calls would wait for.
+    (None, None) for a UDIM set."""
+    if uvmesh.udim is not None:
+        return None, None
+    from crackbake.bake.dilation import PlanAhead
+    from crackbake.bake.prefetch import TargetPrefetch
+    from crackbake.bake.raster import coverage, image_specs, target_specs
+    from crackbake.bake.uv.uvmesh import bake_arrays
+
+    t = time.perf_counter()
+    arrays = bake_arrays(uvmesh)
+    with_normals = arrays["tangents"] is not None
+    inside = coverage(ctx, arrays["uv"], arrays["faces"], params.res, params.tile, with_normals)
+    gutter = PlanAhead(inside, params.dilate)
+    timings["coverage"] = time.perf_counter() - t
+    targets = TargetPrefetch(ctx, target_specs(params.res, params.tile, with_normals),
+                             image_specs(params.res, with_normals))  # fmt: skip
+    return targets, gutter
+
+
 def _bake(
-    ctx, uvmesh: UVMesh, network: CrackNetwork, params: RunParams, timings: dict[str, float]
+    ctx, uvmesh: UVMesh, network: CrackNetwork, params: RunParams, timings: dict[str, float],
+    targets=None, gutter=None,
 ) -> CrackMaps:
     """The GPU bake, timed as ``bake``."""
     from crackbake.bake.raster import bake_cracks
@@ -287,6 +319,8 @@ def _bake(
         tangents=arrays["tangents"],
         look=params.crack_look(),
         seed=params.seed,
+        targets=targets,
+        gutter=gutter,
     )
     timings["bake"] = time.perf_counter() - t
     return maps

@@ -330,6 +330,59 @@ def test_nearest_island_across_column_chunks():
     assert inside.reshape(-1)[src].all()
 
 
+def test_fill_plan_ahead_equals_the_plan_in_place():
+    """PlanAhead's serial, GIL-free kernels on a thread: the same plan as fill_plan's parallel
+    ones; handed to dilate, the same pixels; for other islands or limit, no plan."""
+    from crackbake.bake.dilation import PlanAhead, fill_plan
+
+    rng = np.random.default_rng(11)
+    inside = rng.random((97, 300)) < 0.02
+    inside[30:50, 100:180] = True
+    for limit in (None, 3):
+        here = fill_plan(inside, limit)
+        ahead = PlanAhead(inside, limit)
+        plan = ahead.plan_for(inside.copy(), limit)
+        for name in ("targets", "sources", "far"):
+            assert np.array_equal(getattr(plan, name), getattr(here, name)), name
+        assert ahead.plan_for(inside, 7) is None
+        other = inside.copy()
+        other[0, 0] = ~other[0, 0]
+        assert ahead.plan_for(other, limit) is None
+        ahead.close()
+        img = rng.random(inside.shape).astype(np.float32)
+        a, b = img.copy(), img.copy()
+        dilate([a], inside, limit=limit, background=[-1.0])
+        dilate([b], inside, limit=limit, background=[-1.0], plan=plan)
+        assert np.array_equal(a, b) and (limit is None or (a == -1.0).any())
+
+
+@pytest.mark.parametrize("tile", [200, 64])  # one band, and four with a short last one
+def test_coverage_is_the_bakes_inside(gl_ctx, tile):
+    """The faces' coverage drawn without the cracks is exactly the bake's ``inside``, and a bake
+    given the gutter planned from it fills the same pixels."""
+    from crackbake.bake.dilation import PlanAhead
+    from crackbake.bake.raster import coverage
+
+    res = 200
+    m = plate_mesh(7, wobble=0.03, seed=2)
+    v, f = np.asarray(m.vertices, float), np.asarray(m.faces)
+    # Islands with gutters, a sliver and a face straying past the page's edge.
+    uv = v[:, :2] * 0.8 + 0.1
+    uv[0] = [-0.02, 0.05]
+    rng = np.random.default_rng(4)
+    a = rng.random((25, 3)) * [1, 1, 0]
+    segs = make_segments(a, a + (rng.random((25, 3)) - 0.5) * [0.3, 0.3, 0], width=0.01)
+    own = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=tile, ctx=gl_ctx)
+    inside = coverage(gl_ctx, uv, f, res, tile, with_normals=False)
+    assert inside.dtype == bool and 0 < inside.sum() < inside.size
+    assert np.array_equal(inside, own.inside)
+    gutter = PlanAhead(inside, None)
+    planned = bake_cracks(v, f, uv, segs, res, max_distance=0.05, tile=tile, ctx=gl_ctx,
+                          gutter=gutter)  # fmt: skip
+    for name, image in own.channels().items():
+        assert planned.channels()[name].tobytes() == image.tobytes(), name
+
+
 def test_dilation_with_no_island_fills_background():
     img = np.ones((8, 8), np.float32)
     dilate([img], np.zeros((8, 8), bool), background=[3.0])

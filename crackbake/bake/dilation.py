@@ -9,9 +9,17 @@ more than the whole GPU bake.
 
 Channels are copied as raw bits (half as uint16, float as uint32), so any 16- or 32-bit image is
 filled by the same kernel without conversion.
+
+The fill plan (which texel copies which) depends only on the islands, not on the channels: a run
+knows its islands (the faces' coverage at their UVs) before its crack network, and
+:class:`PlanAhead` works the plan out on a thread of its own while the solver runs, with serial,
+GIL-free copies of the kernels (the same integer results: rows and columns are independent).
 """
 
 from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit, prange
@@ -135,6 +143,12 @@ def _gather(flat: np.ndarray, targets: np.ndarray, sources: np.ndarray) -> None:
         flat[targets[k]] = flat[sources[k]]
 
 
+# The same kernels, serial and without the GIL: PlanAhead's thread, beside the solver's.
+_nearest_row_per_column_serial = njit(cache=True, nogil=True)(_nearest_row_per_column.py_func)
+_nearest_source_serial = njit(cache=True, nogil=True)(_nearest_source.py_func)
+_fill_plan_nogil = njit(cache=True, nogil=True)(_fill_plan.py_func)
+
+
 def nearest_island(inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Nearest island texel of every texel.
 
@@ -161,11 +175,76 @@ def _bits_view(img: np.ndarray) -> np.ndarray:
     return img.reshape(-1).view(kinds[img.dtype.itemsize])
 
 
+@dataclass(eq=False)
+class FillPlan:
+    """Which texels a gutter fill writes: ``targets`` take the value at ``sources`` (flat
+    indices, int32), ``far`` the background (beyond the limit, or no island at all)."""
+
+    targets: np.ndarray
+    sources: np.ndarray
+    far: np.ndarray
+
+
+def _limit2(limit: int | None) -> int:
+    return int(_FAR) if limit is None else min(int(limit) ** 2, int(_FAR))
+
+
+def fill_plan(inside: np.ndarray, limit: int | None = None) -> FillPlan:
+    """The gutter fill of islands ``inside`` ((H, W) bool) within ``limit`` texels
+    (None: every texel), as :func:`dilate` applies it."""
+    src, dist2 = nearest_island(inside)
+    flat = np.ascontiguousarray(inside).reshape(-1)
+    return FillPlan(*_fill_plan(flat, src, dist2, _limit2(limit)))
+
+
+class PlanAhead:
+    """:func:`fill_plan` of ``inside`` worked out on a thread of its own (serial, GIL-free
+    kernels), for a bake that will find the same islands.
+
+    Parameters
+    ----------
+    inside : (H, W) bool
+        The islands the bake is expected to find.
+    limit : int, optional
+        Fill limit in texels (None: every texel).
+    """
+
+    def __init__(self, inside: np.ndarray, limit: int | None = None) -> None:
+        self.inside = np.ascontiguousarray(inside, dtype=np.bool_)
+        self.limit = limit
+        self._plan: FillPlan | None = None
+        self._thread = threading.Thread(target=self._work, name="crackbake-gutter", daemon=True)
+        self._thread.start()
+
+    def _work(self) -> None:
+        from crackbake.bake.prefetch import background
+
+        background()
+        near = _nearest_row_per_column_serial(self.inside)
+        src, dist2 = _nearest_source_serial(near)
+        del near
+        flat = self.inside.reshape(-1)
+        self._plan = FillPlan(*_fill_plan_nogil(flat, src, dist2, _limit2(self.limit)))
+
+    def plan_for(self, inside: np.ndarray, limit: int | None) -> FillPlan | None:
+        """The plan, when ``inside`` and ``limit`` are those it was worked out for (else None:
+        the bake plans its own fill)."""
+        self._thread.join()
+        if limit != self.limit or not np.array_equal(inside, self.inside):
+            return None
+        return self._plan
+
+    def close(self) -> None:
+        """Wait for the thread (a run ends with no thread left running)."""
+        self._thread.join()
+
+
 def dilate(
     images: list[np.ndarray],
     inside: np.ndarray,
     limit: int | None = None,
     background: list[float] | None = None,
+    plan: FillPlan | None = None,
 ) -> None:
     """Fill texels outside the islands from their nearest island texel, in place.
 
@@ -180,14 +259,14 @@ def dilate(
         ``background``.  ``None`` fills every texel (unbounded dilation).
     background : list of float, optional
         Value per image for texels beyond ``limit`` or with no island at all (default 0).
+    plan : FillPlan, optional
+        :func:`fill_plan` of ``inside`` and ``limit``, worked out already.
     """
     if inside.all():
         return
-    src, dist2 = nearest_island(inside)
-    limit2 = int(_FAR) if limit is None else min(int(limit) ** 2, int(_FAR))
-    targets, sources, far = _fill_plan(np.ascontiguousarray(inside).reshape(-1), src, dist2,
-                                       limit2)
-    del src, dist2
+    if plan is None:
+        plan = fill_plan(inside, limit)
+    targets, sources, far = plan.targets, plan.sources, plan.far
     for k, img in enumerate(images):
         bits = _bits_view(img)
         _gather(bits, targets, sources)

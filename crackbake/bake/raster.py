@@ -26,9 +26,10 @@ import numpy as np
 
 from crackbake.bake.cells import image_bins
 from crackbake.bake.context import GLScope, shader_source
-from crackbake.bake.dilation import dilate
+from crackbake.bake.dilation import PlanAhead, dilate
 from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
+from crackbake.bake.prefetch import ArraySpec, Spec, TargetPrefetch
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import DEFAULT_MAX_DISTANCE_FRACTION, MIN_PX_DEFAULT, TILE_DEFAULT
@@ -164,6 +165,8 @@ def bake_cracks(
     look=None,
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
+    targets: TargetPrefetch | None = None,
+    gutter: PlanAhead | None = None,
 ) -> CrackMaps:
     """Bake crack segments into UV-space maps of the given triangles.
 
@@ -220,6 +223,12 @@ def bake_cracks(
         Called as ``progress(rows_done, res)`` after each GL call of the crack pass (at most
         :data:`SLICE_TEXELS` texels each), in the main thread: a long bake reports as it goes,
         and a SIGINT/SIGTERM handler runs between two calls.
+    targets : TargetPrefetch, optional
+        Render targets allocated ahead (:func:`target_specs`, :mod:`crackbake.bake.prefetch`);
+        those it lacks are created here.  The pixels are the same either way.
+    gutter : PlanAhead, optional
+        The gutter fill planned ahead from :func:`coverage`; used when the bake finds those
+        islands and ``dilate_px`` (else planned here).  The pixels are the same either way.
 
     Returns
     -------
@@ -254,10 +263,10 @@ def bake_cracks(
     images = _render(
         ctx, vertices, faces, uv, segments, res, tile, bins,
         float(max_distance), float(profile_shape), timings, frames, projection, float(min_px),
-        terms, progress,
+        terms, progress, targets,
     )  # fmt: skip
 
-    maps = _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings)
+    maps = _dilated_maps(images, res, dilate_px, max_distance, profile_shape, timings, gutter)
     maps.min_px = float(min_px)
     maps.look = look
     return maps
@@ -381,7 +390,103 @@ def _table_texture(gl: GLScope, items: np.ndarray, width: int, dtype: str, compo
     return tex
 
 
-def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
+def band_rows(res: int, tile: int) -> int:
+    """Rows of each full-width band of a ``res``-texel bake: at most ``tile**2`` texels."""
+    return max(1, min(res, (tile * tile) // res))
+
+
+def target_specs(res: int, tile: int, with_normals: bool) -> list[Spec]:
+    """The textures a UV-placed bake of ``res`` texels draws into (``tile`` as given to
+    :func:`bake_cracks`, ``with_normals``: tangents given), for a :class:`TargetPrefetch`:
+    the surface pass's three RGBA32F targets and one target per channel, a band each."""
+    size = (res, band_rows(res, tile))
+    return [(size, 4, "f4")] * 3 + [(size, 1, d) for d in _dtypes(with_normals)]
+
+
+def image_specs(res: int, with_normals: bool) -> list[ArraySpec]:
+    """The numpy images a UV-placed bake of ``res`` texels reads its targets back into, for a
+    :class:`TargetPrefetch` (``arrays``): one per channel, and the normal's three planes."""
+    images = [((res, res), np.dtype(_NUMPY[d]).str) for d in _dtypes(with_normals)]
+    if with_normals:
+        images += [((3, res, res), "<f4"), ((res, res), "<f2")]  # normal, occlusion
+    return images
+
+
+def _image(prefetch: TargetPrefetch | None, shape: tuple[int, ...], dtype,
+           zeros: bool = False) -> np.ndarray:
+    """A prefetched (zeroed, paged-in) image when there is one left, else a new one (empty, or
+    zeroed when ``zeros``)."""
+    image = None if prefetch is None else prefetch.take_array(shape, dtype)
+    if image is None:
+        image = np.zeros(shape, dtype) if zeros else np.empty(shape, dtype)
+    return image
+
+
+def _dtypes(with_normals: bool) -> tuple[str, ...]:
+    # With the normal map the inside target also says which segment's depth wins (R32F).
+    return (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
+
+
+def coverage(ctx, uv: np.ndarray, faces: np.ndarray, res: int, tile: int = TILE_DEFAULT,
+             with_normals: bool = True) -> np.ndarray:
+    """The texels a UV-placed :func:`bake_cracks` of these triangles finds on a face (its
+    ``inside``), drawn without the cracks: the same placement shader (the surface pass's
+    vertex stage, band by band as ``tile`` makes them, so the same rasterisation), one bit out.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context or None
+        The run's context (a temporary one when None).
+    uv : (V, 2) float
+        Texture coordinates, v up.
+    faces : (F, 3) int
+        Triangles indexing ``uv``.
+    res, tile : int
+        As given to :func:`bake_cracks`.
+    with_normals : bool
+        Whether that bake is given tangents (its vertex stage's variant).
+
+    Returns
+    -------
+    (res, res) bool
+        Row 0 = top of the image.
+    """
+    import moderngl
+
+    band = band_rows(res, tile)
+    inside = np.empty((res, res), np.uint8)
+    with GLScope(ctx) as gl:
+        prog = gl.keep(gl.ctx.program(
+            vertex_shader=shader_variant("crack_bake.vert", with_normals),
+            fragment_shader=shader_source("crack_inside.frag")))  # fmt: skip
+        vbo = gl.keep(gl.ctx.buffer(np.asarray(uv, np.float32)))
+        ibo = gl.keep(gl.ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
+        vao = gl.keep(gl.ctx.vertex_array(prog, [(vbo, "2f", "in_uv")], index_buffer=ibo,
+                                          index_element_size=4))  # fmt: skip
+        fbo = gl.keep(gl.ctx.framebuffer(color_attachments=[
+            gl.keep(gl.ctx.texture((res, band), 1, dtype="f1"))]))  # fmt: skip
+        prog["u_res"].value = float(res)
+        gl.ctx.enable_only(moderngl.NOTHING)
+        fbo.use()
+        for y0 in range(0, res, band):
+            h = min(band, res - y0)
+            fbo.clear(0.0, 0.0, 0.0, 0.0)
+            prog["u_tile"].value = (0.0, float(y0), float(res), float(band))
+            vao.render(moderngl.TRIANGLES)
+            fbo.read_into(inside[y0 : y0 + h], viewport=(0, 0, res, h), components=1,
+                          dtype="f1")  # fmt: skip
+    return inside > 0
+
+
+def _texture(gl: GLScope, size: tuple[int, int], components: int, dtype: str,
+             prefetch: TargetPrefetch | None):
+    """A prefetched texture of that kind when there is one left, else a new one."""
+    tex = None if prefetch is None else prefetch.take(gl, size, components, dtype)
+    return tex if tex is not None else gl.keep(gl.ctx.texture(size, components, dtype=dtype))
+
+
+def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...],
+             prefetch: TargetPrefetch | None = None):
     """Framebuffers of one band: the surface pass's three float targets (bound as textures for
     the crack pass) and the crack pass's one target per channel, sharing one depth buffer (the
     surface pass's faces: the crack pass shades only where it holds one); one framebuffer per
@@ -389,13 +494,13 @@ def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...]):
     import moderngl
 
     ctx = gl.ctx
-    gbuffer = [gl.keep(ctx.texture((res, band), 4, dtype="f4")) for _ in range(3)]
+    gbuffer = [_texture(gl, (res, band), 4, "f4", prefetch) for _ in range(3)]
     for unit, tex in enumerate(gbuffer):
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.use(unit)
     zbuffer = gl.keep(ctx.depth_renderbuffer((res, band)))
     gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer, depth_attachment=zbuffer))
-    textures = [gl.keep(ctx.texture((res, band), 1, dtype=d)) for d in dtypes]
+    textures = [_texture(gl, (res, band), 1, d, prefetch) for d in dtypes]
     fbo = gl.keep(ctx.framebuffer(color_attachments=textures, depth_attachment=zbuffer))
     fbo.depth_mask = False
     singles = [gl.keep(ctx.framebuffer(color_attachments=[t])) for t in textures[:-1]]
@@ -422,6 +527,7 @@ def _render(
     min_px: float = 0.0,
     terms: dict | None = None,
     progress: Callable[[int, int], None] | None = None,
+    prefetch: TargetPrefetch | None = None,
 ) -> dict[str, np.ndarray]:
     """Draw the faces at their placement band by band; the planar channel images (row 0 = top)."""
     import moderngl
@@ -438,19 +544,20 @@ def _render(
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
         # (73 bytes a texel: 48 for the surface pass, 4 of depth, 21 for the maps; 76 with the
         # normal map, whose inside target holds the winning segment as R32F).
-        band = max(1, min(res, (tile * tile) // res))
-        # With the normal map the inside target also says which segment's depth wins (R32F).
-        dtypes = (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
-        images = {n: np.empty((res, res), _NUMPY[d]) for n, d in zip(_NAMES, dtypes, strict=True)}
+        band = band_rows(res, tile)
+        dtypes = _dtypes(with_normals)
+        images = {n: _image(prefetch, (res, res), _NUMPY[d])
+                  for n, d in zip(_NAMES, dtypes, strict=True)}  # fmt: skip
         if with_normals:
             normal_pass = NormalPass(gl, profile_shape, min_px, terms)
             # Flat and open wherever no crack's depth reaches.  Planar storage: each component
             # dilates as its own image and EXR writers take the planes without a copy.
-            images["normal"] = np.zeros((3, res, res), np.float32)
+            images["normal"] = _image(prefetch, (3, res, res), np.float32, zeros=True)
             images["normal"][2] = 1.0
-            images["occlusion"] = np.ones((res, res), np.float16)
+            images["occlusion"] = _image(prefetch, (res, res), np.float16)
+            images["occlusion"][:] = 1.0
         projected = projection is not None
-        gfbo, fbo, singles = _targets(gl, res, band, dtypes)
+        gfbo, fbo, singles = _targets(gl, res, band, dtypes, prefetch)
         # No blending or culling.  The depth test: a camera placement keeps the surface nearest
         # to it, a UV placement the last face drawn (as without a test).  The crack pass's
         # triangle shades only the texels nearer than it (shaders/crack_screen.vert): llvmpipe
@@ -565,6 +672,7 @@ def _dilated_maps(
     max_distance: float,
     profile_shape: float,
     timings: dict[str, float],
+    gutter: PlanAhead | None = None,
 ) -> CrackMaps:
     """Fill the gutters of the rendered channels from their nearest island; the maps."""
     mask, width, time_ch = images["mask"], images["width"], images["time"]
@@ -578,7 +686,8 @@ def _dilated_maps(
     if with_normals:
         planes += [*images["normal"], images["occlusion"]]
         background += [0.0, 0.0, 1.0, 1.0]  # flat, open
-    dilate(planes, inside, limit=dilate_px, background=background)
+    plan = None if gutter is None else gutter.plan_for(inside, dilate_px)
+    dilate(planes, inside, limit=dilate_px, background=background, plan=plan)
     normal = occlusion = None
     if with_normals:
         # (res, res, 3) view of the planes: normal[..., k] is C-contiguous.
