@@ -136,7 +136,13 @@ class TargetPrefetch:
         self._error: str | None = None
         self._thread: threading.Thread | None = None
         self._lib = _libraries()
-        shared = None if self._lib is None else _shared_context(self._lib[0])
+        shared = None
+        if self._lib is not None:
+            # The share group must be ctx's: make it current (a no-op in a run, where it is).
+            # Another context may be current here: a released one stays current in EGL until
+            # another is made current.  No __exit__: moderngl's would leave none current.
+            ctx.__enter__()
+            shared = _shared_context(self._lib[0])
         if shared is None:
             self._error = "no shared EGL context"
         specs = [s for s in specs if (s[1], s[2]) in _FORMATS]
