@@ -27,6 +27,24 @@ def face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return face_cross_kernel(v, f)
 
 
+def face_cross_numpy(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """:func:`face_cross` with numpy, bit for bit: for the mesh load, which runs before any
+    numba kernel (numba's import and first call cost more than this at 1.5M faces)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise IndexError(f"faces index vertices outside 0..{len(v) - 1}")
+    a = v[f[:, 0]]
+    u = v[f[:, 1]] - a
+    w = v[f[:, 2]] - a
+    out = np.empty((len(f), 3))
+    # the kernel's operations in its order (no fused multiply-add either way)
+    np.subtract(u[:, 1] * w[:, 2], u[:, 2] * w[:, 1], out=out[:, 0])
+    np.subtract(u[:, 2] * w[:, 0], u[:, 0] * w[:, 2], out=out[:, 1])
+    np.subtract(u[:, 0] * w[:, 1], u[:, 1] * w[:, 0], out=out[:, 2])
+    return out
+
+
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Triangle areas, (F,), mesh units squared."""
     return 0.5 * np.linalg.norm(face_cross(vertices, faces), axis=1)
@@ -45,13 +63,17 @@ def unit_rows(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v / np.where(length > 0, length, 1.0)[:, None], length
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def vertex_normals(
+    vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray | None = None
+) -> np.ndarray:
     """Area-weighted unit vertex normals, (V, 3); zero at vertices no face uses.
 
     Vertices are not welded here: call :func:`weld_by_position` first where UV-seam copies of
-    a position must share one normal.
+    a position must share one normal.  ``cross``: the faces' :func:`face_cross` when the
+    caller has it.
     """
-    cross = face_cross(vertices, faces)  # 2 A n
+    if cross is None:
+        cross = face_cross(vertices, faces)  # 2 A n
     n = len(vertices)
     idx = faces.reshape(-1)
     acc = np.empty((n, 3))
@@ -216,9 +238,13 @@ def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return flag
 
 
-def welded_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def welded_vertex_normals(
+    vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray | None = None
+) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3) accumulated over positions: vertices that share
     a position (UV-seam copies) get the same normal, so shading is smooth across UV seams.
-    The asset mesh's normals when its file has none."""
+    The asset mesh's normals when its file has none.  ``cross``: the faces'
+    :func:`face_cross` when the caller has it (welding moves no position, so it holds for
+    the welded faces too)."""
     wv, wf, inverse = weld_by_position(vertices, faces)
-    return vertex_normals(wv, wf)[inverse]
+    return vertex_normals(wv, wf, cross)[inverse]
