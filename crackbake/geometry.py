@@ -74,7 +74,10 @@ def vertex_normals(
     """
     if cross is None:
         cross = face_cross(vertices, faces)  # 2 A n
-    n = len(vertices)
+    return _summed_normals(len(vertices), faces, cross)
+
+
+def _summed_normals(n: int, faces: np.ndarray, cross: np.ndarray) -> np.ndarray:
     idx = faces.reshape(-1)
     acc = np.empty((n, 3))
     for a in range(3):
@@ -239,12 +242,26 @@ def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
 
 
 def welded_vertex_normals(
-    vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray | None = None
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    cross: np.ndarray | None = None,
+    source: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3) accumulated over positions: vertices that share
     a position (UV-seam copies) get the same normal, so shading is smooth across UV seams.
-    The asset mesh's normals when its file has none.  ``cross``: the faces'
-    :func:`face_cross` when the caller has it (welding moves no position, so it holds for
-    the welded faces too)."""
-    wv, wf, inverse = weld_by_position(vertices, faces)
-    return vertex_normals(wv, wf, cross)[inverse]
+    The asset mesh's normals when its file has none.
+
+    ``cross``: the faces' :func:`face_cross` when the caller has it (welding moves no
+    position, so it holds for the welded faces too).  ``source``: ``(positions, index)`` with
+    ``vertices == positions[index]`` (an OBJ's ``v`` lines and each vertex's line): welding
+    the fewer ``positions`` groups the vertices alike, so the sums, taken in face order,
+    are the same bit for bit."""
+    if source is None:
+        wv, wf, inverse = weld_by_position(vertices, faces)
+        return vertex_normals(wv, wf, cross)[inverse]
+    positions, index = source
+    _, _, by_position = weld_by_position(positions, np.zeros((0, 3), np.int64))
+    inverse = by_position[index]
+    if cross is None:
+        cross = face_cross(vertices, faces)
+    return _summed_normals(int(by_position.max()) + 1, inverse[faces], cross)[inverse]

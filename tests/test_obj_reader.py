@@ -254,7 +254,8 @@ def test_vertex_order_matches_trimesh_unmerge(columns, high):
     size = int(np.abs(corners).max()) + 1
     v = np.arange(size, dtype=np.float64)[:, None].repeat(3, 1)
     vt = np.arange(size, dtype=np.float64)[:, None].repeat(2, 1)
-    vertices, uv, normals, index = obj_reader._unmerge(v, vt, v if columns == 3 else None, *cols)
+    source, uv, normals, index = obj_reader._unmerge(len(v), vt, v if columns == 3 else None, *cols)
+    vertices = v[source]
     assert np.array_equal(index.reshape(-1, 3), new_faces)
     assert np.array_equal(vertices, v[masks[0]])
     assert np.array_equal(uv, vt[masks[1]])

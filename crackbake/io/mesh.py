@@ -105,6 +105,8 @@ class _Geometry:
     uv: np.ndarray | None
     normals: np.ndarray | None
     attributes: dict[str, np.ndarray]
+    #: (positions, index): the OBJ reader's ``v`` lines and each vertex's line, for welding.
+    source: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def of_trimesh(cls, geom) -> _Geometry:
@@ -114,7 +116,8 @@ class _Geometry:
 
     @classmethod
     def of_obj(cls, part: obj_reader.ObjPart) -> _Geometry:
-        return cls(part.vertices, part.faces, part.uv, _unit_normals(part.normals), {})
+        return cls(part.vertices, part.faces, part.uv, _unit_normals(part.normals), {},
+                   (part.positions, part.source))  # fmt: skip
 
 
 def _scene_items(scene) -> list[tuple[str, str, _Geometry]]:
@@ -399,7 +402,10 @@ def load_mesh(
     if all(n is not None for n in normal_parts):
         normals = np.concatenate(normal_parts)
     else:
-        normals = welded_vertex_normals(vertices, faces, cross)
+        source = None
+        if all(g.source is not None for g in geoms):  # one file's v lines: weld those
+            source = (geoms[0].source[0], np.concatenate([g.source[1] for g in geoms]))
+        normals = welded_vertex_normals(vertices, faces, cross, source)
 
     area2 = np.linalg.norm(cross, axis=1)
     if not (area2 > 0).any():

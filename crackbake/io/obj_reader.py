@@ -63,6 +63,11 @@ class ObjPart:
     uv : (V, 2) float64 or None
     normals : (V, 3) float64 or None
         The file's ``vn`` normals per vertex (only for a file of one geometry).
+    source : (V,) int64
+        Each vertex's ``v`` line, 0-based: ``vertices == positions[source]``.
+    positions : (P, 3) float64
+        Every ``v`` of the file (shared by the parts): welding them is welding the parts'
+        vertices, for half the work where UV seams split many.
     """
 
     name: str
@@ -70,6 +75,8 @@ class ObjPart:
     faces: np.ndarray
     uv: np.ndarray | None
     normals: np.ndarray | None
+    source: np.ndarray
+    positions: np.ndarray
 
 
 class _Unsupported(Exception):
@@ -163,16 +170,17 @@ def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool) -> list[O
             raise _Unsupported
         corner = _ranges(first_corner[which], sizes)
         tri = _triangles(sizes, same)  # (T, 3) into ``corner``
-        vertices, uv, normals, index = _unmerge(
-            v, vt, vn, cv[corner], None if ct is None else ct[corner],
+        source, uv, normals, index = _unmerge(
+            len(v), vt, vn, cv[corner], None if ct is None else ct[corner],
             None if cn is None else cn[corner],
         )  # fmt: skip
-        parts.append([material, vertices, index[tri], uv, normals])
+        parts.append([material, source, index[tri], uv, normals])
     if len(parts) == 1:
-        material, vertices, faces, uv, normals = parts[0]
-        return [ObjPart(path.stem, vertices, faces, uv, normals)]
+        _, source, faces, uv, normals = parts[0]
+        return [ObjPart(path.stem, v[source], faces, uv, normals, source, v)]
     names = _names(data, a, starts, ends, kinds, [p[0] for p in parts], path, allow_outside)
-    return [ObjPart(n, p[1], p[2], p[3], None) for n, p in zip(names, parts, strict=True)]
+    return [ObjPart(n, v[p[1]], p[2], p[3], None, p[1], v)
+            for n, p in zip(names, parts, strict=True)]  # fmt: skip
 
 
 def _kinds(data: bytes, a: np.ndarray, starts, ends, tokens) -> np.ndarray:
@@ -279,9 +287,7 @@ def _indices(raw: np.ndarray, count: int, zero_ok: bool = False) -> np.ndarray:
         raise _Unsupported
     if not zero_ok and (raw == 0).any():
         raise _Unsupported  # trimesh reads index 0 as index 1
-    out = raw.copy()
-    out[out > 0] -= 1
-    return out
+    return raw - (raw > 0)
 
 
 def _material_groups(
@@ -331,25 +337,26 @@ def _triangles(sizes: np.ndarray, same: bool) -> np.ndarray:
     return tri
 
 
-def _unmerge(v, vt, vn, cv, ct, cn):
-    """Vertices (and UVs, normals) of the distinct index tuples the corners use, in trimesh's
-    order, and each corner's new vertex index."""
+def _unmerge(n_v: int, vt, vn, cv, ct, cn):
+    """The ``v`` line (0-based) of each distinct index tuple the corners use, in trimesh's
+    order, their UVs and normals, and each corner's new vertex index."""
     columns = [c for c in (cv, ct, cn) if c is not None]
     if len(columns) == 1:  # positions only: the referenced vertices, in file order
-        used = np.zeros(len(v), dtype=bool)
+        used = np.zeros(n_v, dtype=bool)
         used[cv] = True
-        new = np.zeros(len(v), dtype=np.int64)
+        new = np.zeros(n_v, dtype=np.int64)
         new[used] = np.arange(int(used.sum()))
-        return v[used].copy(), None, None, new[cv]
+        return np.flatnonzero(used), None, None, new[cv]
     rows, inverse = _distinct_tuples(columns)
     tuples = [c[rows] for c in columns]
     order = tuples[0].argsort()  # numpy's default sort, as trimesh's: ties as it has them
     rank = np.empty(len(order), dtype=np.int64)
     rank[order] = np.arange(len(order))
-    vertices = v[tuples[0][order]]
+    source = tuples[0][order]
+    source[source < 0] += n_v
     uv = vt[tuples[1][order]] if ct is not None else None
     normals = vn[tuples[-1][order]] if cn is not None and vn is not None else None
-    return vertices, uv, normals, rank[inverse]
+    return source, uv, normals, rank[inverse]
 
 
 def _distinct_tuples(columns: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
