@@ -328,7 +328,8 @@ def load_mesh(
         loaded, obj_text, short_faces = _strip_mesh(path), None, 0
     else:
         loaded, obj_text, short_faces = _read_file(path, allow_outside_textures)
-    if isinstance(loaded, list):  # obj_reader's parts: one mesh, or a scene's geometries
+    fast = isinstance(loaded, list)
+    if fast:  # obj_reader's parts: one mesh, or a scene's geometries
         parts = [_Geometry.of_obj(p) for p in loaded]
         single = len(parts) == 1
         if not single:
@@ -387,7 +388,8 @@ def load_mesh(
             stacklevel=2,
         )
         uv = None
-    if uv is None and obj_text is not None and keep_uv is False:
+    # the reader reads UVs whenever every corner names a vt it has (else trimesh reads it)
+    if uv is None and obj_text is not None and keep_uv is False and not fast:
         bad_vt = obj_checks.explain_bad_uv_index(obj_text)
         if bad_vt is not None:
             warnings.warn(

@@ -200,6 +200,8 @@ def explain_bad_uv_index(data: bytes) -> str | None:
     trimesh then drops every UV of the mesh without a word; called only when a file with
     ``vt`` lines loaded without UVs, so the Python loop over face lines is not on the fast path.
     """
+    if b"/" not in data:  # no corner names a texture coordinate
+        return None
     n_vt = len(_VT_LINE.findall(data))
     bad_lines, first = 0, None
     for match in _FACE_LINE.finditer(data):
