@@ -46,6 +46,8 @@ __all__ = ["ObjPart", "read_obj"]
 _LF, _SPACE, _TAB, _HASH, _SLASH = 10, 32, 9, 35, 47
 # Line kinds.
 _BLANK, _V, _VT, _VN, _F, _O, _G, _S, _USEMTL, _MTLLIB, _COMMENT, _OTHER = range(12)
+_FACE_BLANKS = bytes.maketrans(b"f/", b"  ")
+_V_BLANK = bytes.maketrans(b"v", b" ")
 # More separate runs of one line kind than this: gather its bytes with a mask, not slices.
 _RUNS_SLICED = 256
 
@@ -148,7 +150,7 @@ def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool) -> list[O
     # every corner as the first: its slashes, then (after the parse) its integers
     if block.count(b"/") != slashes * corners.sum():
         raise _Unsupported
-    block = block.replace(b"\nf ", b"\n  ").replace(b"/", b" ")
+    block = block.translate(_FACE_BLANKS)  # the keyword and the slashes to spaces, one pass
     ints = _parse(block, np.int64)
     if len(ints) != corners.sum() * per_ref:
         raise _Unsupported
@@ -257,7 +259,9 @@ def _floats(data, a, starts, ends, tokens, which, word: bytes, widths) -> np.nda
     width = int(tokens[which[0]]) - 1
     if width not in widths:
         raise _Unsupported
-    block = _gather(data, a, starts, ends, which).replace(b"\n" + word + b" ", b"\n ")
+    block = _gather(data, a, starts, ends, which)
+    # blank the keyword: "v" by a table (no number holds a "v"), the others where they are
+    block = block.translate(_V_BLANK) if word == b"v" else block.replace(b"\n" + word, b"\n ")
     if b"e" in block and (b"+e" in block or b"-e" in block):
         raise _Unsupported  # trimesh edits these spellings before its parse
     values = _parse(block, np.float64)
