@@ -4,6 +4,9 @@ The asset mesh keeps its UV seams (vertices are split where UVs differ); that is
 textures are baked for and the mesh written to the GLB.  Anything topological (adjacency,
 geodesic distances, the simulation mesh) works on :func:`weld_by_position`'s copy, so UV seams
 never cut cracks or stress.
+
+OBJ files are read by :mod:`crackbake.io.obj_reader` (numpy, the arrays trimesh would give);
+trimesh reads the other formats and the OBJ files that reader leaves to it.
 """
 
 from __future__ import annotations

@@ -4,7 +4,9 @@ trimesh reads a UTF-8 byte-order mark as part of the first vertex line (dropping
 failing later with "index 2929 is out of bounds"), drops face lines with fewer than three corners
 without a word, reads ``f 0 1 2`` as the last vertex (OBJ counts from 1), and parses a vertex line
 cut short by reading the next line's numbers.  These checks run on the raw bytes, vectorised
-with numpy (regular expressions took 6 s on a 1M-face file), and say what is wrong.
+with numpy (regular expressions took 6 s on a 1M-face file), and say what is wrong.  Their
+scan also gives each line's end and token count, from which :mod:`crackbake.io.obj_reader`
+reads the file (it reproduces trimesh's reader, so the checks hold for both).
 """
 
 from __future__ import annotations
@@ -107,13 +109,6 @@ def scan(data: bytes) -> ObjScan:
 
 def _line_no(data: bytes, pos: int) -> int:
     return data.count(b"\n", 0, pos) + 1
-
-
-def prepare_obj(data: bytes, path: Path) -> tuple[bytes, int]:
-    """Check the OBJ text; return the bytes trimesh should read and how many face lines it
-    will drop (fewer than three corners).  See :func:`prepare_obj_scan`."""
-    data, found = prepare_obj_scan(data, path)
-    return data, found.short_faces
 
 
 def prepare_obj_scan(data: bytes, path: Path) -> tuple[bytes, ObjScan]:
