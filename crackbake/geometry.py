@@ -113,6 +113,35 @@ def weld_by_position(
     return ordered[first], inverse[faces], inverse
 
 
+def position_groups(positions: np.ndarray) -> np.ndarray:
+    """A group number per row of ``positions`` (P, 3) float64, equal for equal positions (as
+    :func:`weld_by_position` merges them), numbered in no particular order.
+
+    Sorts one 64-bit hash of each row instead of lexsorting three float columns (8x faster
+    at 375k rows); rows that share a hash but differ (a collision) fall back to the lexsort.
+    """
+    if len(positions) < 2:
+        return np.zeros(len(positions), dtype=np.int64)
+    bits = np.ascontiguousarray(positions + 0.0, dtype=np.float64).view(np.uint64)  # -0 -> +0
+    key = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
+    key ^= (bits[:, 1] + np.uint64(0x632BE59BD9B4E019)) * np.uint64(0xBF58476D1CE4E5B9)
+    key ^= (bits[:, 2] + np.uint64(0x8CB92BA72F3D8DD7)) * np.uint64(0x94D049BB133111EB)
+    key ^= key >> np.uint64(29)
+    n_bits = (len(key) - 1).bit_length()
+    # the row number below the hash's top bits: one plain sort gives the order
+    packed = (key >> np.uint64(n_bits)) << np.uint64(n_bits) | np.arange(len(key), dtype=np.uint64)
+    packed.sort()
+    order = (packed & np.uint64((1 << n_bits) - 1)).astype(np.int64)
+    top = packed >> np.uint64(n_bits)
+    same = top[1:] == top[:-1]
+    rows = bits[order]
+    if (same & (rows[1:] != rows[:-1]).any(axis=1)).any():  # a collision: exact lexsort
+        return weld_by_position(positions, np.zeros((0, 3), np.int64))[2]
+    group = np.empty(len(key), dtype=np.int64)
+    group[order] = np.cumsum(np.concatenate(([True], ~same))) - 1
+    return group
+
+
 def barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Barycentric coordinates of points ``p`` (K, D) in triangles ``tri`` (K, 3, D), D = 2 or 3.
 
@@ -260,7 +289,7 @@ def welded_vertex_normals(
         wv, wf, inverse = weld_by_position(vertices, faces)
         return vertex_normals(wv, wf, cross)[inverse]
     positions, index = source
-    _, _, by_position = weld_by_position(positions, np.zeros((0, 3), np.int64))
+    by_position = position_groups(positions)
     inverse = by_position[index]
     if cross is None:
         cross = face_cross(vertices, faces)
