@@ -170,13 +170,17 @@ def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool) -> list[O
         which, sizes = which[keep], sizes[keep]
         if not len(which) or (same and not keep.all()):
             raise _Unsupported
-        corner = _ranges(first_corner[which], sizes)
-        tri = _triangles(sizes, same)  # (T, 3) into ``corner``
+        if len(which) == len(f_lines):  # every face line: the corners as they are
+            corner = slice(None)
+        else:
+            corner = _ranges(first_corner[which], sizes)
+        tri = _triangles(sizes, same)  # (T, 3) into ``corner``, None: in order
         source, uv, normals, index = _unmerge(
             len(v), vt, vn, cv[corner], None if ct is None else ct[corner],
             None if cn is None else cn[corner],
         )  # fmt: skip
-        parts.append([material, source, index[tri], uv, normals])
+        parts.append([material, source, index.reshape(-1, 3) if tri is None else index[tri],
+                      uv, normals])  # fmt: skip
     if len(parts) == 1:
         _, source, faces, uv, normals = parts[0]
         return [ObjPart(path.stem, v[source], faces, uv, normals, source, v)]
@@ -319,13 +323,13 @@ def _ranges(first: np.ndarray, sizes: np.ndarray) -> np.ndarray:
     return np.arange(int(sizes.sum()), dtype=np.int64) + np.repeat(first - head, sizes)
 
 
-def _triangles(sizes: np.ndarray, same: bool) -> np.ndarray:
+def _triangles(sizes: np.ndarray, same: bool) -> np.ndarray | None:
     """Triangles (T, 3) over the concatenated corners of polygons of ``sizes`` (all >= 3), in
     trimesh's order; ``same``: every face line of the group had one size (trimesh's array
     path; else its line-by-line fans)."""
     head = np.cumsum(sizes) - sizes
     if (sizes == 3).all():
-        return np.arange(int(sizes.sum()), dtype=np.int64).reshape(-1, 3)
+        return None  # the corners in threes
     if same and sizes[0] == 4:  # trimesh triangulates a quad array: all first halves first
         q = np.arange(int(sizes.sum()), dtype=np.int64).reshape(-1, 4)
         return np.vstack((q[:, [0, 1, 2]], q[:, [2, 3, 0]]))
