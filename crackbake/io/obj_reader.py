@@ -4,7 +4,7 @@ Importing trimesh (with scipy) is most of a small mesh's load, and its OBJ parse
 text in Python (5.9 s for a 1.5M-face OBJ).  This reader classifies lines with numpy from the
 token counts :func:`crackbake.io.obj_checks.scan` already computes, parses every ``v``/``vt``/
 ``vn`` block and every face index with one ``numpy.fromstring`` call each, and reproduces
-trimesh's conventions exactly (``load(..., process=False)``, trimesh 4), so a mesh loads
+trimesh's conventions exactly (``load(..., process=False)``, trimesh 5.2), so a mesh loads
 into the same arrays whichever reader ran:
 
 - faces are grouped by ``usemtl`` material into one geometry per material, in reverse order of
