@@ -18,7 +18,12 @@ Cases (floors from issue 25):
 - ``rebake``: the same mesh re-baked from that run's ``cracks.json`` (``--cracks``, ≤ 2.5 s);
 - ``inspect``: ``crackbake inspect`` on that run's 4096² crack EXR (≤ 0.5 s);
 - ``load``: the ``load`` stage of spot with a 1024² base colour texture bound by an MTL
-  (generated here; ≤ 0.1 s), from a 512² run.
+  (generated here; ≤ 0.1 s), from a 512² run;
+- ``first``: the start-up to the first stage, exactly: a 512² glass bake with ``--progress
+  jsonl``, timed from the launch to the arrival of its ``load`` stage event (≤ 0.25 s; the
+  ``bake`` case's ``start`` also holds the exit after ``total``);
+- ``bigload``: ``load_mesh`` of spot subdivided to 1.5M faces (``bench_scale``'s OBJ, made
+  once) in a fresh interpreter, as the ``load`` stage runs it (≤ 3 s).
 
 Usage::
 
@@ -46,7 +51,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 IMPACT = "0.334,0.044,0.287"
-CASES = ("help", "version", "bake", "rebake", "inspect", "load")
+CASES = ("help", "version", "bake", "rebake", "inspect", "load", "first", "bigload")
 #: Floors of issue 25, seconds: (case, figure) -> floor.
 FLOORS = {
     ("help", "wall"): 0.15,
@@ -58,7 +63,17 @@ FLOORS = {
     ("rebake", "wall"): 2.5,
     ("inspect", "wall"): 0.5,
     ("load", "load"): 0.1,
+    ("first", "first"): 0.25,
+    ("bigload", "load"): 3.0,
 }
+#: A fresh interpreter that times the mesh load as the pipeline's ``load`` stage calls it.
+_LOAD_SNIPPET = """
+import sys, time
+from crackbake.io.mesh import load_mesh
+t = time.perf_counter()
+load_mesh(sys.argv[1])
+print(time.perf_counter() - t)
+"""
 
 
 def _png(path: Path, size: int = 1024) -> None:
@@ -94,15 +109,29 @@ def textured_spot(folder: Path) -> Path:
 
 
 def run(repo: Path, args: list[str], out: Path | None = None) -> dict:
-    """One fresh process of ``python -m crackbake ARGS`` on ``repo``'s code: wall, CPU, stages."""
+    """One fresh process of ``python -m crackbake ARGS`` on ``repo``'s code: wall, CPU, stages.
+
+    With ``--progress jsonl`` in ``args``, ``first`` is the time from the launch to the first
+    stage's event; ``args`` starting with ``-c`` run that Python snippet instead, whose last
+    stdout line (a number of seconds) is ``load``."""
     # The tree first; what PYTHONPATH already holds after it (an extra site, say).
     extra = os.environ.get("PYTHONPATH")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo), *([extra] if extra else [])]))
     if out is not None and out.exists():
         shutil.rmtree(out)
+    command = [sys.executable, *args] if args[0] == "-c" else [sys.executable, "-m", "crackbake",
+                                                                *args]  # fmt: skip
+    watch = "--progress" in args or args[0] == "-c"
     t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "crackbake", *args], env=env, cwd=repo,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(command, env=env, cwd=repo, stderr=subprocess.PIPE,
+                            stdout=subprocess.PIPE if watch else subprocess.DEVNULL)  # fmt: skip
+    first, last = None, ""
+    if watch:
+        for line in proc.stdout:  # as the child writes them: the time they arrive
+            if first is None and b'"stage": "load"' in line:
+                first = time.perf_counter() - t
+            last = line.decode(errors="replace").strip() or last
+        proc.stdout.close()
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t
     proc.returncode = os.waitstatus_to_exitcode(status)
@@ -111,6 +140,10 @@ def run(repo: Path, args: list[str], out: Path | None = None) -> dict:
     if proc.returncode != 0:
         raise SystemExit(f"{repo}: crackbake {' '.join(args)} failed ({proc.returncode}): {err}")
     row = {"wall": wall, "cpu": usage.ru_utime + usage.ru_stime}
+    if first is not None:
+        row["first"] = first
+    if args[0] == "-c":
+        row["load"] = float(last)
     if out is not None:
         timings = json.loads((out / "manifest.json").read_text())["timings_s"]
         row.update({k: float(v) for k, v in timings.items()})
@@ -138,6 +171,15 @@ def case_args(case: str, scratch: Path, tag: str) -> tuple[list[str], Path | Non
         out = scratch / f"{tag}_load"
         return [str(scratch / "textured" / "spot.obj"), "--preset", "glass", "--impact", IMPACT,
                 "--res", "512", "-q", "-o", str(out)], out  # fmt: skip
+    if case == "first":
+        out = scratch / f"{tag}_first"
+        return [str(spot), "--preset", "glass", "--impact", IMPACT, "--res", "512",
+                "--progress", "jsonl", "-o", str(out)], out  # fmt: skip
+    if case == "bigload":
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        from bench_scale import subdivided_spot
+
+        return ["-c", _LOAD_SNIPPET, str(subdivided_spot(4))], None
     raise ValueError(case)
 
 
@@ -147,6 +189,8 @@ STAGES = {
              "bake", "stress_bake", "write"),
     "rebake": ("start", "load", "cracks", "unwrap", "tangents", "coverage", "bake", "write"),
     "load": ("load",),
+    "first": ("first", "load"),
+    "bigload": ("load",),
 }  # fmt: skip
 
 

@@ -27,6 +27,24 @@ def face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return face_cross_kernel(v, f)
 
 
+def face_cross_numpy(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """:func:`face_cross` with numpy, bit for bit: for the mesh load, which runs before any
+    numba kernel (numba's import and first call cost more than this at 1.5M faces)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise IndexError(f"faces index vertices outside 0..{len(v) - 1}")
+    a = v[f[:, 0]]
+    u = v[f[:, 1]] - a
+    w = v[f[:, 2]] - a
+    out = np.empty((len(f), 3))
+    # the kernel's operations in its order (no fused multiply-add either way)
+    np.subtract(u[:, 1] * w[:, 2], u[:, 2] * w[:, 1], out=out[:, 0])
+    np.subtract(u[:, 2] * w[:, 0], u[:, 0] * w[:, 2], out=out[:, 1])
+    np.subtract(u[:, 0] * w[:, 1], u[:, 1] * w[:, 0], out=out[:, 2])
+    return out
+
+
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Triangle areas, (F,), mesh units squared."""
     return 0.5 * np.linalg.norm(face_cross(vertices, faces), axis=1)
@@ -45,14 +63,21 @@ def unit_rows(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v / np.where(length > 0, length, 1.0)[:, None], length
 
 
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def vertex_normals(
+    vertices: np.ndarray, faces: np.ndarray, cross: np.ndarray | None = None
+) -> np.ndarray:
     """Area-weighted unit vertex normals, (V, 3); zero at vertices no face uses.
 
     Vertices are not welded here: call :func:`weld_by_position` first where UV-seam copies of
-    a position must share one normal.
+    a position must share one normal.  ``cross``: the faces' :func:`face_cross` when the
+    caller has it.
     """
-    cross = face_cross(vertices, faces)  # 2 A n
-    n = len(vertices)
+    if cross is None:
+        cross = face_cross(vertices, faces)  # 2 A n
+    return _summed_normals(len(vertices), faces, cross)
+
+
+def _summed_normals(n: int, faces: np.ndarray, cross: np.ndarray) -> np.ndarray:
     idx = faces.reshape(-1)
     acc = np.empty((n, 3))
     for a in range(3):
@@ -86,6 +111,35 @@ def weld_by_position(
     inverse = np.empty(len(v), np.int64)
     inverse[order] = np.cumsum(first) - 1
     return ordered[first], inverse[faces], inverse
+
+
+def position_groups(positions: np.ndarray) -> np.ndarray:
+    """A group number per row of ``positions`` (P, 3) float64, equal for equal positions (as
+    :func:`weld_by_position` merges them), numbered in no particular order.
+
+    Sorts one 64-bit hash of each row instead of lexsorting three float columns (8x faster
+    at 375k rows); rows that share a hash but differ (a collision) fall back to the lexsort.
+    """
+    if len(positions) < 2:
+        return np.zeros(len(positions), dtype=np.int64)
+    bits = np.ascontiguousarray(positions + 0.0, dtype=np.float64).view(np.uint64)  # -0 -> +0
+    key = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
+    key ^= (bits[:, 1] + np.uint64(0x632BE59BD9B4E019)) * np.uint64(0xBF58476D1CE4E5B9)
+    key ^= (bits[:, 2] + np.uint64(0x8CB92BA72F3D8DD7)) * np.uint64(0x94D049BB133111EB)
+    key ^= key >> np.uint64(29)
+    n_bits = (len(key) - 1).bit_length()
+    # the row number below the hash's top bits: one plain sort gives the order
+    packed = (key >> np.uint64(n_bits)) << np.uint64(n_bits) | np.arange(len(key), dtype=np.uint64)
+    packed.sort()
+    order = (packed & np.uint64((1 << n_bits) - 1)).astype(np.int64)
+    top = packed >> np.uint64(n_bits)
+    same = top[1:] == top[:-1]
+    rows = bits[order]
+    if (same & (rows[1:] != rows[:-1]).any(axis=1)).any():  # a collision: exact lexsort
+        return weld_by_position(positions, np.zeros((0, 3), np.int64))[2]
+    group = np.empty(len(key), dtype=np.int64)
+    group[order] = np.cumsum(np.concatenate(([True], ~same))) - 1
+    return group
 
 
 def barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -216,9 +270,27 @@ def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return flag
 
 
-def welded_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def welded_vertex_normals(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    cross: np.ndarray | None = None,
+    source: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Area-weighted unit vertex normals (V, 3) accumulated over positions: vertices that share
     a position (UV-seam copies) get the same normal, so shading is smooth across UV seams.
-    The asset mesh's normals when its file has none."""
-    wv, wf, inverse = weld_by_position(vertices, faces)
-    return vertex_normals(wv, wf)[inverse]
+    The asset mesh's normals when its file has none.
+
+    ``cross``: the faces' :func:`face_cross` when the caller has it (welding moves no
+    position, so it holds for the welded faces too).  ``source``: ``(positions, index)`` with
+    ``vertices == positions[index]`` (an OBJ's ``v`` lines and each vertex's line): welding
+    the fewer ``positions`` groups the vertices alike, so the sums, taken in face order,
+    are the same bit for bit."""
+    if source is None:
+        wv, wf, inverse = weld_by_position(vertices, faces)
+        return vertex_normals(wv, wf, cross)[inverse]
+    positions, index = source
+    by_position = position_groups(positions)
+    inverse = by_position[index]
+    if cross is None:
+        cross = face_cross(vertices, faces)
+    return _summed_normals(int(by_position.max()) + 1, inverse[faces], cross)[inverse]

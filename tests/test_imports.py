@@ -176,3 +176,26 @@ def test_inspect_loads_no_bake_modules(tmp_path):
     assert "crack.mask" in r.stdout  # the table really was printed
     loaded = set(r.stderr.split())
     assert not loaded & {"numba", "scipy", "trimesh", "moderngl", "crackbake.pipeline"}, loaded
+
+
+_LOAD = """
+import sys
+from crackbake.io.mesh import load_mesh
+mesh = load_mesh(sys.argv[1])
+print(len(mesh.faces), " ".join(sorted(m for m in ("trimesh", "numba", "PIL", "scipy")
+                                       if m in sys.modules)))
+"""
+
+
+def test_loading_an_obj_imports_no_trimesh_numba_or_pillow(tmp_path):
+    """The load of an OBJ (its texture bound by an MTL) reads it with numpy alone: importing
+    trimesh (with scipy), numba and Pillow was nearly all of the load stage's time."""
+    spot = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
+    (tmp_path / "spot.mtl").write_text("newmtl skin\nmap_Kd skin.png\n")
+    (tmp_path / "spot.obj").write_text("mtllib spot.mtl\nusemtl skin\n" + spot.read_text())
+    r = subprocess.run([sys.executable, "-c", _LOAD, str(tmp_path / "spot.obj")],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    faces, _, loaded = r.stdout.strip().partition(" ")
+    assert int(faces) == 5856
+    assert loaded == ""

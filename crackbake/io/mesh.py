@@ -4,6 +4,9 @@ The asset mesh keeps its UV seams (vertices are split where UVs differ); that is
 textures are baked for and the mesh written to the GLB.  Anything topological (adjacency,
 geodesic distances, the simulation mesh) works on :func:`weld_by_position`'s copy, so UV seams
 never cut cracks or stress.
+
+OBJ files are read by :mod:`crackbake.io.obj_reader` (numpy, the arrays trimesh would give);
+trimesh reads the other formats and the OBJ files that reader leaves to it.
 """
 
 from __future__ import annotations
@@ -17,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.geometry import face_cross, welded_vertex_normals
-from crackbake.io import obj_checks, ply_strips
+from crackbake.geometry import face_cross_numpy, welded_vertex_normals
+from crackbake.io import obj_checks, obj_reader, ply_strips
 from crackbake.io.safe_open import check_regular, open_regular, read_bytes
 
 __all__ = ["SUPPORTED_SUFFIXES", "VERTEX_COLOURS", "Mesh", "load_mesh"]
@@ -95,7 +98,33 @@ class Mesh:
         }
 
 
-def _scene_geometries(scene, object_name: str | None, path: Path):
+@dataclass
+class _Geometry:
+    """One object of a mesh file, whichever reader read it: the arrays :func:`load_mesh`
+    stacks."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray | None
+    normals: np.ndarray | None
+    attributes: dict[str, np.ndarray]
+    #: (positions, index): the OBJ reader's ``v`` lines and each vertex's line, for welding.
+    source: tuple[np.ndarray, np.ndarray] | None = None
+
+    @classmethod
+    def of_trimesh(cls, geom) -> _Geometry:
+        return cls(np.asarray(geom.vertices, dtype=np.float64),
+                   np.asarray(geom.faces, dtype=np.int64), _uv_of(geom), _file_normals(geom),
+                   _vertex_attributes(geom))  # fmt: skip
+
+    @classmethod
+    def of_obj(cls, part: obj_reader.ObjPart) -> _Geometry:
+        return cls(part.vertices, part.faces, part.uv, _unit_normals(part.normals), {},
+                   (part.positions, part.source))  # fmt: skip
+
+
+def _scene_items(scene) -> list[tuple[str, str, _Geometry]]:
+    """(node name, geometry name, geometry) of a trimesh scene's meshes, transforms applied."""
     import trimesh
 
     # dump() applies the node transforms; geometry names survive in metadata.
@@ -105,7 +134,13 @@ def _scene_geometries(scene, object_name: str | None, path: Path):
         geom = scene.geometry[geom_name]
         if not isinstance(geom, trimesh.Trimesh):
             continue
-        items.append((str(node), str(geom_name), geom.copy().apply_transform(transform)))
+        geom = _Geometry.of_trimesh(geom.copy().apply_transform(transform))
+        items.append((str(node), str(geom_name), geom))
+    return items
+
+
+def _scene_geometries(items: list, object_name: str | None, path: Path) -> list[_Geometry]:
+    """The geometries of a scene's ``items`` that ``object_name`` picks (all without it)."""
     if not items:
         return []
     if object_name is not None:
@@ -168,7 +203,8 @@ class _Refused(OSError):
 
 
 def _read_file(path: Path, allow_outside: bool = False):
-    """The trimesh object of a mesh file, after the path and format checks."""
+    """The trimesh object of a mesh file (for most OBJ files, :func:`obj_reader.read_obj`'s
+    parts), after the path and format checks."""
     if not path.exists():
         raise CrackbakeError(f"{path}: file not found; check the path")
     if path.is_dir():
@@ -186,7 +222,11 @@ def _read_file(path: Path, allow_outside: bool = False):
     data, short_faces = None, 0
     if suffix == ".obj":
         data = _read_bytes(path)
-        checked, short_faces = obj_checks.prepare_obj(data, path)
+        checked, scan = obj_checks.prepare_obj_scan(data, path)
+        short_faces = scan.short_faces
+        parts = obj_reader.read_obj(checked, scan, path, allow_outside)
+        if parts is not None:  # the common case, without importing trimesh
+            return parts, checked, short_faces
         source = str(path) if checked is data else io.BytesIO(checked)
         data = checked
     else:
@@ -236,14 +276,12 @@ def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
     vertices, faces, uv_parts, normal_parts = [], [], [], []
     offset = 0
     for g, u in zip(geoms, uvs, strict=True):
-        v = np.asarray(g.vertices, dtype=np.float64)
-        f = np.asarray(g.faces, dtype=np.int64)
-        vertices.append(v)
-        faces.append(f + offset)
-        offset += len(v)
+        vertices.append(g.vertices)
+        faces.append(g.faces + offset)
+        offset += len(g.vertices)
         if keep_uv:
             uv_parts.append(u)
-        normal_parts.append(_file_normals(g))
+        normal_parts.append(g.normals)
     vertices = np.concatenate(vertices)
     faces = np.concatenate(faces)
 
@@ -293,20 +331,31 @@ def load_mesh(
         loaded, obj_text, short_faces = _strip_mesh(path), None, 0
     else:
         loaded, obj_text, short_faces = _read_file(path, allow_outside_textures)
-    import trimesh  # loaded by the reader by now
+    fast = isinstance(loaded, list)
+    if fast:  # obj_reader's parts: one mesh, or a scene's geometries
+        parts = [_Geometry.of_obj(p) for p in loaded]
+        single = len(parts) == 1
+        if not single:
+            items = [(p.name, p.name, g) for p, g in zip(loaded, parts, strict=True)]
+            geoms = _scene_geometries(items, object_name, path)
+    else:
+        import trimesh  # loaded by the reader by now
 
-    if isinstance(loaded, trimesh.Scene):
-        geoms = _scene_geometries(loaded, object_name, path)
-    elif isinstance(loaded, trimesh.Trimesh):
+        single = isinstance(loaded, trimesh.Trimesh)
+        if isinstance(loaded, trimesh.Scene):
+            geoms = _scene_geometries(_scene_items(loaded), object_name, path)
+        elif single:
+            parts = [_Geometry.of_trimesh(loaded)]
+        else:
+            geoms = []
+    if single:
         if object_name is not None:
             warnings.warn(
                 f"{path.name} holds a single mesh; --object '{object_name}' ignored",
                 CrackbakeWarning,
                 stacklevel=2,
             )
-        geoms = [loaded]
-    else:
-        geoms = []
+        geoms = parts
     geoms = [g for g in geoms if len(g.faces) > 0]
     if obj_text is not None:
         obj_checks.warn_dropped_faces(short_faces, sum(len(g.faces) for g in geoms), path)
@@ -318,7 +367,7 @@ def load_mesh(
             what = f"{what} ({held}; no faces or triangle strips)"
         raise CrackbakeError(f"{path}: the file holds {what}; crackbake needs a triangle mesh")
 
-    uvs = [_uv_of(g) for g in geoms]
+    uvs = [g.uv for g in geoms]
     keep_uv = all(u is not None for u in uvs)
     if not keep_uv and any(u is not None for u in uvs):
         warnings.warn(
@@ -342,7 +391,8 @@ def load_mesh(
             stacklevel=2,
         )
         uv = None
-    if uv is None and obj_text is not None and keep_uv is False:
+    # the reader reads UVs whenever every corner names a vt it has (else trimesh reads it)
+    if uv is None and obj_text is not None and keep_uv is False and not fast:
         bad_vt = obj_checks.explain_bad_uv_index(obj_text)
         if bad_vt is not None:
             warnings.warn(
@@ -352,12 +402,17 @@ def load_mesh(
                 stacklevel=2,
             )
 
+    # numpy's cross, not numba's kernel: the first numba call costs more than the load
+    cross = face_cross_numpy(vertices, faces)
     if all(n is not None for n in normal_parts):
         normals = np.concatenate(normal_parts)
     else:
-        normals = welded_vertex_normals(vertices, faces)
+        source = None
+        if all(g.source is not None for g in geoms):  # one file's v lines: weld those
+            source = (geoms[0].source[0], np.concatenate([g.source[1] for g in geoms]))
+        normals = welded_vertex_normals(vertices, faces, cross, source)
 
-    area2 = np.linalg.norm(face_cross(vertices, faces), axis=1)
+    area2 = np.linalg.norm(cross, axis=1)
     if not (area2 > 0).any():
         raise CrackbakeError(f"{path}: every face has zero area; crackbake needs a surface")
     n_degenerate = int((area2 <= 0).sum())
@@ -376,7 +431,7 @@ def load_mesh(
         normals=normals,
         source=str(path),
         name=name,
-        attributes=_concatenate_attributes([_vertex_attributes(g) for g in geoms]),
+        attributes=_concatenate_attributes([g.attributes for g in geoms]),
         objects=len(geoms),
     )
 
@@ -416,6 +471,13 @@ def _file_normals(geom) -> np.ndarray | None:
     # across seams anyway, so only trust explicit ones of the right shape.
     n = geom._cache.cache.get("vertex_normals") if hasattr(geom, "_cache") else None
     if n is None or len(n) != len(geom.vertices):
+        return None
+    return _unit_normals(n)
+
+
+def _unit_normals(n: np.ndarray | None) -> np.ndarray | None:
+    """A file's vertex normals scaled to unit length; None where any is not finite or zero."""
+    if n is None:
         return None
     n = np.asarray(n, dtype=np.float64)
     length = np.linalg.norm(n, axis=1, keepdims=True)

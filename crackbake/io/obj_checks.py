@@ -4,7 +4,9 @@ trimesh reads a UTF-8 byte-order mark as part of the first vertex line (dropping
 failing later with "index 2929 is out of bounds"), drops face lines with fewer than three corners
 without a word, reads ``f 0 1 2`` as the last vertex (OBJ counts from 1), and parses a vertex line
 cut short by reading the next line's numbers.  These checks run on the raw bytes, vectorised
-with numpy (regular expressions took 6 s on a 1M-face file), and say what is wrong.
+with numpy (regular expressions took 6 s on a 1M-face file), and say what is wrong.  Their
+scan also gives each line's end and token count, from which :mod:`crackbake.io.obj_reader`
+reads the file (it reproduces trimesh's reader, so the checks hold for both).
 """
 
 from __future__ import annotations
@@ -42,34 +44,44 @@ class ObjScan:
     first_short_vertex: int | None = None
     first_zero_index: int | None = None
     short_faces: int = 0
+    #: Byte offset of each line's newline (L,) int64 and each line's whitespace-separated
+    #: token count, keyword included (L,) int32: what the OBJ reader classifies lines with.
+    line_ends: np.ndarray | None = None
+    line_tokens: np.ndarray | None = None
 
 
-def _scan_chunk(a: np.ndarray, scan: ObjScan, line0: int) -> int:
-    """Scan one chunk of whole lines (``a`` ends with a newline); return its line count."""
-    nl = np.flatnonzero(a == _LF)
+def _scan_chunk(a: np.ndarray, scan: ObjScan, line0: int) -> tuple[np.ndarray, np.ndarray]:
+    """Scan one chunk of whole lines (``a`` ends with a newline); return the offsets of its
+    newlines in ``a`` and each line's token count."""
+    control = np.flatnonzero(a < _SPACE)  # mostly the newlines
+    kind = a[control]
+    nl = control[kind == _LF]
+    # When the only control bytes are whitespace, a compare finds the whitespace (5x faster
+    # than the table)
+    plain = bool(_WS[kind].all())
     starts = np.concatenate(([0], nl[:-1] + 1))
     second = a[np.minimum(starts + 1, len(a) - 1)]
     spaced = (second == _SPACE) | (second == _TAB)
     is_v = (a[starts] == ord("v")) & spaced
     is_f = (a[starts] == ord("f")) & spaced
-    ws = _WS[a]
+    ws = a <= _SPACE if plain else _WS[a]
     token = ~ws
     token[1:] &= ws[:-1]  # a token starts after whitespace
-    counts = np.concatenate(([0], np.cumsum(token, dtype=np.int32)))
-    tokens = counts[nl + 1] - counts[starts]  # per line, the keyword included
+    first = np.flatnonzero(token)
+    # per line, the keyword included (a newline starts no token)
+    tokens = np.diff(np.searchsorted(first, nl), prepend=0).astype(np.int32)
     short_v = np.flatnonzero(is_v & (tokens < 4))
     if len(short_v) and scan.first_short_vertex is None:
         scan.first_short_vertex = line0 + int(short_v[0]) + 1
     scan.short_faces += int(np.count_nonzero(is_f & (tokens < 4)))
-    token &= a == _ZERO
-    token[:-1] &= _END_INDEX[a[1:]]
-    zero = np.flatnonzero(token)  # a "0" or "0/..." token
+    zero = first[a[first] == _ZERO]
+    zero = zero[_END_INDEX[a[np.minimum(zero + 1, len(a) - 1)]]]  # a "0" or "0/..." token
     if len(zero) and scan.first_zero_index is None:
         lines = np.searchsorted(nl, zero)
         on_face = lines[is_f[lines]]
         if len(on_face):
             scan.first_zero_index = line0 + int(on_face[0]) + 1
-    return len(nl)
+    return nl, tokens
 
 
 def scan(data: bytes) -> ObjScan:
@@ -81,11 +93,17 @@ def scan(data: bytes) -> ObjScan:
     if not data.endswith(b"\n"):
         data = data + b"\n"
     out, start, line0 = ObjScan(), 0, 0
+    ends, tokens = [], []
     while start < len(data):
         end = data.find(b"\n", min(start + _CHUNK, len(data) - 1))
         a = np.frombuffer(data, dtype=np.uint8, count=end + 1 - start, offset=start)
-        line0 += _scan_chunk(a, out, line0)
+        nl, count = _scan_chunk(a, out, line0)
+        ends.append(nl + start)
+        tokens.append(count)
+        line0 += len(nl)
         start = end + 1
+    out.line_ends = np.concatenate(ends) if ends else np.zeros(0, np.int64)
+    out.line_tokens = np.concatenate(tokens) if tokens else np.zeros(0, np.int32)
     return out
 
 
@@ -93,9 +111,9 @@ def _line_no(data: bytes, pos: int) -> int:
     return data.count(b"\n", 0, pos) + 1
 
 
-def prepare_obj(data: bytes, path: Path) -> tuple[bytes, int]:
-    """Check the OBJ text; return the bytes trimesh should read and how many face lines it
-    will drop (fewer than three corners).
+def prepare_obj_scan(data: bytes, path: Path) -> tuple[bytes, ObjScan]:
+    """Check the OBJ text; return the bytes to read and their :class:`ObjScan` (its
+    ``short_faces``: the face lines with fewer than three corners, which the readers drop).
 
     Strips a UTF-8 byte-order mark and drops a last line cut off mid-way (a truncated file), with
     a warning for the cut.
@@ -129,7 +147,7 @@ def prepare_obj(data: bytes, path: Path) -> tuple[bytes, int]:
             f"{path}: line {found.first_short_vertex} is a vertex with fewer than three "
             "coordinates; the file is corrupt or truncated, re-export it"
         )
-    return data, found.short_faces
+    return data, found
 
 
 def warn_dropped_faces(short_faces: int, faces_loaded: int, path: Path) -> None:
@@ -177,6 +195,8 @@ def explain_bad_uv_index(data: bytes) -> str | None:
     trimesh then drops every UV of the mesh without a word; called only when a file with
     ``vt`` lines loaded without UVs, so the Python loop over face lines is not on the fast path.
     """
+    if b"/" not in data:  # no corner names a texture coordinate
+        return None
     n_vt = len(_VT_LINE.findall(data))
     bad_lines, first = 0, None
     for match in _FACE_LINE.finditer(data):
