@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from crackbake.errors import CrackbakeWarning
-from crackbake.geometry import closest_on_triangles, edges
+from crackbake.geometry import closest_on_triangles, edges, memo, shared_edges
 from crackbake.simulate.simmesh.manifold import split_nonmanifold
 from crackbake.simulate.stress.sources import _finite_vector
 
@@ -28,17 +28,30 @@ def _snap(sim, point: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, np.ndarr
     Returns the point (3,), its sim face, its barycentrics (3,), the face centroids (M, 3) and
     the largest centroid-to-corner distance.
     """
-    tri = sim.vertices[sim.faces]
-    centroid = tri.mean(axis=1)
+    vertices, faces = np.asarray(sim.vertices), np.asarray(sim.faces)
+    centroid, reach = _centroids(vertices, faces)
     dc = np.linalg.norm(centroid - point, axis=1)
     # The face holding the true closest point q has |centroid - p| <= |q - p| + |centroid - q|
     # <= min centroid distance + the largest centroid-to-corner distance; only those can win.
-    reach = np.sqrt(np.einsum("eka,eka->ek", tri - centroid[:, None], tri - centroid[:, None]))
-    cand = np.flatnonzero(dc <= dc.min() + reach.max() * (1 + 1e-9) + 1e-300)
-    q, bary = closest_on_triangles(point, *(tri[cand, k] for k in range(3)))
+    cand = np.flatnonzero(dc <= dc.min() + reach * (1 + 1e-9) + 1e-300)
+    tri = vertices[faces[cand]]
+    q, bary = closest_on_triangles(point, *(tri[:, k] for k in range(3)))
     dist = np.linalg.norm(q - point, axis=1)
     k = int(np.argmin(dist))
-    return q[k], int(cand[k]), bary[k], centroid, float(reach.max())
+    return q[k], int(cand[k]), bary[k], centroid, reach
+
+
+def _centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+    """Face centroids (M, 3) and the largest centroid-to-corner distance, once per mesh (the
+    stress field and the star check snap on the same sim mesh; :func:`~crackbake.geometry.memo`)."""
+
+    def compute():
+        tri = vertices[faces]
+        centroid = tri.mean(axis=1)
+        off = tri - centroid[:, None]
+        return centroid, float(np.sqrt(np.einsum("eka,eka->ek", off, off)).max())
+
+    return memo("centroids", compute, vertices, faces)
 
 
 def _fast_marching(vertices, faces, face: int, bary: np.ndarray) -> np.ndarray:
@@ -144,11 +157,15 @@ def impact_distance(
 
 def _shells(faces: np.ndarray, n: int) -> np.ndarray:
     """Connected piece (shell) of each of ``n`` nodes over the faces' edges, (n,) int."""
-    from scipy.sparse.csgraph import connected_components
+    def compute():
+        from scipy.sparse.csgraph import connected_components
 
-    e = edges(faces, n)[0]
-    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
+        e = shared_edges(faces, n)[0]
+        graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        return (connected_components(graph, directed=False)[1],)
+
+    # Once per mesh: the stress field (twice), the star check and the solver's mates ask.
+    return memo("shells", compute, faces, int(n))[0]
 
 
 def _hop_shells(vertices: np.ndarray, faces: np.ndarray, d: np.ndarray, link: float,

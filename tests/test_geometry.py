@@ -1,0 +1,91 @@
+"""crackbake.geometry's memo: one sim mesh's edges, shells and centroids computed once per run,
+never stale when an array's contents change."""
+
+import numpy as np
+import pytest
+
+from crackbake import geometry
+from crackbake.geometry import content_key, edges, memo, shared_edges
+from crackbake.simulate.stress.geodesic import _shells, _snap
+
+
+def _grid(n=6, shift=0.0):
+    """A flat n x n grid of squares, two triangles each: vertices (N, 3), faces (M, 3)."""
+    x, y = np.meshgrid(np.arange(n + 1.0), np.arange(n + 1.0))
+    vertices = np.column_stack([x.ravel() + shift, y.ravel(), np.zeros(x.size)])
+    i = np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]
+    a, b, c, d = i.ravel(), i.ravel() + 1, i.ravel() + n + 1, i.ravel() + n + 2
+    faces = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    return vertices, faces.astype(np.int64)
+
+
+def test_content_key_follows_contents_dtype_and_shape():
+    _, faces = _grid()
+    assert content_key(faces) == content_key(faces.copy())
+    changed = faces.copy()
+    changed[3, 1] += 1
+    assert content_key(changed) != content_key(faces)
+    assert content_key(faces.astype(np.int32)) != content_key(faces)
+    assert content_key(faces.reshape(-1)) != content_key(faces)
+    # A strided view hashes as its own contents.
+    assert content_key(faces[::2]) == content_key(np.ascontiguousarray(faces[::2]))
+
+
+def test_shared_edges_equal_edges_read_only_and_computed_once():
+    _, faces = _grid()
+    n = int(faces.max()) + 1
+    calls = []
+
+    def counted():
+        calls.append(1)
+        return edges(faces, n)
+
+    first = memo("test-edges", counted, faces, n)
+    again = memo("test-edges", counted, faces.copy(), n)
+    assert len(calls) == 1 and again is first
+    e, uses = shared_edges(faces, n)
+    want_e, want_uses = edges(faces, n)
+    np.testing.assert_array_equal(e, want_e)
+    np.testing.assert_array_equal(uses, want_uses)
+    with pytest.raises(ValueError):
+        e[0, 0] = 5  # shared by every caller: read-only
+
+
+def test_memo_recomputes_for_changed_contents_and_stays_bounded():
+    _, faces = _grid()
+    n = int(faces.max()) + 1
+    before = _shells(faces, n)
+    assert before.max() == 0  # one piece
+    # Two separate grids: the cached answer for the first mesh must not be reused.
+    v2, f2 = _grid(shift=100.0)
+    both = np.concatenate([faces, f2 + n])
+    shells = _shells(both, 2 * n)
+    assert shells.max() == 1
+    assert (shells[:n] != shells[n:2 * n]).all()
+    for k in range(geometry.MEMO_SIZE + 3):
+        memo("test-bound", lambda k=k: (np.full(3, k),), k)
+    assert len(geometry._memo) <= geometry.MEMO_SIZE
+
+
+def test_snap_is_the_same_with_the_memo():
+    vertices, faces = _grid()
+    vertices = vertices + 0.01 * np.sin(np.arange(vertices.size)).reshape(-1, 3)
+
+    class Sim:
+        pass
+
+    sim = Sim()
+    sim.vertices, sim.faces = vertices, faces
+    point = np.array([2.3, 3.7, 0.4])
+    got = _snap(sim, point)
+    # The same sim mesh snapped again (the star check after the stress field): same answer.
+    again = _snap(sim, point)
+    for a, b in zip(got, again, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # Independently: the closest point over every face, by brute force.
+    tri = vertices[faces]
+    q, _ = geometry.closest_on_triangles(point, tri[:, 0], tri[:, 1], tri[:, 2])
+    k = int(np.argmin(np.linalg.norm(q - point, axis=1)))
+    np.testing.assert_allclose(got[0], q[k], atol=1e-12)
+    assert got[1] == k
+    np.testing.assert_array_equal(got[3], tri.mean(axis=1))
