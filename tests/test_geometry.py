@@ -89,3 +89,26 @@ def test_snap_is_the_same_with_the_memo():
     np.testing.assert_allclose(got[0], q[k], atol=1e-12)
     assert got[1] == k
     np.testing.assert_array_equal(got[3], tri.mean(axis=1))
+
+
+def test_impact_distance_reuses_the_patch_solver_bit_for_bit():
+    from types import SimpleNamespace
+
+    from crackbake.simulate.stress.geodesic import impact_distance
+
+    vertices, faces = _grid(12)
+    vertices[:, 2] = 0.3 * np.sin(vertices[:, 0]) * np.cos(0.7 * vertices[:, 1])  # curved
+    sim = SimpleNamespace(vertices=vertices, faces=faces, edge_length=1.0)
+    point = np.array([6.2, 5.9, 0.0])
+    geometry._memo.clear()
+    first = impact_distance(sim, point, max_distance=4.0)[0]
+    solvers = [k for k in geometry._memo if k[0] == "fast marching"]
+    assert len(solvers) == 1
+    # The star check measures again from the snapped point: the same patch, its solver reused.
+    nudged = point + [0.0, 0.0, 1e-9]
+    reused = impact_distance(sim, nudged, max_distance=4.0)[0]
+    assert [k for k in geometry._memo if k[0] == "fast marching"] == solvers
+    geometry._memo.clear()
+    fresh = impact_distance(sim, nudged, max_distance=4.0)[0]
+    np.testing.assert_array_equal(reused, fresh)
+    assert np.isfinite(first).sum() > 20 and np.isinf(first).any()  # the reach cut the patch

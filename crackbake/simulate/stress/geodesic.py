@@ -54,11 +54,23 @@ def _centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, flo
     return memo("centroids", compute, vertices, faces)
 
 
-def _fast_marching(vertices, faces, face: int, bary: np.ndarray) -> np.ndarray:
-    import potpourri3d as pp3d
+def _patch_solver(vertices: np.ndarray, faces: np.ndarray):
+    """The fast-marching solver of a patch (``vertices`` (P, 3), ``faces`` (Q, 3) into them) and
+    the patch node of each of its vertices, (P',): once per patch (the stress field and the
+    star check measure the same impact on the same sim mesh; :func:`~crackbake.geometry.memo`,
+    by content, so a patch that differs by one face is built anew).  Raises ImportError
+    without potpourri3d, RuntimeError or ValueError where it refuses the patch."""
 
-    solver = pp3d.MeshFastMarchingDistanceSolver(vertices, faces)
-    return np.asarray(solver.compute_distance([[(face, [float(x) for x in bary])]]), np.float64)
+    def compute():
+        import potpourri3d as pp3d
+
+        # A patch cut out of a clean surface can have vertices where two sheets of it meet at
+        # one point (its rim zig-zags); fast marching refuses those, so each fan gets its own
+        # copy and a node takes the nearest of its copies.  The sim mesh itself is manifold.
+        split_faces, origin, _ = split_nonmanifold(faces, len(vertices))
+        return origin, pp3d.MeshFastMarchingDistanceSolver(vertices[origin], split_faces)
+
+    return memo("fast marching", compute, vertices, faces)
 
 
 def _edge_dijkstra(vertices, faces, face: int, point: np.ndarray, limit: float) -> np.ndarray:
@@ -123,14 +135,10 @@ def impact_distance(
     else:
         nodes = np.arange(len(vertices))
         sub_faces, sub_face, limit = faces, face, np.inf
-    # A patch cut out of a clean surface can have vertices where two sheets of it meet at one
-    # point (its rim zig-zags); fast marching refuses those, so each fan gets its own copy
-    # and a node takes the nearest of its copies.  The sim mesh itself is manifold.
-    split_faces, origin, _ = split_nonmanifold(sub_faces, len(nodes))
-    split_vertices = vertices[nodes[origin]]
-
     try:
-        d_split = _fast_marching(split_vertices, split_faces, sub_face, bary)
+        origin, solver = _patch_solver(vertices[nodes], sub_faces)
+        d_split = np.asarray(solver.compute_distance([[(sub_face, [float(x) for x in bary])]]),
+                             np.float64)
         d_sub = np.full(len(nodes), np.inf)
         np.minimum.at(d_sub, origin, d_split)
     except (ImportError, RuntimeError, ValueError) as exc:
