@@ -256,6 +256,14 @@ def memo(name: str, compute: Callable[[], tuple], *key) -> tuple:
     return out
 
 
+def forget() -> None:
+    """Drop everything :func:`memo` keeps (a run's sim mesh arrays and fast-marching patch:
+    tens of MB on a 1M-face sim mesh), so a long-lived process (the Blender add-on, a batch)
+    holds none of them between runs."""
+    with _memo_lock:
+        _memo.clear()
+
+
 def shared_edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """:func:`edges`, computed once per face array (by content, :func:`memo`); read-only."""
     return memo("edges", lambda: edges(faces, n_vertices), faces, int(n_vertices))

@@ -415,6 +415,9 @@ def solve(
     finally:
         if warming is not None:  # no numba load left running past the run (or its error)
             warming.join()
+        from crackbake.geometry import forget
+
+        forget()  # the sim mesh's memoised edges, shells and patches: this run's only
 
 
 def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],

@@ -112,3 +112,11 @@ def test_impact_distance_reuses_the_patch_solver_bit_for_bit():
     fresh = impact_distance(sim, nudged, max_distance=4.0)[0]
     np.testing.assert_array_equal(reused, fresh)
     assert np.isfinite(first).sum() > 20 and np.isinf(first).any()  # the reach cut the patch
+
+
+def test_forget_empties_the_memo_and_a_run_leaves_nothing(tmp_path):
+    _, faces = _grid()
+    shared_edges(faces, int(faces.max()) + 1)
+    assert geometry._memo
+    geometry.forget()
+    assert not geometry._memo
