@@ -398,12 +398,35 @@ def solve(
     solved : Solved
         Sim mesh, stress field and the solver's full result.
     """
+    if sources is None:
+        sources = stress_sources(params, mesh, relative)
+    # The stages' own modules are imported before the thread starts, which then imports only
+    # the solver's: no two threads import one package at once.
+    from crackbake.simulate import simmesh, stress, timing  # noqa: F401
+
+    warming = None
+    if (params.method or "iben") == "iben":
+        from crackbake.simulate import warm
+
+        # The solver's kernels load on a thread while the sim mesh and the field are built.
+        warming = warm.start()
+    try:
+        return _solve(mesh, params, relative, timings, sources)
+    finally:
+        if warming is not None:  # no numba load left running past the run (or its error)
+            warming.join()
+        from crackbake.geometry import forget
+
+        forget()  # the sim mesh's memoised edges, shells and patches: this run's only
+
+
+def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],
+           sources: list) -> tuple[CrackNetwork, dict, Solved]:
+    """:func:`solve` once the sources are built and the solver's kernels are loading."""
     from crackbake.simulate.simmesh import build_simmesh, onto_asset
     from crackbake.simulate.stress import impact_refinement, noise_origin, stress_field
     from crackbake.simulate.timing import grow_from_impacts
 
-    if sources is None:
-        sources = stress_sources(params, mesh, relative)
     logger.info("building the simulation mesh", extra={"stage": "simmesh"})
     t = time.perf_counter()
     # Held back until the sim mesh is final: a rebuild for a thin feature repeats them.

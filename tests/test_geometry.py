@@ -1,17 +1,26 @@
 """Geometry helpers the mesh load relies on: numpy's face cross products equal the numba
-kernel's bit for bit, and the hash grouping of positions welds exactly what the lexsort welds."""
+kernel's bit for bit, and the hash grouping of positions welds exactly what the lexsort welds;
+the memo computes one sim mesh's edges, shells and centroids once per run, never stale when an
+array's contents change."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from crackbake import geometry
 from crackbake.geometry import (
+    content_key,
+    edges,
     face_cross,
     face_cross_numpy,
+    memo,
     position_groups,
+    shared_edges,
     weld_by_position,
     welded_vertex_normals,
 )
+from crackbake.simulate.stress.geodesic import _shells, _snap
 
 
 def test_numpy_face_cross_equals_the_kernel_bit_for_bit():
@@ -44,3 +53,116 @@ def test_welded_normals_from_source_lines_are_the_same_bits():
     by_position = welded_vertex_normals(vertices, faces)
     by_line = welded_vertex_normals(vertices, faces, cross, (positions, source))
     assert by_line.tobytes() == by_position.tobytes()
+
+
+def _grid(n=6, shift=0.0):
+    """A flat n x n grid of squares, two triangles each: vertices (N, 3), faces (M, 3)."""
+    x, y = np.meshgrid(np.arange(n + 1.0), np.arange(n + 1.0))
+    vertices = np.column_stack([x.ravel() + shift, y.ravel(), np.zeros(x.size)])
+    i = np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]
+    a, b, c, d = i.ravel(), i.ravel() + 1, i.ravel() + n + 1, i.ravel() + n + 2
+    faces = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    return vertices, faces.astype(np.int64)
+
+
+def test_content_key_follows_contents_dtype_and_shape():
+    _, faces = _grid()
+    assert content_key(faces) == content_key(faces.copy())
+    changed = faces.copy()
+    changed[3, 1] += 1
+    assert content_key(changed) != content_key(faces)
+    assert content_key(faces.astype(np.int32)) != content_key(faces)
+    assert content_key(faces.reshape(-1)) != content_key(faces)
+    # A strided view hashes as its own contents.
+    assert content_key(faces[::2]) == content_key(np.ascontiguousarray(faces[::2]))
+
+
+def test_shared_edges_equal_edges_read_only_and_computed_once():
+    _, faces = _grid()
+    n = int(faces.max()) + 1
+    calls = []
+
+    def counted():
+        calls.append(1)
+        return edges(faces, n)
+
+    first = memo("test-edges", counted, faces, n)
+    again = memo("test-edges", counted, faces.copy(), n)
+    assert len(calls) == 1 and again is first
+    e, uses = shared_edges(faces, n)
+    want_e, want_uses = edges(faces, n)
+    np.testing.assert_array_equal(e, want_e)
+    np.testing.assert_array_equal(uses, want_uses)
+    with pytest.raises(ValueError):
+        e[0, 0] = 5  # shared by every caller: read-only
+
+
+def test_memo_recomputes_for_changed_contents_and_stays_bounded():
+    _, faces = _grid()
+    n = int(faces.max()) + 1
+    before = _shells(faces, n)
+    assert before.max() == 0  # one piece
+    # Two separate grids: the cached answer for the first mesh must not be reused.
+    v2, f2 = _grid(shift=100.0)
+    both = np.concatenate([faces, f2 + n])
+    shells = _shells(both, 2 * n)
+    assert shells.max() == 1
+    assert (shells[:n] != shells[n:2 * n]).all()
+    for k in range(geometry.MEMO_SIZE + 3):
+        memo("test-bound", lambda k=k: (np.full(3, k),), k)
+    assert len(geometry._memo) <= geometry.MEMO_SIZE
+
+
+def test_snap_is_the_same_with_the_memo():
+    vertices, faces = _grid()
+    vertices = vertices + 0.01 * np.sin(np.arange(vertices.size)).reshape(-1, 3)
+
+    class Sim:
+        pass
+
+    sim = Sim()
+    sim.vertices, sim.faces = vertices, faces
+    point = np.array([2.3, 3.7, 0.4])
+    got = _snap(sim, point)
+    # The same sim mesh snapped again (the star check after the stress field): same answer.
+    again = _snap(sim, point)
+    for a, b in zip(got, again, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # Independently: the closest point over every face, by brute force.
+    tri = vertices[faces]
+    q, _ = geometry.closest_on_triangles(point, tri[:, 0], tri[:, 1], tri[:, 2])
+    k = int(np.argmin(np.linalg.norm(q - point, axis=1)))
+    np.testing.assert_allclose(got[0], q[k], atol=1e-12)
+    assert got[1] == k
+    np.testing.assert_array_equal(got[3], tri.mean(axis=1))
+
+
+def test_impact_distance_reuses_the_patch_solver_bit_for_bit():
+    from types import SimpleNamespace
+
+    from crackbake.simulate.stress.geodesic import impact_distance
+
+    vertices, faces = _grid(12)
+    vertices[:, 2] = 0.3 * np.sin(vertices[:, 0]) * np.cos(0.7 * vertices[:, 1])  # curved
+    sim = SimpleNamespace(vertices=vertices, faces=faces, edge_length=1.0)
+    point = np.array([6.2, 5.9, 0.0])
+    geometry._memo.clear()
+    first = impact_distance(sim, point, max_distance=4.0)[0]
+    solvers = [k for k in geometry._memo if k[0] == "fast marching"]
+    assert len(solvers) == 1
+    # The star check measures again from the snapped point: the same patch, its solver reused.
+    nudged = point + [0.0, 0.0, 1e-9]
+    reused = impact_distance(sim, nudged, max_distance=4.0)[0]
+    assert [k for k in geometry._memo if k[0] == "fast marching"] == solvers
+    geometry._memo.clear()
+    fresh = impact_distance(sim, nudged, max_distance=4.0)[0]
+    np.testing.assert_array_equal(reused, fresh)
+    assert np.isfinite(first).sum() > 20 and np.isinf(first).any()  # the reach cut the patch
+
+
+def test_forget_empties_the_memo_and_a_run_leaves_nothing(tmp_path):
+    _, faces = _grid()
+    shared_edges(faces, int(faces.max()) + 1)
+    assert geometry._memo
+    geometry.forget()
+    assert not geometry._memo

@@ -365,6 +365,10 @@ def test_library_run_keeps_the_stress_field_and_solver_result(plate, tmp_path):
     assert len(solved.result.stress_final) == len(solved.result.faces) >= m  # splits add faces
     assert len(solved.result.separation) == len(solved.result.vertices)
     assert result.network is not None and len(result.network.cracks) > 0
+    # The sim mesh's memoised edges, shells and fast-marching patch do not outlive the run.
+    from crackbake import geometry
+
+    assert not geometry._memo
 
 
 def test_a_run_cut_short_by_max_steps_warns(plate, tmp_path):

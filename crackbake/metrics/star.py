@@ -198,19 +198,19 @@ def surface_distance(
         return straight
     from scipy.spatial import cKDTree
 
-    from crackbake.simulate.stress.geodesic import impact_distance
+    from crackbake.simulate.stress.geodesic import _centroids, impact_distance
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     link = mean_edge(v, f) if link is None else float(link)
     node, snapped, _ = impact_distance(SimpleNamespace(vertices=v, faces=f, edge_length=link),
                                        imp, max_distance)
-    tri = v[f]
-    _, nearest = cKDTree(tri.mean(axis=1)).query(pts)
+    # The face centroids the impact's snap already took (once per mesh).
+    _, nearest = cKDTree(_centroids(v, f)[0]).query(pts)
     d = node[f[nearest]]
     out = np.full(len(pts), np.inf)
     ok = np.isfinite(d).all(axis=1)
-    out[ok] = _interpolated(tri[nearest[ok]], d[ok], pts[ok])
+    out[ok] = _interpolated(v[f[nearest[ok]]], d[ok], pts[ok])
     return np.maximum(out, np.linalg.norm(pts - snapped, axis=1))
 
 

@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from crackbake.errors import CrackbakeWarning
-from crackbake.geometry import closest_on_triangles, edges
+from crackbake.geometry import closest_on_triangles, edges, memo, shared_edges
 from crackbake.simulate.simmesh.manifold import split_nonmanifold
 from crackbake.simulate.stress.sources import _finite_vector
 
@@ -28,24 +28,49 @@ def _snap(sim, point: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, np.ndarr
     Returns the point (3,), its sim face, its barycentrics (3,), the face centroids (M, 3) and
     the largest centroid-to-corner distance.
     """
-    tri = sim.vertices[sim.faces]
-    centroid = tri.mean(axis=1)
+    vertices, faces = np.asarray(sim.vertices), np.asarray(sim.faces)
+    centroid, reach = _centroids(vertices, faces)
     dc = np.linalg.norm(centroid - point, axis=1)
     # The face holding the true closest point q has |centroid - p| <= |q - p| + |centroid - q|
     # <= min centroid distance + the largest centroid-to-corner distance; only those can win.
-    reach = np.sqrt(np.einsum("eka,eka->ek", tri - centroid[:, None], tri - centroid[:, None]))
-    cand = np.flatnonzero(dc <= dc.min() + reach.max() * (1 + 1e-9) + 1e-300)
-    q, bary = closest_on_triangles(point, *(tri[cand, k] for k in range(3)))
+    cand = np.flatnonzero(dc <= dc.min() + reach * (1 + 1e-9) + 1e-300)
+    tri = vertices[faces[cand]]
+    q, bary = closest_on_triangles(point, *(tri[:, k] for k in range(3)))
     dist = np.linalg.norm(q - point, axis=1)
     k = int(np.argmin(dist))
-    return q[k], int(cand[k]), bary[k], centroid, float(reach.max())
+    return q[k], int(cand[k]), bary[k], centroid, reach
 
 
-def _fast_marching(vertices, faces, face: int, bary: np.ndarray) -> np.ndarray:
-    import potpourri3d as pp3d
+def _centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+    """Face centroids (M, 3) and the largest centroid-to-corner distance, once per mesh (the
+    stress field and the star check snap on the same sim mesh; :func:`~crackbake.geometry.memo`)."""
 
-    solver = pp3d.MeshFastMarchingDistanceSolver(vertices, faces)
-    return np.asarray(solver.compute_distance([[(face, [float(x) for x in bary])]]), np.float64)
+    def compute():
+        tri = vertices[faces]
+        centroid = tri.mean(axis=1)
+        off = tri - centroid[:, None]
+        return centroid, float(np.sqrt(np.einsum("eka,eka->ek", off, off)).max())
+
+    return memo("centroids", compute, vertices, faces)
+
+
+def _patch_solver(vertices: np.ndarray, faces: np.ndarray):
+    """The fast-marching solver of a patch (``vertices`` (P, 3), ``faces`` (Q, 3) into them) and
+    the patch node of each of its vertices, (P',): once per patch (the stress field and the
+    star check measure the same impact on the same sim mesh; :func:`~crackbake.geometry.memo`,
+    by content, so a patch that differs by one face is built anew).  Raises ImportError
+    without potpourri3d, RuntimeError or ValueError where it refuses the patch."""
+
+    def compute():
+        import potpourri3d as pp3d
+
+        # A patch cut out of a clean surface can have vertices where two sheets of it meet at
+        # one point (its rim zig-zags); fast marching refuses those, so each fan gets its own
+        # copy and a node takes the nearest of its copies.  The sim mesh itself is manifold.
+        split_faces, origin, _ = split_nonmanifold(faces, len(vertices))
+        return origin, pp3d.MeshFastMarchingDistanceSolver(vertices[origin], split_faces)
+
+    return memo("fast marching", compute, vertices, faces)
 
 
 def _edge_dijkstra(vertices, faces, face: int, point: np.ndarray, limit: float) -> np.ndarray:
@@ -110,14 +135,10 @@ def impact_distance(
     else:
         nodes = np.arange(len(vertices))
         sub_faces, sub_face, limit = faces, face, np.inf
-    # A patch cut out of a clean surface can have vertices where two sheets of it meet at one
-    # point (its rim zig-zags); fast marching refuses those, so each fan gets its own copy
-    # and a node takes the nearest of its copies.  The sim mesh itself is manifold.
-    split_faces, origin, _ = split_nonmanifold(sub_faces, len(nodes))
-    split_vertices = vertices[nodes[origin]]
-
     try:
-        d_split = _fast_marching(split_vertices, split_faces, sub_face, bary)
+        origin, solver = _patch_solver(vertices[nodes], sub_faces)
+        d_split = np.asarray(solver.compute_distance([[(sub_face, [float(x) for x in bary])]]),
+                             np.float64)
         d_sub = np.full(len(nodes), np.inf)
         np.minimum.at(d_sub, origin, d_split)
     except (ImportError, RuntimeError, ValueError) as exc:
@@ -144,11 +165,15 @@ def impact_distance(
 
 def _shells(faces: np.ndarray, n: int) -> np.ndarray:
     """Connected piece (shell) of each of ``n`` nodes over the faces' edges, (n,) int."""
-    from scipy.sparse.csgraph import connected_components
+    def compute():
+        from scipy.sparse.csgraph import connected_components
 
-    e = edges(faces, n)[0]
-    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
+        e = shared_edges(faces, n)[0]
+        graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+        return (connected_components(graph, directed=False)[1],)
+
+    # Once per mesh: the stress field (twice), the star check and the solver's mates ask.
+    return memo("shells", compute, faces, int(n))[0]
 
 
 def _hop_shells(vertices: np.ndarray, faces: np.ndarray, d: np.ndarray, link: float,

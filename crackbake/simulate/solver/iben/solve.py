@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from crackbake.errors import CrackbakeError
-from crackbake.geometry import edges
+from crackbake.geometry import shared_edges
 from crackbake.simulate.solver import SolverParams, SolverResult
 from crackbake.simulate.solver.iben import constants as C
 from crackbake.simulate.solver.iben.calibration import (
@@ -117,7 +117,7 @@ def _setup(sim, field, params: SolverParams) -> tuple[State, SimpleNamespace]:
     has_growth = growth is not None and bool(np.any(growth))
     room = int(min(params.max_steps, C.INITIAL_ROOM)) + 16
     ncap, mcap, scap = n0 + 10 * room, m0 + 4 * room, 6 * room
-    edge, uses = edges(F0, n0)
+    edge, uses = shared_edges(F0, n0)  # the stress field and the star check ask too
     bnd = np.zeros(n0, bool)
     bnd[edge[uses == 1].ravel()] = True
     period = float(getattr(sim, "period", 0.0) or 0.0)

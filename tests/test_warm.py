@@ -1,0 +1,50 @@
+"""crackbake.simulate.warm: the I&O solver's kernels loaded on a thread before the solve,
+without a warning or a change to the run."""
+
+import warnings
+
+import numpy as np
+
+from crackbake.simulate import warm
+from crackbake.simulate.solver import SolverParams
+from crackbake.simulate.solver.iben import solve_iben
+
+
+def test_plate_is_a_valid_sim_mesh_and_field():
+    sim, field = warm.plate(4)
+    assert sim.vertices.dtype == np.float64 and sim.vertices.shape == (25, 3)
+    assert sim.faces.dtype == np.int64 and sim.faces.shape == (32, 3)
+    # Counter-clockwise seen from +z, every face with area.
+    p = sim.vertices[sim.faces]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    assert (cross[:, 2] > 0).all()
+    # In-plane, symmetric, tension: the loop has something to crack.
+    assert np.allclose(field.stress, np.swapaxes(field.stress, 1, 2))
+    assert np.allclose(field.stress[:, 2], 0.0)
+    assert np.trace(field.stress, axis1=1, axis2=2).max() > 0
+
+
+def test_warm_loads_the_loop_kernels_without_warnings():
+    from crackbake.simulate.solver.iben import loop, update
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning from the thread would land in a run's list
+        warm.warm()
+    for kernel in (loop.run, update.rebuild, update.incidence, update.update_faces,
+                   update.update_nodes):
+        assert kernel.signatures, kernel  # compiled or loaded for the types a run uses
+    # The plate cracks (the loop ran its events), and the same way twice.
+    sim, field = warm.plate()
+    a = solve_iben(sim, field, SolverParams(max_steps=50, max_cracks=4))
+    b = solve_iben(sim, field, SolverParams(max_steps=50, max_cracks=4))
+    assert a.steps > 0
+    assert len(a.cracks) == len(b.cracks) > 0
+    for ca, cb in zip(a.cracks, b.cracks, strict=True):
+        np.testing.assert_array_equal(ca.points, cb.points)
+
+
+def test_start_runs_a_daemon_thread_that_ends():
+    thread = warm.start()
+    assert thread.daemon
+    thread.join(120)
+    assert not thread.is_alive()
