@@ -43,20 +43,22 @@ def facing_sum_kernel(cross: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def weighted_centre_kernel(v: np.ndarray, f: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """``sum_f weight[f] * centroid[f] / sum_f weight[f]`` over faces ``f`` (F, 3) of ``v``
-    (V, 3): (3,), in one pass without the (F, 3, 3) corner gather."""
+def area_centre_kernel(v: np.ndarray, f: np.ndarray, cross: np.ndarray) -> np.ndarray:
+    """The area-weighted mean of the face centroids of ``f`` (F, 3) int64 over ``v`` (V, 3),
+    the areas from the faces' ``cross`` products (F, 3) (:func:`face_cross_kernel`): (3,).
+
+    One pass without the (F, 3, 3) corner gather and the (F,) norms (1.3 s at 1.5M faces)."""
     sx = sy = sz = total = 0.0
     for k in range(len(f)):
-        w = weight[k] / 3.0
+        w = np.sqrt(cross[k, 0] ** 2 + cross[k, 1] ** 2 + cross[k, 2] ** 2)
         a, b, c = f[k, 0], f[k, 1], f[k, 2]
         sx += w * (v[a, 0] + v[b, 0] + v[c, 0])
         sy += w * (v[a, 1] + v[b, 1] + v[c, 1])
         sz += w * (v[a, 2] + v[b, 2] + v[c, 2])
-        total += weight[k]
+        total += w
     out = np.empty(3)
     out[0], out[1], out[2] = sx, sy, sz
-    return out / max(total, 1e-300)
+    return out / max(3.0 * total, 1e-300)
 
 
 @njit(cache=True, nogil=True)

@@ -7,9 +7,9 @@ import trimesh
 
 from crackbake.geometry import face_cross
 from crackbake.geometry_kernels import (
+    area_centre_kernel,
     facing_sum_kernel,
     solid_faces_kernel,
-    weighted_centre_kernel,
 )
 
 
@@ -47,19 +47,23 @@ def test_facing_sum_of_a_closed_surface_is_its_projected_area_twice():
     assert facing_sum_kernel(np.zeros((0, 3)), d).tolist() == [0.0, 0.0]
 
 
-def test_weighted_centre_matches_the_area_weighted_centroid():
+def test_area_centre_matches_the_area_weighted_centroid():
     rng = np.random.default_rng(4)
     v = rng.normal(size=(50, 3))
     f = rng.integers(0, 50, size=(80, 3))
-    w = rng.random(80)
+    cross = face_cross(v, f)
+    w = np.linalg.norm(cross, axis=1)
     want = (w @ v[f].mean(axis=1)) / w.sum()
-    np.testing.assert_allclose(weighted_centre_kernel(v, f, w), want, rtol=1e-12, atol=1e-14)
-    # A sphere moved by t has its centre at t.
+    np.testing.assert_allclose(area_centre_kernel(v, f, cross), want, rtol=1e-12, atol=1e-14)
+    # A sphere moved by t has its centre at t; a half sphere's lies off its base.
     m = _sphere()
     t = np.array([1.0, -2.0, 0.5])
-    centre = weighted_centre_kernel(m.vertices + t, np.asarray(m.faces, np.int64),
-                                    2 * m.area_faces)
-    np.testing.assert_allclose(centre, t, atol=1e-9)
+    faces = np.asarray(m.faces, np.int64)
+    got = area_centre_kernel(m.vertices + t, faces, face_cross(m.vertices, faces))
+    np.testing.assert_allclose(got, t, atol=1e-9)
+    top = faces[m.vertices[faces].mean(axis=1)[:, 2] > 0]
+    got = area_centre_kernel(m.vertices, top, face_cross(m.vertices, top))
+    assert 0.45 < got[2] < 0.55 and np.abs(got[:2]).max() < 1e-9  # a shell's centroid: r/2
 
 
 def test_solid_faces_match_the_numpy_test_value_for_value():

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from crackbake.simulate.simmesh.manifold import split_nonmanifold
+from crackbake.simulate.simmesh.manifold import duplicate_faces, split_nonmanifold
 from crackbake.simulate.simmesh.manifold_kernels import fan_split
 
 
@@ -41,3 +41,11 @@ def test_bow_tie_vertex_is_split_and_a_closed_fan_is_not():
     ring = np.array([[0, 1 + i, 1 + (i + 1) % 6] for i in range(6)])
     faces, origin, n_cut = split_nonmanifold(ring, 7)
     assert np.array_equal(faces, ring) and origin.tolist() == list(range(7)) and n_cut == 0
+
+
+def test_duplicate_faces_flag_later_copies_with_either_sort():
+    # Vertex counts below and above the one-key limit (n**3 < 2**63) take different sorts.
+    for offset in (0, 3_000_000):
+        f = np.array([[0, 1, 2], [2, 0, 1], [3, 4, 5], [1, 0, 2], [5, 4, 6], [4, 5, 3]]) + offset
+        assert duplicate_faces(f).tolist() == [False, True, False, True, False, True]
+    assert duplicate_faces(np.zeros((0, 3), np.int64)).shape == (0,)

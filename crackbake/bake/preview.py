@@ -249,12 +249,12 @@ def up_axis(mesh: Mesh, cross: np.ndarray | None = None) -> np.ndarray:
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     if cross is None:
         cross = face_cross(mesh.vertices, mesh.faces)
-    from crackbake.geometry_kernels import weighted_centre_kernel
+    from crackbake.geometry_kernels import area_centre_kernel
 
     # One pass over the faces: the (F, 3, 3) corner gather took seconds at 1.5M faces.
-    weight = np.linalg.norm(cross, axis=1)
-    faces = np.ascontiguousarray(mesh.faces, np.int64)
-    centre = weighted_centre_kernel(np.ascontiguousarray(mesh.vertices, np.float64), faces, weight)
+    centre = area_centre_kernel(np.ascontiguousarray(mesh.vertices, np.float64),
+                                np.ascontiguousarray(mesh.faces, np.int64),
+                                np.ascontiguousarray(cross, np.float64))
     score_y, stands_y = _support(pts, hull, area, 1, centre)
     score_z, stands_z = _support(pts, hull, area, 2, centre)
     strong = score_z >= Z_UP_SUPPORT_RATIO * score_y and stands_z and not stands_y

@@ -37,13 +37,27 @@ def duplicate_faces(faces: np.ndarray) -> np.ndarray:
     (F,) bool
         True for every copy after the first (lowest index) of a vertex triple.
     """
-    key = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    dup = np.zeros(len(f), dtype=bool)
+    if not len(f):
+        return dup
+    # The sorted triple by min / max (np.sort(axis=1) is slow on rows of three).
+    lo = np.minimum(np.minimum(f[:, 0], f[:, 1]), f[:, 2])
+    hi = np.maximum(np.maximum(f[:, 0], f[:, 1]), f[:, 2])
+    mid = f[:, 0] + f[:, 1] + f[:, 2] - lo - hi
     # A stable sort by the three columns keeps equal triples in face order, so every row equal
-    # to the one before it is a later copy (3x faster than np.unique(axis=0) at 1M faces).
-    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
-    k = key[order]
-    dup = np.zeros(len(faces), dtype=bool)
-    dup[order[1:][(k[1:] == k[:-1]).all(axis=1)]] = True
+    # to the one before it is a later copy.  One int64 key and one sort where the vertex count
+    # allows (n**3 < 2**63), else a lexsort of the columns (3x faster than np.unique(axis=0)).
+    n = int(hi.max()) + 1
+    if n < 2_000_000:
+        key = (lo * n + mid) * n + hi
+        order = np.argsort(key, kind="stable")
+        k = key[order]
+        dup[order[1:][k[1:] == k[:-1]]] = True
+    else:
+        order = np.lexsort((hi, mid, lo))
+        k = np.stack([lo[order], mid[order], hi[order]], axis=1)
+        dup[order[1:][(k[1:] == k[:-1]).all(axis=1)]] = True
     return dup
 
 
