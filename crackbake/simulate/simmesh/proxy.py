@@ -100,25 +100,35 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, rows: np.ndarray, n_faces:
         while not started.wait(0.01) and not job.done():  # done: it failed before the kernel
             pass
         surface = SurfaceIndex(v, f)
+        border = _asset_border(v, f)  # also while the kernel runs
         pv, pf = job.result()
-    _onto_border(pv, pf, v, f)
+    _onto_border(pv, pf, v, border)
     return Proxy(vertices=pv, faces=pf, surface=surface, rows=np.asarray(rows, np.int64))
 
 
-def _onto_border(pv: np.ndarray, pf: np.ndarray, v: np.ndarray, f: np.ndarray) -> None:
-    """Move the proxy's border vertices (in place) to the closest point of the asset's border."""
+def _asset_border(v: np.ndarray, f: np.ndarray):
+    """The asset's open-border edges (B, 2) and their AABB tree (None without a border)."""
     import igl
 
-    pe, p_count = edges(pf, len(pv))
     ae, a_count = edges(f, len(v))
-    border = np.unique(pe[p_count == 1])
     asset_border = np.ascontiguousarray(ae[a_count == 1], dtype=np.int64)
-    if not len(border) or not len(asset_border):
-        return
+    if not len(asset_border):
+        return asset_border, None
     tree = igl.AABB()
     tree.init(v, asset_border)
-    _, _, closest = tree.squared_distance(v, asset_border, np.ascontiguousarray(pv[border]))
-    pv[border] = closest
+    return asset_border, tree
+
+
+def _onto_border(pv: np.ndarray, pf: np.ndarray, v: np.ndarray, border) -> None:
+    """Move the proxy's border vertices (in place) to the closest point of the asset's border
+    (:func:`_asset_border`)."""
+    asset_border, tree = border
+    pe, p_count = edges(pf, len(pv))
+    ends = np.unique(pe[p_count == 1])
+    if not len(ends) or tree is None:
+        return
+    _, _, closest = tree.squared_distance(v, asset_border, np.ascontiguousarray(pv[ends]))
+    pv[ends] = closest
 
 
 def onto_asset(paths: list, proxy: Proxy | None) -> list:
