@@ -92,3 +92,16 @@ def test_deterministic_and_input_untouched():
     b = decimate_shortest(v, f, 1500)
     assert np.array_equal(v, v0) and np.array_equal(f, f0)
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_started_is_set_before_the_kernel_and_changes_nothing():
+    import threading
+
+    ring = np.array([[np.cos(a), np.sin(a), 0.0] for a in np.linspace(0, 2 * np.pi, 9)[:-1]])
+    v = np.vstack([[0.0, 0.0, 0.1], ring])
+    f = np.array([[0, 1 + i, 1 + (i + 1) % 8] for i in range(8)], np.int64)
+    started = threading.Event()
+    pv, pf = decimate_shortest(v, f, 6, started)
+    assert started.is_set()
+    qv, qf = decimate_shortest(v, f, 6)
+    assert np.array_equal(pv, qv) and np.array_equal(pf, qf) and len(pf) < len(f)

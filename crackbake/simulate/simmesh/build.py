@@ -271,12 +271,14 @@ def _welded_surface(vertices: np.ndarray, faces: np.ndarray, warn: bool):
     """Vertices welded by position, the non-degenerate faces made a 2-manifold and their rows
     in ``faces``: (W, 3), (R, 3), (R,).  ``warn`` names what was repaired (the asset's own
     faces; a proxy's repairs are not the user's business)."""
+    from crackbake.geometry_kernels import solid_faces_kernel
+
     wv, wf_all, _ = weld_by_position(vertices, faces)
-    tri_all = wv[wf_all]
-    edge_len_all = np.linalg.norm(tri_all[:, [1, 2, 0]] - tri_all, axis=2)
-    twice_area = np.linalg.norm(face_cross(wv, wf_all), axis=1)
-    # Zero-area faces carry no material and would give Triangle a collinear boundary: drop them.
-    keep = np.flatnonzero(twice_area > 1e-12 * edge_len_all.max(axis=1) ** 2)
+    wv = np.ascontiguousarray(wv, np.float64)
+    wf_all = np.ascontiguousarray(wf_all, np.int64)
+    # Zero-area faces carry no material and would give Triangle a collinear boundary: drop them
+    # (twice the area at most 1e-12 of the longest edge squared).
+    keep = np.flatnonzero(solid_faces_kernel(wv, wf_all, 1e-12))
     if warn:
         wf, keep, wv, _ = _manifold_copy(wv, wf_all, keep)
     else:

@@ -13,6 +13,8 @@ an edge of more than two faces) or turn a face over.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 # Rounds after which the face count is taken as it is: the last rounds collapse only a few
@@ -24,8 +26,8 @@ CLOSE_ENOUGH = 0.002
 ROUND_SHARE = 0.3
 
 
-def decimate_shortest(vertices: np.ndarray, faces: np.ndarray,
-                      n_faces: int) -> tuple[np.ndarray, np.ndarray]:
+def decimate_shortest(vertices: np.ndarray, faces: np.ndarray, n_faces: int,
+                      started: threading.Event | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A surface decimated to about ``n_faces`` faces by collapsing its shortest edges to their
     midpoints.
 
@@ -38,6 +40,9 @@ def decimate_shortest(vertices: np.ndarray, faces: np.ndarray,
     n_faces : int
         Wanted face count; the result has from one face fewer to 0.2 % more (more where no
         further collapse is allowed).
+    started : threading.Event, optional
+        Set just before the kernel (which releases the GIL) is called, so that a caller on
+        another thread can start GIL-holding work without stalling it.
 
     Returns
     -------
@@ -50,6 +55,8 @@ def decimate_shortest(vertices: np.ndarray, faces: np.ndarray,
 
     v = np.array(vertices, dtype=np.float64)
     f = np.array(faces, dtype=np.int64)
+    if started is not None:
+        started.set()
     alive = collapse_rounds(v, f, max(int(n_faces), 1), ROUND_SHARE, CLOSE_ENOUGH, MAX_ROUNDS)
     f = f[alive]
     used = np.unique(f)

@@ -13,6 +13,7 @@ solve, every crack point (:func:`onto_asset`).
 
 from __future__ import annotations
 
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
@@ -88,30 +89,46 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, rows: np.ndarray, n_faces:
     """
     v = np.ascontiguousarray(vertices, dtype=np.float64)
     f = np.ascontiguousarray(faces, dtype=np.int64)
-    # The asset's AABB tree (2 s at 1.5M faces) is built beside the decimation, whose kernel
-    # releases the GIL: two independent results, so the same ones as one after the other.
+    # The asset's AABB tree (2 s at 1.5M faces) is built beside the decimation: two
+    # independent results, so the same ones as one after the other.  libigl's AABB.init holds
+    # the GIL and the decimation kernel releases it, so the kernel must start first (the other
+    # way round the decimation waited for the whole tree): it runs on the worker and the tree
+    # is built here once the worker is about to enter it.
+    started = threading.Event()
     with ThreadPoolExecutor(1) as pool:
-        surface = pool.submit(SurfaceIndex, v, f)
-        pv, pf = decimate_shortest(v, f, int(min(n_faces, len(f) - 1)))
-        _onto_border(pv, pf, v, f)
-        return Proxy(vertices=pv, faces=pf, surface=surface.result(),
-                     rows=np.asarray(rows, np.int64))
+        job = pool.submit(decimate_shortest, v, f, int(min(n_faces, len(f) - 1)), started)
+        while not started.wait(0.01) and not job.done():  # done: it failed before the kernel
+            pass
+        surface = SurfaceIndex(v, f)
+        border = _asset_border(v, f)  # also while the kernel runs
+        pv, pf = job.result()
+    _onto_border(pv, pf, v, border)
+    return Proxy(vertices=pv, faces=pf, surface=surface, rows=np.asarray(rows, np.int64))
 
 
-def _onto_border(pv: np.ndarray, pf: np.ndarray, v: np.ndarray, f: np.ndarray) -> None:
-    """Move the proxy's border vertices (in place) to the closest point of the asset's border."""
+def _asset_border(v: np.ndarray, f: np.ndarray):
+    """The asset's open-border edges (B, 2) and their AABB tree (None without a border)."""
     import igl
 
-    pe, p_count = edges(pf, len(pv))
     ae, a_count = edges(f, len(v))
-    border = np.unique(pe[p_count == 1])
     asset_border = np.ascontiguousarray(ae[a_count == 1], dtype=np.int64)
-    if not len(border) or not len(asset_border):
-        return
+    if not len(asset_border):
+        return asset_border, None
     tree = igl.AABB()
     tree.init(v, asset_border)
-    _, _, closest = tree.squared_distance(v, asset_border, np.ascontiguousarray(pv[border]))
-    pv[border] = closest
+    return asset_border, tree
+
+
+def _onto_border(pv: np.ndarray, pf: np.ndarray, v: np.ndarray, border) -> None:
+    """Move the proxy's border vertices (in place) to the closest point of the asset's border
+    (:func:`_asset_border`)."""
+    asset_border, tree = border
+    pe, p_count = edges(pf, len(pv))
+    ends = np.unique(pe[p_count == 1])
+    if not len(ends) or tree is None:
+        return
+    _, _, closest = tree.squared_distance(v, asset_border, np.ascontiguousarray(pv[ends]))
+    pv[ends] = closest
 
 
 def onto_asset(paths: list, proxy: Proxy | None) -> list:
