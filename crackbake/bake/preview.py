@@ -356,3 +356,14 @@ def preview_camera(mesh: Mesh, network: CrackNetwork, up: str | None = None):
     half = np.radians(35.0) / 2  # render_preview's field of view
     frame = np.clip(crack_radius / 0.8, 0.4 * 0.5 * np.linalg.norm(hi - lo), mesh_radius)
     return tuple(view_dir), tuple(up), target, float(frame / np.sin(half))
+
+
+def warm() -> None:
+    """Compile (or load from numba's cache) the up-axis kernel, which only meshes with volume
+    reach (:mod:`crackbake.precompile`'s plates are flat, so their hull fails first): a
+    tetrahedron, with the argument types :func:`up_axis` passes."""
+    from crackbake.geometry_kernels import area_centre_kernel
+
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int64)
+    area_centre_kernel(v, f, face_cross(v, f))
