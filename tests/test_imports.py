@@ -209,7 +209,8 @@ import sys
 from crackbake.cli import main
 
 heavy = ("numba", "scipy", "trimesh", "moderngl", "crackbake.bake", "crackbake.exchange",
-         "crackbake.simulate", "crackbake.io.sidecar", "crackbake.network", "crackbake.memory")
+         "crackbake.simulate", "crackbake.io.sidecar", "crackbake.network", "crackbake.memory",
+         "crackbake.io.ply_strips")
 seen = []
 
 class AtLoad(logging.Handler):
