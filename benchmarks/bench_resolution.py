@@ -33,7 +33,7 @@ from conftest import impact_stress, sim_plate, uniform_stress  # noqa: E402
 
 from crackbake.io.mesh import load_mesh  # noqa: E402
 from crackbake.params import Impact, RunParams  # noqa: E402
-from crackbake.pipeline import solver_params, stress_sources  # noqa: E402
+from crackbake.simulate.setup import solver_params, stress_sources  # noqa: E402
 from crackbake.simulate.simmesh import build_simmesh  # noqa: E402
 from crackbake.simulate.solver import SolverParams  # noqa: E402
 from crackbake.simulate.solver.iben import RES_TOLERANCE, solve_iben  # noqa: E402

@@ -20,18 +20,8 @@ import numpy as np
 
 from crackbake.errors import CrackbakeWarning
 from crackbake.io.mesh import Mesh, load_mesh
-from crackbake.io.sidecar import jsonable, read_sidecar
 from crackbake.looks import FEWEST_CELLS, WIDTH_NOISE_SCALE, open_to_cells, vary_widths
-from crackbake.memory import check_memory, estimate_peak, run_sizes
-from crackbake.network import CrackNetwork, from_solver, segments
 from crackbake.params import DECAL_RES_DEFAULT, STRESS_RES_DEFAULT, RunParams
-from crackbake.simulate.setup import (
-    check_scale,
-    sidecar_params,
-    solver_params,
-    stress_sources,
-    with_spacing,
-)
 from crackbake.transaction.interrupt import run_staged
 from crackbake.transaction.stage import OutputStage
 
@@ -39,6 +29,7 @@ if TYPE_CHECKING:
     from crackbake.bake.raster import CrackMaps
     from crackbake.bake.stress import StressMaps
     from crackbake.bake.uv import UVMesh
+    from crackbake.network import CrackNetwork
 
 # The stages' modules (GL, numba kernels, scipy, trimesh) are imported where a stage runs, not
 # here: a run refused by its cheap checks (the output folder, the mesh file, the sidecar, the
@@ -144,6 +135,10 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     t = time.perf_counter()
     mesh = load_mesh(params.mesh, params.object_name, params.allow_outside_textures)
     timings["load"] = time.perf_counter() - t
+    # Imported once the mesh is read: the launch-to-first-stage time is imports (issue 25).
+    from crackbake.memory import check_memory, estimate_peak, run_sizes
+    from crackbake.simulate.setup import check_scale, stress_sources
+
     check_scale(mesh)  # before any work: the float32 bake cannot resolve extreme scales
     # Before the heavy stages: a run that cannot fit is refused now, not killed at 20 GB.
     sizes = run_sizes(params.resolved()[0], mesh)
@@ -163,6 +158,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
             )
         logger.info("reading crack network %s", params.cracks, extra={"stage": "cracks"})
         t = time.perf_counter()
+        from crackbake.io.sidecar import read_sidecar
+
         network = read_sidecar(params.cracks, mesh)
         timings["cracks"] = time.perf_counter() - t
     else:
@@ -170,8 +167,6 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         sources = stress_sources(params, mesh, relative)  # weight maps, impacts: checked here
 
     from crackbake.bake.context import create_context, renderer_info
-    from crackbake.exchange.bundle import write_outputs
-    from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
@@ -184,6 +179,11 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
         maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
         stress = _bake_stress(ctx, uvmesh, solved, params, timings)
+        # The writers are imported here, not before the UV stage: each stage imports its own
+        # modules (the bake's GL and numba kernels, the stress bake's scipy.spatial) where it runs.
+        from crackbake.exchange.bundle import write_outputs
+        from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
+
         logger.info("writing %s", params.out_dir, extra={"stage": "write"})
         t = time.perf_counter()
         effective = effective_params(params, solver_stats, maps, uvmesh)
@@ -287,6 +287,7 @@ def _bake(
     """The GPU bake, timed as ``bake``."""
     from crackbake.bake.raster import bake_cracks
     from crackbake.bake.uv.uvmesh import bake_arrays
+    from crackbake.network import segments
 
     logger.info("baking %dx%d", params.res, params.res, extra={"stage": "bake"})
     t = time.perf_counter()
@@ -333,6 +334,7 @@ def _decals(ctx, uvmesh, network, maps, params: RunParams, stage, timings) -> No
     from crackbake.decals.files import write_decal_set
     from crackbake.decals.projector import bake_decals
     from crackbake.exchange.targets import normal_convention
+    from crackbake.network import segments
 
     logger.info("baking %d decal(s)", len(params.impacts), extra={"stage": "decals"})
     t = time.perf_counter()
@@ -388,7 +390,7 @@ def solve(
     """Simulation mesh, stress field and crack solver: the network for a resolved run.
 
     Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).  ``sources``
-    are :func:`stress_sources` of the run when the caller already built them.
+    are the run's :func:`~crackbake.simulate.setup.stress_sources` when the caller built them.
 
     Returns
     -------
@@ -399,9 +401,14 @@ def solve(
         Sim mesh, stress field and the solver's full result.
     """
     if sources is None:
+        from crackbake.simulate.setup import stress_sources
+
         sources = stress_sources(params, mesh, relative)
     # The stages' own modules are imported before the thread starts, which then imports only
-    # the solver's: no two threads import one package at once.
+    # the solver's: no two threads import one package at once (scipy.spatial too: the stress
+    # field's and the solver's KD-trees; the writers no longer import it before the UV stage).
+    import scipy.spatial  # noqa: F401
+
     from crackbake.simulate import simmesh, stress, timing  # noqa: F401
 
     warming = None
@@ -423,6 +430,9 @@ def solve(
 def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],
            sources: list) -> tuple[CrackNetwork, dict, Solved]:
     """:func:`solve` once the sources are built and the solver's kernels are loading."""
+    from crackbake.io.sidecar import jsonable
+    from crackbake.network import from_solver
+    from crackbake.simulate.setup import sidecar_params, solver_params, with_spacing
     from crackbake.simulate.simmesh import build_simmesh, onto_asset
     from crackbake.simulate.stress import impact_refinement, noise_origin, stress_field
     from crackbake.simulate.timing import grow_from_impacts

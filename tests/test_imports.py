@@ -199,3 +199,45 @@ def test_loading_an_obj_imports_no_trimesh_numba_or_pillow(tmp_path):
     faces, _, loaded = r.stdout.strip().partition(" ")
     assert int(faces) == 5856
     assert loaded == ""
+
+
+# Runs the bake command on a mesh refused just after its load (too small for the float32 bake)
+# and prints the exit code, then the heavy modules already loaded when the ``load`` stage began.
+_FIRST_STAGE = """
+import logging
+import sys
+from crackbake.cli import main
+
+heavy = ("numba", "scipy", "trimesh", "moderngl", "crackbake.bake", "crackbake.exchange",
+         "crackbake.simulate", "crackbake.io.sidecar", "crackbake.network", "crackbake.memory",
+         "crackbake.io.ply_strips")
+seen = []
+
+class AtLoad(logging.Handler):
+    def emit(self, record):
+        if getattr(record, "stage", None) == "load" and not seen:
+            seen.append(" ".join(sorted(h for h in heavy if h in sys.modules)))
+
+logging.getLogger("crackbake.pipeline").addHandler(AtLoad())
+try:
+    main(sys.argv[1:], prog_name="crackbake")
+except SystemExit as exc:
+    code = exc.code
+print(code, len(seen), *seen, sep="|")
+"""
+
+
+def test_the_first_stage_starts_before_the_later_stages_are_imported(tmp_path):
+    """The launch-to-first-stage time (0.25 s floor, issue 25) is imports: the load stage
+    begins before the solver's, the bake's and the writers' modules (scipy, numba, GL) and
+    the run's later helpers (sidecar, memory estimate, network) are imported."""
+    tiny = tmp_path / "tiny.obj"  # 1.7e-12 units across: refused by the scale check after load
+    tiny.write_text("v 0 0 0\nv 1e-12 0 0\nv 0 1e-12 0\nv 0 0 1e-12\n"
+                    "f 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n")  # fmt: skip
+    r = subprocess.run([sys.executable, "-c", _FIRST_STAGE, str(tiny), "--preset", "glass",
+                        "--impact", "0,0,0", "-o", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert "rescale the mesh" in r.stderr, r.stderr  # the load stage ran, then the scale check
+    code, count, loaded = r.stdout.strip().split("|")
+    assert code == "2" and count == "1", r.stdout  # the load stage really was logged
+    assert loaded == "", loaded

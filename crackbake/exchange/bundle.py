@@ -24,7 +24,6 @@ from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.exr import exr_threads, write_exr
 from crackbake.exchange.frames import submit_frames
 from crackbake.exchange.glb import write_glb
-from crackbake.exchange.halving import base_color_half, normal_half
 from crackbake.exchange.layers import (
     crack_attributes,
     crack_planes,
@@ -346,6 +345,8 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
         if with_normal and small.normal is not None:
             normal = pack("normal", small, 8, "gl")
         return colour, normal
+    from crackbake.exchange.halving import base_color_half, normal_half  # above 2048² only
+
     half = 2 * size
     mask, occ = downsample(maps.mask, half), maps.occlusion
     occ = None if occ is None else downsample(occ, half)

@@ -21,7 +21,7 @@ import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.geometry import face_cross_numpy, welded_vertex_normals
-from crackbake.io import obj_checks, obj_reader, ply_strips
+from crackbake.io import obj_checks, obj_reader
 from crackbake.io.safe_open import check_regular, open_regular, read_bytes
 
 __all__ = ["SUPPORTED_SUFFIXES", "VERTEX_COLOURS", "Mesh", "load_mesh"]
@@ -327,7 +327,7 @@ def load_mesh(
     """
     path = Path(path)
     # is_file() is true of regular files only: a FIFO or device goes on to _read_file's refusal.
-    if path.suffix.lower() == ".ply" and path.is_file() and ply_strips.declares_strips(path):
+    if path.suffix.lower() == ".ply" and path.is_file() and _declares_strips(path):
         loaded, obj_text, short_faces = _strip_mesh(path), None, 0
     else:
         loaded, obj_text, short_faces = _read_file(path, allow_outside_textures)
@@ -450,9 +450,19 @@ def _ply_elements(loaded) -> str:
     return "the elements " + "; ".join(parts)
 
 
+def _declares_strips(path: Path) -> bool:
+    """Whether the PLY file declares triangle strips (the reader is imported for PLY files
+    only: it is part of the imports before a run's first stage)."""
+    from crackbake.io import ply_strips
+
+    return ply_strips.declares_strips(path)
+
+
 def _strip_mesh(path: Path):
     """A triangle-strip PLY as a trimesh, its raw vertex properties kept as trimesh keeps them."""
     import trimesh
+
+    from crackbake.io import ply_strips
 
     vertices, props, faces = ply_strips.read_strip_ply(path)
     metadata = {"_ply_raw": {"vertex": {"data": props}}}

@@ -6,7 +6,6 @@ import hashlib
 import os
 import tempfile
 import warnings
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,9 @@ CACHE_FORMAT_VERSION = 4
 
 def xatlas_version() -> str:
     """The installed xatlas version (part of the cache key)."""
+    # importlib.metadata (with email) is ~35 ms of imports that only an unwrap needs.
+    from importlib import metadata
+
     try:
         return metadata.version("xatlas")
     except metadata.PackageNotFoundError:
