@@ -144,7 +144,8 @@ def poll_until_done(cancel_at=None):
     return {"polls": len(times), "max_poll_s": max(times[:-1]), "finish_s": times[-1],
             "slowest": sorted(times[:-1])[-5:], "cancelled_at": cancelled_at,
             "workdir_left": os.path.exists(job.workdir), "status": s.status,
-            "status_bar": lines, "status_bar_after": {
+            "status_bar": lines, "final_fraction": job.fraction,
+            "summary_read": job.summary is not None, "status_bar_after": {
                 "line": status_mod.STATE["line"], "shown": status_mod.is_shown(),
                 "in_header": status_mod.draw in bpy.types.STATUSBAR_HT_header._dyn_ui_initialize()}}
 
