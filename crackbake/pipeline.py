@@ -597,7 +597,7 @@ def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
     # Over touching shells as one surface, as the solver cracks them: an eye's own short
     # cracks crossing the circle where its shell ends must not count as a star's arms.
     checks = star_checks(network, sim.vertices, sim.faces, link=float(sim.edge_length))
-    _warn_web(web_stars(network, checks=checks))
+    _warn_web(web_stars(network, checks=checks), sim)
     missing = missing_stars(network, checks=checks)
     if not missing:
         return
@@ -623,21 +623,49 @@ def _warn_no_star(network: CrackNetwork, sim, sources: list) -> None:
     )
 
 
-def _warn_web(webs: list) -> None:
+def _warn_web(webs: list, sim) -> None:
     """One line per impact whose arms wander (``web_stars``' entries): a web of cells grew
-    where a star should.  Seen where the surface folds sharply within the star's reach
-    (suzanne's low-poly brow between the eyes; subdivided, the same point grows a star)."""
-    from crackbake.metrics.star import STAR_MIN_RADIAL
+    where a star should, with its likely cause and fix.  Where the surface turns sharply within
+    the star's reach (suzanne's low-poly brow between the eyes; subdivided, the same point grows
+    a star) the fold; on a smooth part simulated on too coarse a sim mesh (a plate on 5,000 sim
+    faces) the sim mesh; else neither, and another seed or radius."""
+    from crackbake.metrics.star import (
+        STAR_MIN_RADIAL,
+        WEB_FOLD_DEG,
+        WEB_MIN_EDGES,
+        impact_reach,
+        surface_fold,
+    )
 
+    edge = max(float(sim.edge_length), 1e-300)
     for imp, _, radial in webs:
         at = ",".join(f"{float(x) + 0.0:.4g}" for x in imp["point"])
+        within = 0.3 * impact_reach(imp["radius"])
+        fold = surface_fold(sim.vertices, sim.faces, imp["point"], within)
+        spans = within / edge
+        if fold >= WEB_FOLD_DEG:
+            why = (f"where the surface folds sharply (it turns {fold:.0f} degrees within the "
+                   "star's reach); give a point on a smoother part, or subdivide the mesh")
+        elif spans < WEB_MIN_EDGES:
+            finer = within / (1.5 * WEB_MIN_EDGES)
+            more = len(sim.faces) * (edge / finer) ** 2
+            why = (f"where the sim mesh is too coarse ({spans:.1f} edges across the star's "
+                   f"reach): give --sim-faces {_round_up(more)} or a finer --detail "
+                   f"(about {finer:.3g})")
+        else:
+            why = "on a smooth, finely meshed part; give another --seed or a larger radius"
         warnings.warn(
             f"the impact at ({at}) grew a web of cells, not a star: its arms wander (straightness "
-            f"{radial:.2f}, a star's over {STAR_MIN_RADIAL:.2f}) where the surface folds sharply; "
-            "give a point on a smoother part, or subdivide the mesh",
+            f"{radial:.2f}, a star's over {STAR_MIN_RADIAL:.2f}) {why}",
             CrackbakeWarning,
             stacklevel=4,
         )
+
+
+def _round_up(n: float) -> int:
+    """``n`` rounded up to two significant figures (a face count to suggest)."""
+    step = 10 ** max(int(np.floor(np.log10(max(n, 1.0)))) - 1, 0)
+    return int(np.ceil(n / step) * step)
 
 
 def _grow(sim, field, sp):

@@ -565,9 +565,60 @@ def test_a_web_of_wandering_arms_warns(tmp_path):
     assert "(0.5,0.5,0) grew a web of cells, not a star" in line
     named = float(line.split("straightness ")[1].split(",")[0])
     assert named == pytest.approx(np.cos(np.radians(35.0)), abs=0.02)  # fast marching's error
-    assert "a point on a smoother part" in line and "subdivide the mesh" in line
+    # a flat plate on a fine sim mesh: neither the surface nor the sim mesh is to blame
+    assert "folds" not in line and "coarse" not in line and "another --seed" in line
     assert said(15.0, impact) == []
     assert said(35.0, impact + [ShrinkSource()]) == []
+
+
+def test_a_web_names_its_cause(tmp_path):
+    # The same web's line names the fold where the surface turns within the star's reach (a
+    # roof whose ridge runs through the impact) and the sim mesh where a flat plate is simulated
+    # too coarsely, with a --sim-faces that gives 12 sim edges across the reach.
+    from crackbake.metrics.star import WEB_MIN_EDGES, surface_fold
+    from crackbake.pipeline import _warn_web
+
+    def line(sim, point, radius) -> str:
+        imp = {"point": list(point), "radius": radius}
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            _warn_web([(imp, 9, 0.8)], sim)
+        [w] = caught
+        return str(w.message)
+
+    point, radius = np.array([0.5, 0.5, 0.0]), 0.25
+    within = 0.3 * impact_reach(radius)
+    plate = plate_obj(tmp_path / "plate.obj", 4, uv_margin=0.0)
+    coarse = build_simmesh(load_mesh(plate), target_faces=800)
+    spans = within / coarse.edge_length
+    assert spans < WEB_MIN_EDGES
+    said = line(coarse, point, radius)
+    assert f"too coarse ({spans:.1f} edges" in said and "folds" not in said
+    suggested = int(said.split("--sim-faces ")[1].split(" ")[0])
+    # sim faces scale with 1 / edge**2: the suggestion gives 1.5 WEB_MIN_EDGES across the reach
+    finer = coarse.edge_length * np.sqrt(len(coarse.faces) / suggested)
+    assert within / finer == pytest.approx(1.5 * WEB_MIN_EDGES, rel=0.1)
+
+    # a roof: two planes meeting at 90 degrees along the ridge x = 0.5
+    roof = tmp_path / "roof.obj"
+    x, y = np.meshgrid(np.linspace(0, 1, 21), np.linspace(0, 1, 21))
+    z = 0.5 - np.abs(x - 0.5)
+    verts = np.c_[x.ravel(), y.ravel(), z.ravel()]
+    trimesh.Trimesh(verts, _grid_faces(21), process=False).export(roof)
+    sim = build_simmesh(load_mesh(roof), target_faces=20000)
+    ridge = np.array([0.5, 0.5, 0.5])
+    assert surface_fold(sim.vertices, sim.faces, ridge, within) == pytest.approx(90.0, abs=1.0)
+    flat = surface_fold(sim.vertices, sim.faces, [0.2, 0.5, 0.2], 0.1)
+    assert flat == pytest.approx(0.0, abs=1e-6)
+    said = line(sim, ridge, radius)
+    assert "folds sharply (it turns 90 degrees" in said and "a point on a smoother part" in said
+
+
+def _grid_faces(n: int) -> np.ndarray:
+    """The triangles of an ``n`` x ``n`` vertex grid (row-major), two per cell."""
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
+    a = (i * n + j).ravel()
+    return np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
 
 
 @pytest.mark.parametrize("case", ["plate", "plate-on-plate", "on-the-small-plate", "mud"])
