@@ -29,6 +29,9 @@ from crackbake.network import Segments
 BIN_PER_REACH = 0.25
 #: Relative slack on reaches, covering float32 rounding in the shader.
 _SLACK = 1e-3
+#: Faces from which :func:`face_bins` measures them in one kernel pass (:func:`_face_geometry`,
+#: the same bits): below it numpy takes milliseconds, less than loading the kernel.
+KERNEL_FACES = 100_000
 
 
 @dataclass(eq=False)
@@ -153,13 +156,19 @@ def face_bins(
     extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
     cell = max(BIN_PER_REACH * max(max_distance, half_width), extent / 2**16, 1e-30)
     # A face's bin grows with its extent and with the part of its reach above the clamp (a face
-    # stretched in UV has a wide texel footprint), never with the clamp itself.  One pass over
-    # the faces: the numpy of face_reach and _face_boxes made a dozen (F, 3) temporaries (1.3 s
-    # at 1.5M faces); the kernel does their arithmetic in their order, so the same bits.
-    reach, lo, hi, size = _face_geometry(
-        np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int64),
-        np.ascontiguousarray(uv, np.float64), float(res), float(max_distance), half_width,
-        0.5 * float(min_px), 1.0 + _SLACK)  # fmt: skip
+    # stretched in UV has a wide texel footprint), never with the clamp itself.
+    if n_faces >= KERNEL_FACES:
+        # One pass: the numpy below makes a dozen (F, 3) temporaries (1.3 s at 1.5M faces);
+        # the kernel does its arithmetic in its order, so the same bits.
+        reach, lo, hi, size = _face_geometry(
+            np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int64),
+            np.ascontiguousarray(uv, np.float64), float(res), float(max_distance), half_width,
+            0.5 * float(min_px), 1.0 + _SLACK)  # fmt: skip
+    else:
+        reach = face_reach(vertices, faces, uv, res, max_distance, half_width, min_px)
+        excess = reach / (1 + _SLACK) - max(max_distance, half_width)
+        lo, hi = _face_boxes(vertices, faces)
+        size = np.maximum((hi - lo).max(axis=1), excess)
     face_bin = bin_faces(lo, hi, cell, size)
 
     order = np.argsort(face_bin, kind="stable")
@@ -331,3 +340,12 @@ def _bin_candidates(
                 out[bin_start[bi] + j] = found[e]
                 bound[bin_start[bi] + j] = max(np.sqrt(gaps[e]) - slack, 0.0)
     return counts
+
+
+def warm() -> None:
+    """Compile (or load from numba's cache) :func:`_face_geometry`, which only meshes of
+    :data:`KERNEL_FACES` faces or more reach (:mod:`crackbake.precompile`'s plates are
+    smaller): one triangle, with the argument types :func:`face_bins` passes."""
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    _face_geometry(v, np.array([[0, 1, 2]], np.int64), v[:, :2].copy(), 64.0, 0.1, 0.01, 0.5,
+                   1.0 + _SLACK)
