@@ -348,3 +348,19 @@ def test_indexed_stress_draw_gives_the_unindexed_pictures(gl_ctx):
     assert indexed["inside"].any()
     for name, image in soup.items():
         assert np.array_equal(image, indexed[name], equal_nan=True), name
+
+
+def test_at_points_interpolates_the_closest_point_as_the_einsum_did():
+    from crackbake.bake.stress import at_points
+    from crackbake.geometry import SurfaceIndex
+
+    uvmesh = _wavy_uvmesh()
+    v, f = np.asarray(uvmesh.vertices), np.asarray(uvmesh.faces, np.int64)
+    rng = np.random.default_rng(4)
+    nodal = rng.normal(size=(len(v), 14))
+    points = rng.random((500, 3)) * [1.0, 1.0, 0.2] - [0.0, 0.0, 0.1]
+    face, bary, _ = SurfaceIndex(v, f).closest(points)
+    want = np.einsum("kc,kcn->kn", bary, nodal[f[face]])
+    assert at_points(v, f, nodal, points).view(np.int64).tolist() == want.view(np.int64).tolist()
+    # At a vertex of the surface, the vertex's own values.
+    np.testing.assert_allclose(at_points(v, f, nodal, v[:36]), nodal[:36], atol=1e-12)

@@ -164,7 +164,13 @@ def at_points(vertices: np.ndarray, faces: np.ndarray, nodal: np.ndarray,
     """Nodal values (N, C) of a mesh interpolated at the closest mesh point to each of
     ``points`` (K, 3): (K, C).  On a cracked mesh a point takes the side of the crack it is on."""
     face, bary, _ = SurfaceIndex(vertices, faces).closest(points)
-    return np.einsum("kc,kcn->kn", bary, nodal[faces[face]])
+    corner = faces[face]
+    # Corner by corner, in the einsum's order ((0 + 1) + 2): the same bits without its
+    # (K, 3, C) gather (250 MB at a 1.5M-face asset's vertices).
+    out = bary[:, 0, None] * nodal[corner[:, 0]]
+    out += bary[:, 1, None] * nodal[corner[:, 1]]
+    out += bary[:, 2, None] * nodal[corner[:, 2]]
+    return out
 
 
 def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, initial=None,
