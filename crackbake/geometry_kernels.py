@@ -82,3 +82,84 @@ def solid_faces_kernel(v: np.ndarray, f: np.ndarray, rel: float) -> np.ndarray:
         cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
         out[k] = np.sqrt(cx * cx + cy * cy + cz * cz) > rel * (longest * longest)
     return out
+
+
+@njit(cache=True, nogil=True)
+def closed_oriented_kernel(faces: np.ndarray, group: np.ndarray) -> bool:
+    """Whether faces ``faces`` (F, 3) int64, their vertices welded by ``group`` (V,) int64 (one
+    number per position, :func:`crackbake.geometry.position_groups`), close a surface with one
+    orientation: every directed edge a -> b is used once and its reverse b -> a once, and no
+    face repeats a corner."""
+    n_vertices = len(group)
+    # Each position named by its first vertex: the file's order keeps neighbours near in
+    # memory, where the groups' hash order scattered them (1.1 s at 1.5M faces, now 0.1 s).
+    first = np.full(n_vertices, n_vertices, np.int64)
+    for i in range(n_vertices):
+        if first[group[i]] == n_vertices:
+            first[group[i]] = i
+    n = len(faces)
+    f = np.empty((n, 3), np.int64)
+    start = np.zeros(n_vertices + 1, np.int64)
+    for k in range(n):
+        for c in range(3):
+            f[k, c] = first[group[faces[k, c]]]
+    for k in range(n):
+        for c in range(3):
+            a, b = f[k, c], f[k, (c + 1) % 3]
+            if a == b:
+                return False
+            start[a + 1] += 1
+    for x in range(n_vertices):
+        start[x + 1] += start[x]
+    fill = start[:-1].copy()
+    head = np.empty(3 * n, np.int64)  # the ends of each vertex's outgoing edges
+    for k in range(n):
+        for c in range(3):
+            a = f[k, c]
+            head[fill[a]] = f[k, (c + 1) % 3]
+            fill[a] += 1
+    for a in range(n_vertices):
+        for q in range(start[a], start[a + 1]):
+            b = head[q]
+            same = 0
+            for r in range(start[a], start[a + 1]):
+                if head[r] == b:
+                    same += 1
+            back = 0
+            for r in range(start[b], start[b + 1]):
+                if head[r] == a:
+                    back += 1
+            if same != 1 or back != 1:
+                return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def eye_view_kernel(v: np.ndarray, f: np.ndarray, eye: np.ndarray) -> tuple:
+    """For faces ``f`` (F, 3) int64 over ``v`` (V, 3) seen from ``eye`` (3,): six times the
+    signed volume they enclose (> 0: wound counter-clockwise seen from outside), their winding
+    number around the eye (solid angles over 4 pi, Van Oosterom and Strackee's formula: 0
+    outside a closed surface, +-1 inside) and a lower bound of the eye's distance to them
+    (each face's nearest corner less its longest edge)."""
+    volume = 0.0
+    angle = 0.0
+    near = np.inf
+    for k in range(len(f)):
+        i, j, m = f[k, 0], f[k, 1], f[k, 2]
+        ax, ay, az = v[i, 0] - eye[0], v[i, 1] - eye[1], v[i, 2] - eye[2]
+        bx, by, bz = v[j, 0] - eye[0], v[j, 1] - eye[1], v[j, 2] - eye[2]
+        cx, cy, cz = v[m, 0] - eye[0], v[m, 1] - eye[1], v[m, 2] - eye[2]
+        # the volume about the eye: the same sum about any point for a closed surface
+        triple = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+        volume += triple
+        la = np.sqrt(ax * ax + ay * ay + az * az)
+        lb = np.sqrt(bx * bx + by * by + bz * bz)
+        lc = np.sqrt(cx * cx + cy * cy + cz * cz)
+        den = (la * lb * lc + (ax * bx + ay * by + az * bz) * lc
+               + (ax * cx + ay * cy + az * cz) * lb + (bx * cx + by * cy + bz * cz) * la)
+        angle += 2.0 * np.arctan2(triple, den)
+        edge = max(np.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2),
+                   np.sqrt((cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2),
+                   np.sqrt((ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2))
+        near = min(near, min(la, lb, lc) - edge)
+    return volume, angle / (4.0 * np.pi), near

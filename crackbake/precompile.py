@@ -45,15 +45,18 @@ CASES: dict[str, list[str]] = {
 #: clone's ``make test`` (2 cores): iben 73 s, shrinkage 17 s, thesis 49 s, decal 23 s, tile
 #: 21 s, and the warm-ups of kernels the small plates never reach: ``halving`` (above 2048²,
 #: about 6 s), ``collapse`` (the proxy's decimation above 200k faces, about 15 s) and
-#: ``preview`` (the up axis of a mesh with volume, about 2 s); so the lanes take about 98 s
-#: and 108 s.
-LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage", "halving", "preview"),
-                                      ("thesis", "decal", "tile", "collapse"))
+#: ``preview`` (the up axis of a mesh with volume, about 2 s), ``stress`` (the proxy's stress
+#: bake) and ``grid`` (the crack bake's face pass above 100k faces), a few seconds each; so the
+#: lanes take about 100 s and 110 s.
+LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage", "halving", "preview", "stress"),
+                                      ("thesis", "decal", "tile", "collapse", "grid"))
 
 #: The warm-ups: kernels no small run reaches, compiled by calling their module's ``warm``.
 WARM_UPS = {"halving": "crackbake.exchange.halving",
             "collapse": "crackbake.simulate.simmesh.collapse",
-            "preview": "crackbake.bake.preview"}
+            "preview": "crackbake.bake.preview",
+            "stress": "crackbake.bake.stress",
+            "grid": "crackbake.bake.grid"}
 
 
 def textured_plate_obj(path: Path) -> Path:

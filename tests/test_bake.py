@@ -231,6 +231,31 @@ def _point_segment_distance(p, a, b):
     return np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
 
 
+def test_face_geometry_kernel_gives_the_numpy_bits():
+    # face_bins' one-pass kernel against face_reach and _face_boxes, the numpy it replaced: the
+    # same float64 bits (reach, boxes, bin sizes), with faces of no UV area (footprint 0), a
+    # mesh crossing 0 (-0.0 against 0.0 in the boxes) and UVs stretched along one axis.
+    from crackbake.bake.grid import _SLACK, _face_boxes, _face_geometry
+
+    rng = np.random.default_rng(3)
+    m = plate_mesh(12)
+    v = (m.vertices - 0.5) * [3.0, 1.0, 0.0] + rng.normal(0, 1e-3, m.vertices.shape)
+    v[::7, 2] = 0.0
+    v[::5, 2] = -0.0
+    f = np.asarray(m.faces, np.int64)
+    uv = m.vertices[:, :2] * [1.0, 0.3] + rng.normal(0, 1e-3, (len(v), 2))
+    uv[f[:4].ravel()] = 0.5  # four faces of no UV area
+    for res, clamp, half, min_px in ((256, 0.05, 0.002, 0.0), (4096, 0.0, 0.0, 3.0),
+                                     (64, 0.001, 0.2, 1.5)):
+        reach = face_reach(v, f, uv, res, clamp, half, min_px)
+        lo, hi = _face_boxes(v, f)
+        size = np.maximum((hi - lo).max(axis=1), reach / (1 + _SLACK) - max(clamp, half))
+        got = _face_geometry(v, f, uv, float(res), clamp, half, 0.5 * min_px, 1.0 + _SLACK)
+        for want, have in zip((reach, lo, hi, size), got, strict=True):
+            assert want.view(np.int64).tolist() == have.view(np.int64).tolist()
+        assert (got[0][:4] == max(clamp, half) * (1 + _SLACK)).all()  # footprint 0
+
+
 def test_face_bins_list_every_segment_within_reach_with_valid_bounds():
     # A 20 x 20 plate of 800 faces, some stretched in UV, and 300 short segments on it.
     rng = np.random.default_rng(0)

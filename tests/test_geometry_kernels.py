@@ -8,6 +8,8 @@ import trimesh
 from crackbake.geometry import face_cross
 from crackbake.geometry_kernels import (
     area_centre_kernel,
+    closed_oriented_kernel,
+    eye_view_kernel,
     facing_sum_kernel,
     solid_faces_kernel,
 )
@@ -83,3 +85,37 @@ def test_solid_faces_match_the_numpy_test_value_for_value():
         got = solid_faces_kernel(v, f, rel)
         assert np.array_equal(got, want)
     assert not got[:2].any() and not got[3]
+
+
+def _groups(v):
+    from crackbake.geometry import position_groups
+
+    return position_groups(np.ascontiguousarray(v, np.float64))
+
+
+def test_closed_oriented_accepts_a_closed_surface_split_at_seams_only():
+    s = trimesh.creation.icosphere(2)
+    v, f = np.asarray(s.vertices), np.asarray(s.faces, np.int64)
+    assert closed_oriented_kernel(f, _groups(v))
+    # Every face given its own corners (a UV-seam split everywhere): welded by position, closed.
+    sv, sf = v[f.ravel()], np.arange(3 * len(f), dtype=np.int64).reshape(-1, 3)
+    assert closed_oriented_kernel(sf, _groups(sv))
+    assert not closed_oriented_kernel(f[1:], _groups(v))  # a hole
+    flipped = f.copy()
+    flipped[0] = flipped[0, ::-1]  # one face wound the other way
+    assert not closed_oriented_kernel(flipped, _groups(v))
+    doubled = np.vstack([f, f[:1]])  # an edge of three faces
+    assert not closed_oriented_kernel(doubled, _groups(v))
+    pinched = f.copy()
+    pinched[0, 1] = pinched[0, 0]  # a face repeating a corner
+    assert not closed_oriented_kernel(pinched, _groups(v))
+
+
+def test_eye_view_gives_volume_winding_and_a_distance_bound():
+    box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))  # wound counter-clockwise outside
+    v, f = np.asarray(box.vertices), np.asarray(box.faces, np.int64)
+    volume, winding, near = eye_view_kernel(v, f, np.array([5.0, 0.0, 0.0]))
+    assert np.isclose(volume, 6 * 8.0) and abs(winding) < 1e-9
+    assert 0 < near <= 4.0  # the box is 4 from the eye; the bound never exceeds it
+    volume, winding, _ = eye_view_kernel(v, f[:, ::-1], np.array([0.2, 0.1, -0.3]))
+    assert np.isclose(volume, -6 * 8.0) and np.isclose(winding, -1.0)  # inside, turned out

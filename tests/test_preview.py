@@ -7,7 +7,8 @@ from dataclasses import replace
 import numpy as np
 from conftest import plate_mesh
 
-from crackbake.bake.preview import preview_direction, render_preview
+from crackbake.bake import preview
+from crackbake.bake.preview import hidden_side, preview_direction, render_preview
 from crackbake.network import Crack, CrackNetwork, mesh_info
 
 
@@ -56,3 +57,41 @@ def test_preview_direction_faces_the_cracks():
     assert np.isclose(np.linalg.norm(d), 1.0) and d[2] < 0  # the cracked side faces -z
     crack.faces = np.array([0, 0])
     assert preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)), (0, 1, 0))[2] > 0
+
+
+def _sphere():
+    import trimesh
+
+    s = trimesh.creation.uv_sphere(radius=1.0, count=[48, 48])
+    v = np.asarray(s.vertices)
+    uv = 0.5 + 0.5 * v[:, :2]
+    return v, np.asarray(s.faces, np.int64), uv, v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_hidden_side_only_for_a_closed_surface_seen_from_outside():
+    v, f, _, _ = _sphere()
+    eye = np.array([0.0, 0.0, 4.0])
+    assert hidden_side(v, f, eye, 0.1) == "back"
+    assert hidden_side(v, f[:, ::-1], eye, 0.1) == "front"  # wound clockwise outside
+    assert hidden_side(v, f[2:], eye, 0.1) is None  # open: its inside shows through
+    assert hidden_side(v, f, np.array([0.0, 0.1, 0.2]), 0.01) is None  # the eye inside
+    assert hidden_side(v, f, eye, 1.6) is None  # the near plane would cut it
+
+
+def test_culled_preview_equals_the_full_draw_on_a_closed_surface(gl_ctx, monkeypatch):
+    # The faces turned away are hidden behind the others: the pictures agree but for a few
+    # silhouette samples where a face turned away won the depth test.
+    v, f, uv, n = _sphere()
+    rng = np.random.default_rng(0)
+    color = (rng.random((64, 64, 3)) * 255).astype(np.uint8)
+    args = (v, f, uv, n, color)
+    monkeypatch.setattr(preview, "CULL_FACES", 10**9)
+    full = render_preview(*args, size=256, ctx=gl_ctx)
+    monkeypatch.setattr(preview, "CULL_FACES", 0)
+    culled = render_preview(*args, size=256, ctx=gl_ctx)
+    assert (full != culled).any(axis=2).sum() <= 0.001 * 256 * 256
+    # Turned inside out, the side wound towards the camera is culled and nothing changes.
+    turned = (v, f[:, ::-1], uv, -n, color)
+    monkeypatch.setattr(preview, "CULL_FACES", 0)
+    assert (render_preview(*turned, size=256, ctx=gl_ctx) != full).any(axis=2).sum() \
+        <= 0.001 * 256 * 256

@@ -295,3 +295,72 @@ def test_reported_initial_separation_and_gutter_limit(gl_ctx, islands):
     assert (maps.stress0.p1[far] == 0).all() and (maps.stress0.sep[far] == 0).all()
     near = ~maps.inside & (distance_transform_edt(~maps.inside) <= 2.0)
     assert np.allclose(maps.stress0.p1[near], 1.0, atol=1e-5)
+
+
+def _wavy_uvmesh():
+    """A 6 x 6 plate, bumped, with one face of no area and two faces copied by UV wraps."""
+    mesh = plate_mesh(6)
+    v = mesh.vertices.copy()
+    v[:, 2] = 0.1 * np.sin(3 * v[:, 0]) * np.cos(2 * v[:, 1])
+    n = len(v)
+    # A face of no area (three corners at one point) with a UV triangle of its own.
+    v = np.vstack([v, np.tile([0.5, 0.5, 0.3], (3, 1))])
+    f = np.vstack([mesh.faces, [[n, n + 1, n + 2]]])
+    uv = np.vstack([mesh.uv, [[0.1, 0.1], [0.3, 0.1], [0.1, 0.3]]])
+    normals = np.vstack([mesh.normals, np.tile([0.0, 0.0, 1.0], (3, 1))])
+    return UVMesh(vertices=v, faces=f, uv=uv, normals=normals,
+                  vertex_map=np.arange(len(v)), method="kept", overlap_fraction=0.0,
+                  padding_px=0, wraps=np.array([[3, 1, 0], [len(f) - 1, 0, -1], [40, -1, 1]],
+                                               np.int64))
+
+
+def test_vertex_rows_are_the_unindexed_rows_of_the_asset_faces():
+    # The indexed draw of a proxy's stress bake: data[index] holds, bit for bit, the rows
+    # draw_data and wrapped_rows give for the asset's own faces (the unindexed draw's buffer).
+    from crackbake.bake.stress import vertex_rows, wrapped_rows
+    from crackbake.bake.stress_fields import draw_data
+
+    uvmesh = _wavy_uvmesh()
+    rng = np.random.default_rng(2)
+    n = len(uvmesh.vertices)
+    tangents = np.column_stack([rng.normal(size=(n, 3)), np.sign(rng.normal(size=n))])
+    nodal = rng.normal(size=(n, 14))
+    faces = np.arange(len(uvmesh.faces))
+    want = wrapped_rows(draw_data(uvmesh, tangents, uvmesh.vertices, uvmesh.faces, faces, nodal),
+                        faces, uvmesh.wraps)
+    data, index = vertex_rows(uvmesh, tangents, nodal, uvmesh.wraps)
+    assert index.dtype == np.uint32 and len(index) == len(want)
+    assert len(data) < len(want)  # shared rows
+    assert data[index].view(np.uint32).tolist() == want.view(np.uint32).tolist()
+
+
+def test_indexed_stress_draw_gives_the_unindexed_pictures(gl_ctx):
+    from crackbake.bake.stress import _render, vertex_rows
+
+    uvmesh = _wavy_uvmesh()
+    rng = np.random.default_rng(3)
+    n = len(uvmesh.vertices)
+    tangents = np.column_stack([rng.normal(size=(n, 3)), np.ones(n)])
+    nodal = np.abs(rng.normal(size=(n, 14)))
+    data, index = vertex_rows(uvmesh, tangents, nodal, uvmesh.wraps)
+    indexed = _render(gl_ctx, data, 64, 32, {}, index)
+    soup = _render(gl_ctx, np.ascontiguousarray(data[index]), 64, 32, {})
+    assert indexed["inside"].any()
+    for name, image in soup.items():
+        assert np.array_equal(image, indexed[name], equal_nan=True), name
+
+
+def test_at_points_interpolates_the_closest_point_as_the_einsum_did():
+    from crackbake.bake.stress import at_points
+    from crackbake.geometry import SurfaceIndex
+
+    uvmesh = _wavy_uvmesh()
+    v, f = np.asarray(uvmesh.vertices), np.asarray(uvmesh.faces, np.int64)
+    rng = np.random.default_rng(4)
+    nodal = rng.normal(size=(len(v), 14))
+    points = rng.random((500, 3)) * [1.0, 1.0, 0.2] - [0.0, 0.0, 0.1]
+    face, bary, _ = SurfaceIndex(v, f).closest(points)
+    want = np.einsum("kc,kcn->kn", bary, nodal[f[face]])
+    assert at_points(v, f, nodal, points).view(np.int64).tolist() == want.view(np.int64).tolist()
+    # At a vertex of the surface, the vertex's own values.
+    np.testing.assert_allclose(at_points(v, f, nodal, v[:36]), nodal[:36], atol=1e-12)

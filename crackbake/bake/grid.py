@@ -29,6 +29,9 @@ from crackbake.network import Segments
 BIN_PER_REACH = 0.25
 #: Relative slack on reaches, covering float32 rounding in the shader.
 _SLACK = 1e-3
+#: Faces from which :func:`face_bins` measures them in one kernel pass (:func:`_face_geometry`,
+#: the same bits): below it numpy takes milliseconds, less than loading the kernel.
+KERNEL_FACES = 100_000
 
 
 @dataclass(eq=False)
@@ -150,14 +153,22 @@ def face_bins(
         return FaceBins(np.zeros(n_faces, np.uint32), np.zeros(2, np.uint32),
                         np.zeros(1, np.uint32), np.zeros(1, np.float32))  # fmt: skip
     half_width = 0.5 * float(segments.width.max())
-    reach = face_reach(vertices, faces, uv, res, max_distance, half_width, min_px)
     extent = float((vertices.max(axis=0) - vertices.min(axis=0)).max())
     cell = max(BIN_PER_REACH * max(max_distance, half_width), extent / 2**16, 1e-30)
     # A face's bin grows with its extent and with the part of its reach above the clamp (a face
     # stretched in UV has a wide texel footprint), never with the clamp itself.
-    excess = reach / (1 + _SLACK) - max(max_distance, half_width)
-    lo, hi = _face_boxes(vertices, faces)
-    size = np.maximum((hi - lo).max(axis=1), excess)
+    if n_faces >= KERNEL_FACES:
+        # One pass: the numpy below makes a dozen (F, 3) temporaries (1.3 s at 1.5M faces);
+        # the kernel does its arithmetic in its order, so the same bits.
+        reach, lo, hi, size = _face_geometry(
+            np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int64),
+            np.ascontiguousarray(uv, np.float64), float(res), float(max_distance), half_width,
+            0.5 * float(min_px), 1.0 + _SLACK)  # fmt: skip
+    else:
+        reach = face_reach(vertices, faces, uv, res, max_distance, half_width, min_px)
+        excess = reach / (1 + _SLACK) - max(max_distance, half_width)
+        lo, hi = _face_boxes(vertices, faces)
+        size = np.maximum((hi - lo).max(axis=1), excess)
     face_bin = bin_faces(lo, hi, cell, size)
 
     order = np.argsort(face_bin, kind="stable")
@@ -187,6 +198,55 @@ def _face_boxes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np
     """World bounding box (lo, hi), each (F, 3), of every face."""
     p0, p1, p2 = (vertices[faces[:, k]] for k in range(3))
     return np.minimum(np.minimum(p0, p1), p2), np.maximum(np.maximum(p0, p1), p2)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")  # x / 0 is inf or nan, as in numpy
+def _face_geometry(vertices, faces, uv, res, max_distance, half_width, half_px, grow):
+    """:func:`face_reach` (F,), :func:`_face_boxes` (F, 3) twice and each face's bin size (F,):
+    ``max(box extent, reach / grow - max(max_distance, half_width))``, in one pass.
+
+    The arithmetic is the numpy's, operation for operation (``half_px`` is ``0.5 * min_px``,
+    ``grow`` is ``1 + _SLACK``), so the results are the same bits."""
+    n = faces.shape[0]
+    reach = np.empty(n, np.float64)
+    lo = np.empty((n, 3), np.float64)
+    hi = np.empty((n, 3), np.float64)
+    size = np.empty(n, np.float64)
+    clamp = max(max_distance, half_width)
+    dpx = np.empty(3, np.float64)
+    dpy = np.empty(3, np.float64)
+    for i in range(n):
+        a, b, c = faces[i, 0], faces[i, 1], faces[i, 2]
+        t0x, t0y = uv[a, 0] * res, uv[a, 1] * res
+        q1x, q1y = uv[b, 0] * res - t0x, uv[b, 1] * res - t0y
+        q2x, q2y = uv[c, 0] * res - t0x, uv[c, 1] * res - t0y
+        det = q1x * q2y - q1y * q2x
+        ext = 0.0
+        for k in range(3):
+            p0, p1, p2 = vertices[a, k], vertices[b, k], vertices[c, k]
+            e1, e2 = p1 - p0, p2 - p0
+            dpx[k] = (e1 * q2y - e2 * q1y) / det
+            dpy[k] = (e2 * q1x - e1 * q2x) / det
+            # np.minimum/np.maximum's rule (NaN wins, the second of two equals: -0.0 or 0.0)
+            m0 = p0 if (p0 < p1 or np.isnan(p0)) else p1
+            m1 = m0 if (m0 < p2 or np.isnan(m0)) else p2
+            x0 = p0 if (p0 > p1 or np.isnan(p0)) else p1
+            x1 = x0 if (x0 > p2 or np.isnan(x0)) else p2
+            lo[i, k] = m1
+            hi[i, k] = x1
+            d = x1 - m1
+            ext = d if k == 0 else (ext if (ext >= d or np.isnan(ext)) else d)
+        # np.einsum("ij,ij->i") adds a row's three products as (x + z) + y
+        foot = np.sqrt((dpx[0] * dpx[0] + dpx[2] * dpx[2] + dpx[1] * dpx[1])
+                       + (dpy[0] * dpy[0] + dpy[2] * dpy[2] + dpy[1] * dpy[1]))
+        if not np.isfinite(foot):  # no UV area: no texels, its reach never matters
+            foot = 0.0
+        drawn = max(half_width, half_px * foot)
+        r = max(max_distance, drawn + foot) * grow
+        reach[i] = r
+        excess = r / grow - clamp
+        size[i] = ext if (ext >= excess or np.isnan(ext)) else excess
+    return reach, lo, hi, size
 
 
 def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
@@ -280,3 +340,12 @@ def _bin_candidates(
                 out[bin_start[bi] + j] = found[e]
                 bound[bin_start[bi] + j] = max(np.sqrt(gaps[e]) - slack, 0.0)
     return counts
+
+
+def warm() -> None:
+    """Compile (or load from numba's cache) :func:`_face_geometry`, which only meshes of
+    :data:`KERNEL_FACES` faces or more reach (:mod:`crackbake.precompile`'s plates are
+    smaller): one triangle, with the argument types :func:`face_bins` passes."""
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    _face_geometry(v, np.array([[0, 1, 2]], np.int64), v[:, :2].copy(), 64.0, 0.1, 0.01, 0.5,
+                   1.0 + _SLACK)

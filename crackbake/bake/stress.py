@@ -164,7 +164,13 @@ def at_points(vertices: np.ndarray, faces: np.ndarray, nodal: np.ndarray,
     """Nodal values (N, C) of a mesh interpolated at the closest mesh point to each of
     ``points`` (K, 3): (K, C).  On a cracked mesh a point takes the side of the crack it is on."""
     face, bary, _ = SurfaceIndex(vertices, faces).closest(points)
-    return np.einsum("kc,kcn->kn", bary, nodal[faces[face]])
+    corner = faces[face]
+    # Corner by corner, in the einsum's order ((0 + 1) + 2): the same bits without its
+    # (K, 3, C) gather (250 MB at a 1.5M-face asset's vertices).
+    out = bary[:, 0, None] * nodal[corner[:, 0]]
+    out += bary[:, 1, None] * nodal[corner[:, 1]]
+    out += bary[:, 2, None] * nodal[corner[:, 2]]
+    return out
 
 
 def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, initial=None,
@@ -212,16 +218,16 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
                          np.asarray(result.separation, np.float64))
     first = on_final_mesh(v0, f0, nodal_values(v0, f0, s0, sep0), v1)
     nodal = np.concatenate([first, final], axis=1)
+    index = None
     if getattr(initial, "proxy", None) is None:
         asset_face = np.asarray(result.asset_face, np.int64)
         data = draw_data(uvmesh, tan, v1, f1, asset_face, nodal)
+        data = wrapped_rows(data, asset_face, getattr(uvmesh, "wraps", None))
     else:  # sim nodes lie near the asset, not in its faces: draw the asset at its own vertices
-        asset_face = np.arange(len(uvmesh.faces))
-        data = draw_data(uvmesh, tan, uvmesh.vertices, uvmesh.faces, asset_face,
-                         at_points(v1, f1, nodal, uvmesh.vertices))
-    data = wrapped_rows(data, asset_face, getattr(uvmesh, "wraps", None))
+        data, index = vertex_rows(uvmesh, tan, at_points(v1, f1, nodal, uvmesh.vertices),
+                                  getattr(uvmesh, "wraps", None))
     timings["prepare"] = time.perf_counter() - t0
-    planes = _render(ctx, data, res, tile, timings)
+    planes = _render(ctx, data, res, tile, timings, index)
     t1 = time.perf_counter()
     inside = planes.pop("inside")
     source = _sources(inside, dilate_px)
@@ -231,6 +237,73 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     timings["principal"] = time.perf_counter() - t2
     return StressMaps(res=res, stress0=maps["stress0"], stress=maps["stress"], inside=inside,
                       timings=timings)
+
+
+def vertex_rows(uvmesh, tangents: np.ndarray, nodal: np.ndarray,
+                wraps: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The asset's own faces for an indexed draw: rows (V', 9 + C) float32 and indices (3M,)
+    uint32, the same corner values as :func:`draw_data` with each face its own asset face,
+    followed by :func:`wrapped_rows`' copies, in the same order.
+
+    A corner's barycentrics in its own face are exactly 1 and 0 (the same products on both
+    sides of the division), so its row is its vertex's: one row per vertex, where the unindexed
+    buffer held three per face (430 MB at 1.5M faces, built, copied and uploaded: 1.3 s).  A
+    face of no area interpolates the surface attributes of all three corners at its first
+    vertex (``draw_data``'s fallback), so it gets three rows of its own.
+
+    Parameters
+    ----------
+    uvmesh : UVMesh
+        ``vertices`` (V, 3), ``faces`` (M, 3), ``uv`` (V, 2), ``normals`` (V, 3).
+    tangents : (V, 4) float
+    nodal : (V, C) float
+        The fields at the asset's vertices.
+    wraps : (K, 3) int, optional
+        ``UVMesh.wraps``: (face, du, dv) of each copy drawn shifted by (-du, -dv).
+    """
+    faces = np.asarray(uvmesh.faces, np.int64)
+    n_vertices = len(uvmesh.vertices)
+    rows = np.empty((n_vertices, 9 + nodal.shape[1]), np.float32)
+    rows[:, 0:2] = uvmesh.uv
+    rows[:, 2:6] = tangents
+    rows[:, 6:9] = uvmesh.normals
+    rows[:, 9:] = nodal
+    index = faces.copy()
+    flat = _flat_faces(np.ascontiguousarray(uvmesh.vertices, np.float64), faces)
+    if len(flat):  # uv, T, w, N of all three corners at the first; the fields their own
+        own = rows[faces[flat].reshape(-1)]
+        own[:, :9] = np.repeat(rows[faces[flat, 0], :9], 3, axis=0)
+        rows = np.concatenate([rows, own])
+        index[flat] = n_vertices + np.arange(3 * len(flat)).reshape(-1, 3)
+    if wraps is None or not len(wraps):
+        return rows, index.astype(np.uint32).reshape(-1)
+    wraps = np.asarray(wraps, np.int64)
+    corners = rows[index[wraps[:, 0]].reshape(-1)]
+    corners[:, 0:2] -= np.repeat(wraps[:, 1:3], 3, axis=0).astype(np.float32)
+    copies = len(rows) + np.arange(3 * len(wraps)).reshape(-1, 3)
+    return (np.concatenate([rows, corners]),
+            np.concatenate([index, copies]).astype(np.uint32).reshape(-1))
+
+
+@njit(cache=True, nogil=True)
+def _flat_faces(vertices, faces):  # pragma: no cover - numba
+    """Faces whose Gram determinant ``d11 d22 - d12^2`` (:func:`draw_data`'s, the same sums)
+    is 0: (K,) int64."""
+    out = np.empty(len(faces), np.int64)
+    n = 0
+    for f in range(len(faces)):
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        d11 = d12 = d22 = 0.0
+        for a in range(3):
+            e1 = vertices[i1, a] - vertices[i0, a]
+            e2 = vertices[i2, a] - vertices[i0, a]
+            d11 += e1 * e1
+            d12 += e1 * e2
+            d22 += e2 * e2
+        if d11 * d22 - d12 * d12 == 0.0:
+            out[n] = f
+            n += 1
+    return out[:n]
 
 
 def wrapped_rows(data: np.ndarray, asset_face: np.ndarray, wraps: np.ndarray | None) -> np.ndarray:
@@ -257,10 +330,11 @@ _OUT = ("xx", "yy", "xy", "sep")
 _BAND_TEXELS = 1 << 20
 
 
-def _render(ctx, data: np.ndarray, res: int, tile: int,
-            timings: dict[str, float]) -> dict[str, np.ndarray]:
+def _render(ctx, data: np.ndarray, res: int, tile: int, timings: dict[str, float],
+            index: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Draw both fields in one pass, band by band; planar images
-    ``<field>.<xx|yy|xy|sep>`` and ``inside``.
+    ``<field>.<xx|yy|xy|sep>`` and ``inside``.  ``data`` rows are drawn three a triangle, or
+    by ``index`` (3M,) uint32 when given.
 
     The eight targets are cleared to -1, so ``inside`` is where ``sep`` (>= 0 on every drawn
     texel) was written: a ninth target would exceed llvmpipe's eight draw buffers.
@@ -273,9 +347,11 @@ def _render(ctx, data: np.ndarray, res: int, tile: int,
                                       fragment_shader=shader_source("stress_bake.frag")))
         prog["u_res"].value = float(res)
         vbo = gl.keep(gl.ctx.buffer(data))
+        ibo = None if index is None else gl.keep(gl.ctx.buffer(index))
         vao = gl.keep(gl.ctx.vertex_array(
             prog, [(vbo, "2f 3f 1f 3f 3f 3f 1f 3f 3f 1f", "in_uv", "in_t", "in_w", "in_n",
-                    "in_sd0", "in_so0", "in_sep0", "in_sd", "in_so", "in_sep")]))
+                    "in_sd0", "in_so0", "in_sep0", "in_sd", "in_so", "in_sep")],
+            index_buffer=ibo, index_element_size=4))
         band = max(1, min(res, min(tile * tile, _BAND_TEXELS) // res))
         names = [f"{f}.{c}" for f in FIELDS for c in _OUT]
         images = {n: np.empty((res, res), np.float32) for n in names}
@@ -365,3 +441,11 @@ def _principal_maps(planes: dict[str, np.ndarray], name: str, res: int,
     _fill_principal(source, xx.reshape(-1), yy.reshape(-1), xy.reshape(-1), sep.reshape(-1),
                     p1.reshape(-1), p2.reshape(-1), flat[:, 0], flat[:, 1])
     return TensorMaps(xx=xx, yy=yy, xy=xy, p1=p1, p2=p2, dir=direction, sep=sep)
+
+
+def warm() -> None:
+    """Compile (or load from numba's cache) the kernel of :func:`vertex_rows`, which only a
+    proxy's stress bake reaches (assets above 200k faces; :mod:`crackbake.precompile`'s plates
+    are smaller)."""
+    v = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    _flat_faces(v, np.array([[0, 1, 2]], np.int64))
