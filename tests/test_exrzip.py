@@ -232,6 +232,24 @@ def test_each_chunk_is_the_transform_of_its_scanlines(tmp_path, compression):
     assert deflated > 0
 
 
+@pytest.mark.parametrize("width", [1, 2, 3, 64])
+def test_narrow_and_wide_rows_decode(tmp_path, width):
+    """The predictor's row views hold ``width - 1`` words (none for one pixel): every width
+    decodes to the planes in OpenEXR and OpenImageIO, smooth rows (deflated chunks) and
+    random ones (stored chunks) alike."""
+    rng = np.random.default_rng(width)
+    ramp = np.linspace(0, 1, 40 * width, dtype=np.float32).reshape(40, width)
+    planes = {
+        "a.V": ramp.astype(np.float16),
+        "b.V": ramp * 3,
+        "c.V": rng.integers(0, 2**32, (40, width), dtype=np.uint32),
+    }
+    path = tmp_path / "n.exr"
+    write_scanline(path, planes, {}, "zip")
+    _same(read_exr(path)[0], planes)
+    _same(_oiio(path), planes)
+
+
 @pytest.mark.parametrize("level", [None, 1, 2, 6])
 def test_every_deflate_gives_the_same_pixels(tmp_path, level):
     """The default chunks' deflate (ISA-L where installed, zlib-ng without it) and zlib-ng's

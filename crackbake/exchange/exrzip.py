@@ -110,11 +110,18 @@ def _predict_channel(cur, pred, shift, y0, y1, e0, half_line, h1, first_odd,
             p = np.int32(pred[y - shift, pb - 1])
             out[e] = np.uint8((w - p + 128) & 255)
             out[o] = np.uint8(((w >> 8) - (p >> 8) + 128) & 255)
-        for i in range(1, m):  # one store stream per loop: LLVM vectorises each
-            out[e + i] = np.uint8((np.int32(row[i]) - np.int32(row[i - 1]) + 128) & 255)
-        for i in range(1, m):
-            out[o + i] = np.uint8(((np.int32(row[i]) >> 8) - (np.int32(row[i - 1]) >> 8) + 128)
-                                  & 255)  # fmt: skip
+        # Views from the row's second word on, indexed by the loop counter alone: with
+        # ``out[e + i]`` numba's negative-index wrap-around of the sum stayed in the loop and
+        # kept LLVM from vectorising it (3x slower).  One store stream per loop; unsigned
+        # arithmetic, the same bytes mod 256.
+        cur1, prev1 = row[1:], row[:m - 1]
+        even, odd = out[e + 1:e + m], out[o + 1:o + m]
+        for i in range(m - 1):
+            even[i] = np.uint8((np.uint32(cur1[i]) - np.uint32(prev1[i]) + np.uint32(128))
+                               & np.uint32(255))  # fmt: skip
+        for i in range(m - 1):
+            odd[i] = np.uint8(((np.uint32(cur1[i]) >> 8) - (np.uint32(prev1[i]) >> 8)
+                               + np.uint32(128)) & np.uint32(255))  # fmt: skip
 
 
 @intrinsic
