@@ -41,10 +41,7 @@ try:  # the same module pngenc uses; stdlib zlib writes valid (slower) files too
     from zlib_ng import zlib_ng as _zlib
 except ImportError:  # pragma: no cover - zlib-ng is a dependency
     _zlib = zlib
-try:  # ISA-L's deflate (the default chunks' encoder, below); zlib-ng where it is missing
-    from isal import isal_zlib as _isal
-except ImportError:  # pragma: no cover - isal is a dependency
-    _isal = None
+from crackbake.exchange import isal_deflate  # the default chunks' encoder; zlib-ng without it
 
 #: Compressions written here, with the scanlines per chunk and the file's compression code.
 SCANLINE_COMPRESSIONS = {"zips": (1, 2), "zip": (16, 3)}
@@ -70,8 +67,8 @@ def deflate(data, level: int | None = None) -> bytes:
     """zlib stream of ``data`` (a buffer): ISA-L at :data:`ISAL_LEVEL` when ``level`` is None
     and it is installed, else zlib-ng (stdlib zlib without it) at ``level`` (None:
     :data:`ZIP_LEVEL`)."""
-    if level is None and _isal is not None:
-        return _isal.compress(data, ISAL_LEVEL)
+    if level is None and isal_deflate.AVAILABLE:
+        return isal_deflate.compress(data, ISAL_LEVEL)
     return _zlib.compress(data, ZIP_LEVEL if level is None else int(level))
 
 

@@ -31,10 +31,7 @@ try:  # an optional speed-up: the same bytes either way (module docstring)
     from zlib_ng import zlib_ng as _rle_zlib
 except ImportError:  # pragma: no cover - zlib-ng is a dependency; a bare install still works
     _rle_zlib = zlib
-try:  # the data texture's deflate (data_deflate)
-    from isal import isal_zlib as _isal
-except ImportError:  # pragma: no cover - isal is a dependency
-    _isal = None
+from crackbake.exchange import isal_deflate  # the data texture's deflate (data_deflate)
 
 PathLike = str | os.PathLike
 
@@ -57,8 +54,8 @@ def data_deflate(data) -> bytes:
     (``benchmarks/bench_write.py --levels``).  On the 8-bit maps Z_RLE stays: ISA-L wrote
     them twice as large.  zlib-ng level 3 where ISA-L is missing.
     """
-    if _isal is not None:
-        return _isal.compress(data, 1)
+    if isal_deflate.AVAILABLE:
+        return isal_deflate.compress(data, 1)
     return _rle_zlib.compress(data, 3)
 
 
