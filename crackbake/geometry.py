@@ -62,6 +62,23 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
+def corner_mean(corners: np.ndarray) -> np.ndarray:
+    """``corners.mean(axis=1)`` of (K, 3, ...) float64 corners (a face's three), bit for bit,
+    in about a third of the time: numpy's mean is a generic reduction, slow over an axis of 3.
+
+    numpy sums from 0 (``((0 + a) + b) + c``), which differs from ``(a + b) + c`` only in the
+    sign of a zero sum; adding 0.0 gives that zero numpy's sign, then both divide by 3.
+    """
+    c = np.asarray(corners)
+    if c.dtype != np.float64:  # numpy's own rules (float32 sums in float32 and so on)
+        return c.mean(axis=1)
+    out = c[:, 0] + c[:, 1]
+    out += c[:, 2]
+    out += 0.0
+    out /= 3.0
+    return out
+
+
 def unit_rows(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows of ``v`` (N, 3) scaled to unit length (zero rows stay zero) and their lengths (N,)."""
     length = np.linalg.norm(v, axis=1)

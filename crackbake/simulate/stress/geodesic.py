@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from crackbake.errors import CrackbakeWarning
-from crackbake.geometry import closest_on_triangles, edges, memo, shared_edges
+from crackbake.geometry import closest_on_triangles, corner_mean, edges, memo, shared_edges
 from crackbake.simulate.simmesh.manifold import split_nonmanifold
 from crackbake.simulate.stress.sources import _finite_vector
 
@@ -47,7 +47,7 @@ def _centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, flo
 
     def compute():
         tri = vertices[faces]
-        centroid = tri.mean(axis=1)
+        centroid = corner_mean(tri)
         off = tri - centroid[:, None]
         return centroid, float(np.sqrt(np.einsum("eka,eka->ek", off, off)).max())
 
