@@ -310,13 +310,30 @@ def memo(name: str, compute: Callable[[], tuple], *key) -> tuple:
     sim mesh's edges, shells and face centroids; each is computed once.  The arrays come back
     read-only, shared by every caller: copy one to change it.
     """
-    parts = [content_key(k) if isinstance(k, np.ndarray) else k for k in key]
-    full = (name, *parts)
+    full = _memo_key(name, key)
+    out = recall(full)
+    if out is None:
+        out = compute()
+        remember(full, out)
+    return out
+
+
+def _memo_key(name: str, key: tuple) -> tuple:
+    return (name, *(content_key(k) if isinstance(k, np.ndarray) else k for k in key))
+
+
+def recall(full: tuple) -> tuple | None:
+    """What :func:`remember` kept under ``full`` (a name and hashable parts), or None."""
     with _memo_lock:
         if full in _memo:
             _memo.move_to_end(full)
             return _memo[full]
-    out = compute()
+    return None
+
+
+def remember(full: tuple, out: tuple) -> None:
+    """Keep ``out`` (its arrays made read-only) under ``full``, for :func:`recall`; the
+    :data:`MEMO_SIZE` newest are kept, as :func:`memo`'s."""
     for a in out:
         if isinstance(a, np.ndarray):
             a.flags.writeable = False
@@ -324,7 +341,6 @@ def memo(name: str, compute: Callable[[], tuple], *key) -> tuple:
         _memo[full] = out
         while len(_memo) > MEMO_SIZE:
             _memo.popitem(last=False)
-    return out
 
 
 def forget() -> None:

@@ -511,7 +511,8 @@ def star_checks(network: Any, vertices: np.ndarray | None = None,
     straightness inside 0.6 reach (:func:`arm_straightness`), distances over
     ``vertices``/``faces`` (a fine mesh of the surface, the sim mesh; straight without),
     across touching shells closer than ``link`` (the sim edge; :func:`surface_distance`).
-    One fast-marching pass per impact, stopped at the reach.
+    One fast-marching pass per impact, stopped at the reach (none in a run: the stress field's
+    distance from the same point is kept, :func:`~crackbake.simulate.stress.impact_distance`).
 
     Returns
     -------
