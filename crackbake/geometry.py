@@ -284,8 +284,9 @@ def edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([uniq // n_vertices, uniq % n_vertices], axis=1), counts
 
 
-#: How many results :func:`memo` keeps (the newest): a run asks about one or two sim meshes.
-MEMO_SIZE = 8
+#: How many results :func:`memo` keeps (the newest): a run asks about one or two sim meshes
+#: (edges, shells, centroids) and, per impact, a fast-marching patch and its distance.
+MEMO_SIZE = 16
 _memo: OrderedDict = OrderedDict()
 _memo_lock = threading.Lock()
 

@@ -128,11 +128,11 @@ def impact_distance(
 
     Notes
     -----
-    The result is kept per mesh, point and ``max_distance`` (:func:`~crackbake.geometry.memo`,
-    read-only arrays), under ``point`` and under ``snapped`` too: the star check measures from
-    the point the stress field reports (``snapped``), and gets the field's distance, not a
-    second fast marching from a point one rounding away.  Not kept when fast marching failed
-    (the edge-path fallback warns on each call).
+    The result is kept per mesh, ``snapped`` point and ``max_distance``
+    (:func:`~crackbake.geometry.memo`, read-only arrays): the star check measures from the
+    point the stress field reports (``snapped``), and gets the field's distance, not a second
+    fast marching from a point one rounding away.  Not kept when fast marching failed (the
+    edge-path fallback warns on each call).
     """
     vertices = np.asarray(sim.vertices, dtype=np.float64)
     faces = np.asarray(sim.faces, dtype=np.int64)
@@ -140,14 +140,12 @@ def impact_distance(
     link = float(getattr(sim, "edge_length", 0.0) or 0.0)
     limit_key = None if max_distance is None else float(max_distance)
     mesh = content_key(vertices, faces)
-    full = ("impact distance", mesh, p.tobytes(), limit_key, link)
-    kept = recall(full)
+    kept = recall(("impact distance", mesh, p.tobytes(), limit_key, link))
     if kept is None:
         distance, snapped, face, marched = _impact_distance(sim, vertices, faces, p,
                                                             max_distance, link)
         kept = (distance, snapped, face)
         if marched:
-            remember(full, kept)
             remember(("impact distance", mesh, snapped.tobytes(), limit_key, link), kept)
     distance, snapped, face = kept
     return distance, snapped, int(face)
