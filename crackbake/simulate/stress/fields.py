@@ -716,8 +716,11 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0,
     vertices = np.asarray(sim.vertices, dtype=np.float64)
     faces = np.asarray(sim.faces, dtype=np.int64)
     area, normal, grad = face_geometry(vertices, faces)
-    # The centroids the impacts' snap takes too (once per mesh, :func:`_centroids`).
-    geo = _Geometry(vertices, faces, area, normal, grad, _centroids(vertices, faces)[0])
+    sources = list(sources)
+    # With impacts, the centroids their snap takes too (once per mesh, :func:`_centroids`).
+    centroid = (_centroids(vertices, faces)[0] if any(isinstance(s, ImpactSource) for s in sources)
+                else corner_mean(vertices[faces]))
+    geo = _Geometry(vertices, faces, area, normal, grad, centroid)
     m = len(faces)
 
     stress = np.zeros((m, 3, 3))
