@@ -121,6 +121,25 @@ def test_arms_that_wander_make_a_web(slant):
     assert len(web_stars(network)) == (slant > 30)
 
 
+def test_nearest_centroid_within_the_patch_equals_the_whole_tree():
+    """The star check's nearest sim face: searched in the impact's patch first, the same face
+    a KD-tree of every centroid gives, for points inside the ball, near its rim and far out."""
+    from scipy.spatial import cKDTree
+
+    from crackbake.metrics.star import _nearest_centroid
+    from crackbake.simulate.stress.geodesic import _centroids
+
+    sim = sim_plate(45)
+    centroid, corner_reach = _centroids(np.asarray(sim.vertices), np.asarray(sim.faces))
+    rng = np.random.default_rng(2)
+    snapped = centroid[len(centroid) // 2]
+    pts = np.column_stack([rng.uniform(0, 1, 3000), rng.uniform(0, 1, 3000), np.zeros(3000)])
+    whole = cKDTree(centroid).query(pts)[1]
+    for reach in (0.05, 0.2, 0.45, 2.0, None):
+        near = _nearest_centroid(centroid, corner_reach, snapped, reach, pts)
+        assert np.array_equal(near, whole), reach
+
+
 def test_trimmed_mean_drops_the_extremes():
     assert trimmed_mean(np.array([0.2, 0.9, 0.95, 0.97, 1.0])) == pytest.approx(0.94)
     assert trimmed_mean(np.array([0.5, 0.6])) == pytest.approx(0.55)

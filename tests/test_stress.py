@@ -217,6 +217,28 @@ def test_impact_distance_restricted_matches_full_within_reach():
     assert (full - straight).min() > -0.5 * sim.edge_length
 
 
+def test_impact_distance_from_the_reported_point_is_the_first_one():
+    """The star check measures from the point the stress field reports (the snapped one): it
+    gets the field's distance, not a second fast marching; another mesh or reach measures
+    anew, and a fresh run's memo (forget) gives the same values."""
+    from crackbake.geometry import forget
+
+    sim, _ = plate(30)
+    forget()
+    d1, q1, f1 = impact_distance(sim, (0.4, 0.3, 0.02), max_distance=0.4)
+    d2, q2, f2 = impact_distance(sim, q1, max_distance=0.4)
+    assert d2 is d1 and q2 is q1 and f2 == f1
+    assert not d1.flags.writeable
+    assert impact_distance(sim, q1, max_distance=0.5)[0] is not d1
+    moved = SimpleNamespace(vertices=sim.vertices * 1.5, faces=sim.faces,
+                            edge_length=sim.edge_length)
+    assert impact_distance(moved, q1, max_distance=0.4)[0] is not d1
+    forget()
+    d3, _, _ = impact_distance(sim, q1, max_distance=0.4)
+    assert d3 is not d1 and np.allclose(d3[np.isfinite(d1)], d1[np.isfinite(d1)], atol=1e-9)
+    forget()
+
+
 def test_impact_point_off_the_surface_is_snapped():
     sim, mesh = plate(20)
     dist, snapped, face = impact_distance(sim, (0.23, 0.31, 0.7))

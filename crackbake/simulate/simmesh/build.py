@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.geometry import barycentric, face_cross, weld_by_position
+from crackbake.geometry import barycentric, corner_mean, face_cross, weld_by_position
 from crackbake.io.mesh import Mesh
 from crackbake.params import SIM_FACES_DEFAULT
 from crackbake.params import SIM_FACES_MAX as MAX_SIM_FACES
@@ -260,7 +260,7 @@ def build_simmesh(
         proxy = decimate(wv, wf, keep, max(int(wanted), 100))
     pv, pf, pkeep = _welded_surface(proxy.vertices, proxy.faces, warn=False)
     sim = _refine(pv, pf, pkeep, h, rng, jitter, local)
-    centroid = sim.vertices[sim.faces].mean(axis=1)
+    centroid = corner_mean(sim.vertices[sim.faces])
     asset_face = proxy.onto_asset(centroid)[0]
     node_face, node_bary, _ = proxy.onto_asset(sim.vertices)
     return replace(sim, asset_face=asset_face, node_face=node_face, node_bary=node_bary,
@@ -298,7 +298,7 @@ def _refine(wv: np.ndarray, wf: np.ndarray, keep: np.ndarray, h: float,
     corners, pt_edge, t_edge, l_face, l_xy = _layout(wv[wf], face_edge, n_e, h, rng, jitter)
     h_face = h
     if local is not None:
-        centroid = wv[wf].mean(axis=1)
+        centroid = corner_mean(wv[wf])
         h_face = local.edge_at(centroid, h)
         ball = local.ball_of(centroid, h)
         base = int(rng.integers(1 << 62)) if (ball >= 0).any() else 0

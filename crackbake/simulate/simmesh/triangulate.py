@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crackbake.geometry import barycentric
+from crackbake.geometry import barycentric, corner_mean
 from crackbake.simulate.simmesh.layout import min_angle_2d
 
 
@@ -108,7 +108,7 @@ def triangulate(corners, b_face, b_xy, segments, l_face, l_xy, quality_on_edges:
     out = triangle.triangulate({"vertices": pts, "segments": segments}, opts)
     out_xy = np.asarray(out["vertices"], dtype=np.float64)
     out_tri = np.asarray(out["triangles"], dtype=np.int64).reshape(-1, 3)
-    tri_face = locate(out_xy[out_tri].mean(axis=1))
+    tri_face = locate(corner_mean(out_xy[out_tri]))
     return out_xy, out_tri, tri_face, translate, locate, np.asarray(out["segments"])
 
 

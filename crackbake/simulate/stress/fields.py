@@ -17,10 +17,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.geometry import unit_rows, vertex_normals
+from crackbake.geometry import corner_mean, unit_rows, vertex_normals
 from crackbake.io.mesh import Mesh
 from crackbake.simulate.solver.fem import face_frames, face_geometry
-from crackbake.simulate.stress.geodesic import _shells, _snap, impact_distance, iso_length
+from crackbake.simulate.stress.geodesic import (
+    _centroids,
+    _shells,
+    _snap,
+    impact_distance,
+    iso_length,
+)
 from crackbake.simulate.stress.sources import (
     CurvatureSource,
     DirectionalSource,
@@ -127,13 +133,15 @@ def _project(stress: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """``P S P`` symmetrised, with ``P = I - n n^T``; (M, 3, 3)."""
     sn = np.matmul(stress, normal[:, :, None])[:, :, 0]
     nsn = np.einsum("ea,ea->e", normal, sn)
-    out = (
-        stress
-        - _outer(sn, normal)
-        - _outer(normal, sn)
-        + nsn[:, None, None] * _outer(normal, normal)
-    )
-    return 0.5 * (out + np.swapaxes(out, 1, 2))
+    # S - s n^T - n s^T + (n.s) n n^T, in that order, in place (no (M, 3, 3) temporaries).
+    out = stress - _outer(sn, normal)
+    out -= _outer(normal, sn)
+    nn = _outer(normal, normal)
+    nn *= nsn[:, None, None]
+    out += nn
+    sym = out + np.swapaxes(out, 1, 2)
+    sym *= 0.5
+    return sym
 
 
 def _outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -555,7 +563,7 @@ def _face_vertex_smooth(faces: np.ndarray, area: np.ndarray, values: np.ndarray)
     )
     node_area = np.asarray(inc.sum(axis=1)).reshape(-1)
     node = (inc @ flat) / np.where(node_area > 0, node_area, 1.0)[:, None]
-    return node[local.reshape(k, 3)].mean(axis=1).reshape(values.shape)
+    return corner_mean(node[local.reshape(k, 3)]).reshape(values.shape)
 
 
 def _node_normals(sim, mesh: Mesh, geo: _Geometry) -> np.ndarray:
@@ -634,7 +642,7 @@ def noise_origin(sim) -> np.ndarray:
     """The point the stress noise's phases are measured from on ``sim``: the mean of its face
     centroids, (3,)."""
     v = np.asarray(sim.vertices, dtype=np.float64)
-    return v[np.asarray(sim.faces, dtype=np.int64)].mean(axis=1).mean(axis=0)
+    return corner_mean(v[np.asarray(sim.faces, dtype=np.int64)]).mean(axis=0)
 
 
 def _smooth_noise(points: np.ndarray, origin: np.ndarray, scale: float,
@@ -708,7 +716,11 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0,
     vertices = np.asarray(sim.vertices, dtype=np.float64)
     faces = np.asarray(sim.faces, dtype=np.int64)
     area, normal, grad = face_geometry(vertices, faces)
-    geo = _Geometry(vertices, faces, area, normal, grad, vertices[faces].mean(axis=1))
+    sources = list(sources)
+    # With impacts, the centroids their snap takes too (once per mesh, :func:`_centroids`).
+    centroid = (_centroids(vertices, faces)[0] if any(isinstance(s, ImpactSource) for s in sources)
+                else corner_mean(vertices[faces]))
+    geo = _Geometry(vertices, faces, area, normal, grad, centroid)
     m = len(faces)
 
     stress = np.zeros((m, 3, 3))
@@ -835,7 +847,7 @@ def back_share(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray, fa
         sharp corner (the star would wrap round it).
     """
     d = distance[faces]
-    d = np.where(np.isfinite(d).all(axis=1), d.mean(axis=1), np.inf)
+    d = np.where(np.isfinite(d).all(axis=1), corner_mean(d), np.inf)
     d[face] = 0.0
     inside = d <= ball * reach
     tri = vertices[faces[inside]]
@@ -872,7 +884,7 @@ def fitted_radius(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray,
     """
     # Every ball tried lies in the first: measure on its faces only.
     d = distance[faces]
-    keep = np.isfinite(d).all(axis=1) & (d.mean(axis=1) <= BACK_BALL_REACH * 0.5 * np.pi * radius)
+    keep = np.isfinite(d).all(axis=1) & (corner_mean(d) <= BACK_BALL_REACH * 0.5 * np.pi * radius)
     keep[face] = True
     sub, at = faces[keep], int(np.count_nonzero(keep[:face]))
     share0 = None

@@ -17,7 +17,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from crackbake.errors import CrackbakeWarning
-from crackbake.geometry import closest_on_triangles, edges, memo, shared_edges
+from crackbake.geometry import (
+    closest_on_triangles,
+    content_key,
+    corner_mean,
+    edges,
+    memo,
+    recall,
+    remember,
+    shared_edges,
+)
 from crackbake.simulate.simmesh.manifold import split_nonmanifold
 from crackbake.simulate.stress.sources import _finite_vector
 
@@ -47,7 +56,7 @@ def _centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, flo
 
     def compute():
         tri = vertices[faces]
-        centroid = tri.mean(axis=1)
+        centroid = corner_mean(tri)
         off = tri - centroid[:, None]
         return centroid, float(np.sqrt(np.einsum("eka,eka->ek", off, off)).max())
 
@@ -116,10 +125,36 @@ def impact_distance(
         The surface point the distance is measured from.
     face : int
         Sim face holding ``snapped``.
+
+    Notes
+    -----
+    The result is kept per mesh, ``snapped`` point and ``max_distance``
+    (:func:`~crackbake.geometry.memo`, read-only arrays): the star check measures from the
+    point the stress field reports (``snapped``), and gets the field's distance, not a second
+    fast marching from a point one rounding away.  Not kept when fast marching failed (the
+    edge-path fallback warns on each call).
     """
     vertices = np.asarray(sim.vertices, dtype=np.float64)
     faces = np.asarray(sim.faces, dtype=np.int64)
     p = _finite_vector(point, "impact point")
+    link = float(getattr(sim, "edge_length", 0.0) or 0.0)
+    limit_key = None if max_distance is None else float(max_distance)
+    mesh = content_key(vertices, faces)
+    kept = recall(("impact distance", mesh, p.tobytes(), limit_key, link))
+    if kept is None:
+        distance, snapped, face, marched = _impact_distance(sim, vertices, faces, p,
+                                                            max_distance, link)
+        kept = (distance, snapped, face)
+        if marched:
+            remember(("impact distance", mesh, snapped.tobytes(), limit_key, link), kept)
+    distance, snapped, face = kept
+    return distance, snapped, int(face)
+
+
+def _impact_distance(sim, vertices: np.ndarray, faces: np.ndarray, p: np.ndarray,
+                     max_distance: float | None, link: float):
+    """:func:`impact_distance` computed: the distance, the snapped point, its face and whether
+    fast marching measured it (False: the edge-path fallback)."""
     snapped, face, bary, centroid, reach = _snap(sim, p)
 
     if max_distance is not None and np.isfinite(max_distance):
@@ -135,6 +170,7 @@ def impact_distance(
     else:
         nodes = np.arange(len(vertices))
         sub_faces, sub_face, limit = faces, face, np.inf
+    marched = True
     try:
         origin, solver = _patch_solver(vertices[nodes], sub_faces)
         d_split = np.asarray(solver.compute_distance([[(sub_face, [float(x) for x in bary])]]),
@@ -148,11 +184,11 @@ def impact_distance(
             "geodesic distance for the impact falls back to edge paths, which run a few "
             f"percent long; {fix}",
             CrackbakeWarning,
-            stacklevel=2,
+            stacklevel=3,
         )
+        marched = False
         d_sub = _edge_dijkstra(vertices[nodes], sub_faces, sub_face, snapped, limit)
 
-    link = float(getattr(sim, "edge_length", 0.0) or 0.0)
     if link > 0.0:
         shell = _shells(faces, len(vertices))
         if shell.max() > 0:
@@ -160,7 +196,7 @@ def impact_distance(
     distance = np.full(len(vertices), np.inf)
     distance[nodes] = d_sub
     distance[~np.isfinite(distance)] = np.inf
-    return distance, snapped, face
+    return distance, snapped, face, marched
 
 
 def _shells(faces: np.ndarray, n: int) -> np.ndarray:
