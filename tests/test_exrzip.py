@@ -252,8 +252,8 @@ def test_narrow_and_wide_rows_decode(tmp_path, width):
 
 @pytest.mark.parametrize("level", [None, 1, 2, 6])
 def test_every_deflate_gives_the_same_pixels(tmp_path, level):
-    """The default chunks' deflate (ISA-L where installed, zlib-ng without it) and zlib-ng's
-    explicit levels: different streams, the same file for OpenEXR and OpenImageIO."""
+    """The default chunks' deflate (zlib-ng at ZIP_LEVEL) and zlib-ng's explicit levels:
+    different streams, the same file for OpenEXR and OpenImageIO."""
     planes = _planes(13)
     path = tmp_path / f"l{level}.exr"
     write_scanline(path, planes, ATTRS, "zip", level=level)
@@ -288,10 +288,9 @@ def _crack_like(size: int, seed: int) -> dict[str, np.ndarray]:
 
 def test_concurrent_writes_give_the_same_bytes(tmp_path):
     # ISA-L's deflate gave different (valid) streams for the same chunk when two of its calls
-    # ran at once (crackbake.exchange.isal_deflate): files written side by side on threads must
-    # still be byte for byte the one a lone write gives.  The race showed on real bakes' chunks
-    # (1-4 of 12-30 files without the lock); on this data it has not shown, so this guards the
-    # property, not that one race.
+    # ran at once (exrzip.ZIP_LEVEL): files written side by side on threads must still be byte
+    # for byte the one a lone write gives.  That showed on real bakes' chunks (1-4 of 12-30
+    # files); on this data it did not, so this guards the property, not that one library.
     import threading
 
     planes = _crack_like(1024, 4)

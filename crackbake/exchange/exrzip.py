@@ -1,4 +1,4 @@
-"""Scanline EXR files with ZIP or ZIPS compression, encoded here: numba + ISA-L (or zlib-ng).
+"""Scanline EXR files with ZIP or ZIPS compression, encoded here: numba + zlib-ng.
 
 Why not the OpenEXR bindings for these: the 4096² crack master is 0.47 GB of planes, and
 OpenEXR's ZIP path spent about 1.3 CPU-s on it (quiet 2-core machine; 2.9 s loaded), 40 % in
@@ -41,34 +41,26 @@ try:  # the same module pngenc uses; stdlib zlib writes valid (slower) files too
     from zlib_ng import zlib_ng as _zlib
 except ImportError:  # pragma: no cover - zlib-ng is a dependency
     _zlib = zlib
-from crackbake.exchange import isal_deflate  # the default chunks' encoder; zlib-ng without it
 
 #: Compressions written here, with the scanlines per chunk and the file's compression code.
 SCANLINE_COMPRESSIONS = {"zips": (1, 2), "zip": (16, 3)}
-#: zlib-ng's deflate level of the chunks where ISA-L is missing (or for an explicit level).
-#: On the README run's 4096² crack master (loaded machine, one
-#: thread) zlib-ng's deflate took 0.19 / 0.23 / 0.27 / 0.29 / 0.49 CPU-s at levels 1 / 2 / 3 /
-#: 4 / 6 for 10.6 / 7.05 / 6.99 / 6.98 / 6.91 MB, and on its 1024² stress file 0.08 / 0.13 /
-#: 0.14 / 0.16 / 0.19 CPU-s for 7.25 / 6.49 / 6.38 / 6.28 / 6.22 MB
+#: zlib-ng's deflate level of the chunks.  On the README run's 4096² crack master (loaded
+#: machine, one thread) zlib-ng's deflate took 0.19 / 0.23 / 0.27 / 0.29 / 0.49 CPU-s at levels
+#: 1 / 2 / 3 / 4 / 6 for 10.6 / 7.05 / 6.99 / 6.98 / 6.91 MB, and on its 1024² stress file
+#: 0.08 / 0.13 / 0.14 / 0.16 / 0.19 CPU-s for 7.25 / 6.49 / 6.38 / 6.28 / 6.22 MB
 #: (``benchmarks/bench_write.py --levels``): level 2 costs 1-2 % in size for 10-15 % of the
 #: deflate; level 1 (static codes) grows the master by half.  The bindings wrote 6.84 MB
-#: (their level 4).
+#: (their level 4).  ISA-L's level 1 (the ``isal`` package) took 0.11 CPU-s for 7.50 MB, but its
+#: streams are not always the same for the same chunk (valid, the pixels equal): 4 of 30 writes
+#: of the crack master on two threads at once differed, and one chunk compressed alone differed
+#: between two processes, so a run's EXR bytes (and the manifest's hashes) varied.  Output
+#: bytes that follow from the inputs come first (docs/benchmarks.md, "ISA-L dropped").
 ZIP_LEVEL = 2
-#: ISA-L's deflate level of the chunks when it is installed (``level=None``, the default).
-#: Intel's ISA-L (the ``isal`` package: x86-64 and ARM assembly, the ``zlib`` API, the GIL
-#: released) took 0.12 CPU-s for 7.50 MB on the README run's crack master, against zlib-ng's
-#: 0.27 s for 7.06 MB at level 2, and 0.04 s for 6.20 MB on its stress file (zlib-ng: 0.14 s
-#: for 6.49 MB); its levels 0 and 2 gave 11.5 / 7.49 MB for about the same time, level 3 was
-#: 15x slower (loaded machine, ``benchmarks/bench_write.py --levels``).
-ISAL_LEVEL = 1
 
 
 def deflate(data, level: int | None = None) -> bytes:
-    """zlib stream of ``data`` (a buffer): ISA-L at :data:`ISAL_LEVEL` when ``level`` is None
-    and it is installed, else zlib-ng (stdlib zlib without it) at ``level`` (None:
-    :data:`ZIP_LEVEL`)."""
-    if level is None and isal_deflate.AVAILABLE:
-        return isal_deflate.compress(data, ISAL_LEVEL)
+    """zlib stream of ``data`` (a buffer): zlib-ng (stdlib zlib without it) at ``level``
+    (None: :data:`ZIP_LEVEL`)."""
     return _zlib.compress(data, ZIP_LEVEL if level is None else int(level))
 
 
@@ -241,7 +233,7 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
         Worker threads besides the calling one (0: the calling thread alone); the chunks are
         split among them in contiguous runs, so the file is the same for any count.
     level : int, optional
-        zlib-ng's deflate level 1..9; None: :func:`deflate`'s default (ISA-L where installed).
+        zlib-ng's deflate level 1..9; None: :data:`ZIP_LEVEL`.
 
     Raises
     ------

@@ -31,7 +31,6 @@ try:  # an optional speed-up: the same bytes either way (module docstring)
     from zlib_ng import zlib_ng as _rle_zlib
 except ImportError:  # pragma: no cover - zlib-ng is a dependency; a bare install still works
     _rle_zlib = zlib
-from crackbake.exchange import isal_deflate  # the data texture's deflate (data_deflate)
 
 PathLike = str | os.PathLike
 
@@ -45,17 +44,15 @@ PNG_LEVEL = 1
 
 
 def data_deflate(data) -> bytes:
-    """zlib stream of the 16-bit data texture's filtered rows (a buffer).
+    """zlib stream of the 16-bit data texture's filtered rows (a buffer): zlib-ng level 3.
 
     Its rows hold short varied runs (width, depth and time inside the cracks), where a
-    matcher finds what run lengths miss: on the README run's 4096² map ISA-L's level 1 (the
-    ``isal`` package, the GIL released) wrote 1.37 MB in 0.039 CPU-s, zlib-ng's default
-    strategy at level 3 1.26 MB in 0.085, Z_RLE (the other maps' deflate) 1.60 MB in 0.069
-    (``benchmarks/bench_write.py --levels``).  On the 8-bit maps Z_RLE stays: ISA-L wrote
-    them twice as large.  zlib-ng level 3 where ISA-L is missing.
+    matcher finds what run lengths miss: on the README run's 4096² map zlib-ng's default
+    strategy at level 3 wrote 1.26 MB in 0.085 CPU-s, Z_RLE (the other maps' deflate) 1.60 MB
+    in 0.069 (``benchmarks/bench_write.py --levels``).  ISA-L's level 1 (1.37 MB, 0.039 CPU-s)
+    is not used: its streams are not always the same for the same data (:data:`crackbake.
+    exchange.exrzip.ZIP_LEVEL`).
     """
-    if isal_deflate.AVAILABLE:
-        return isal_deflate.compress(data, 1)
     return _rle_zlib.compress(data, 3)
 
 
