@@ -1,4 +1,4 @@
-"""numba's start-up in a fresh process: cache loads without the compiler's set-up, begun early.
+"""numba's start-up in a fresh process: kernels loaded from the cache without the compiler's set-up.
 
 Every ``crackbake`` process loads its kernels from numba's disk cache (about 40 of them in a
 bake).  Before its first load numba refreshes its target context (``BaseContext.refresh``):
@@ -11,14 +11,12 @@ the cache still compiles as before (numba's compiler refreshes the context itsel
 0.2-0.3 CPU-s of numba's 1 CPU-s start-up, on the critical path of every run, re-bake and
 batch job (docs/benchmarks.md).
 
-:func:`start` then loads the first stage's kernels (the tangent frames) on a thread as soon as
-the mesh is read, while the main thread opens the GL context and checks the UVs: LLVM's share
-of each load runs beside them (llvmlite's calls release the GIL).
+The kernels are not loaded ahead on a thread: the start-up is imports and loads that hold the
+GIL, and a thread allocating beside the main one made ``spot_cracks.exr``'s bytes vary between
+runs (ISA-L's deflate output depends on the heap; docs/benchmarks.md).
 """
 
 from __future__ import annotations
-
-import threading
 
 
 def light_cache_loads() -> bool:
@@ -46,26 +44,3 @@ def light_cache_loads() -> bool:
     load_overload._crackbake_light = True
     cache.load_overload = load_overload
     return True
-
-
-def warm_first_kernels() -> None:
-    """Light cache loads, then the tangent frames' kernels loaded (or compiled)."""
-    light_cache_loads()
-    from crackbake.bake.tangents import warm
-
-    warm()
-
-
-def start() -> threading.Thread:
-    """:func:`warm_first_kernels` on a daemon thread, started; join it or let it run out."""
-    thread = threading.Thread(target=_quiet, name="crackbake-jit-warm", daemon=True)
-    thread.start()
-    return thread
-
-
-def _quiet() -> None:
-    # Only a head start: a failure here is the real stage's to report, with its own inputs.
-    try:
-        warm_first_kernels()
-    except Exception:  # noqa: BLE001
-        pass

@@ -166,17 +166,13 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         params, relative = params.resolved()
         sources = stress_sources(params, mesh, relative)  # weight maps, impacts: checked here
 
-    from crackbake import jit
     from crackbake.bake.context import create_context, renderer_info
 
-    # numba's start-up (its import, its runtime, the tangent stage's kernels) on a thread, once
-    # the inputs are checked, while this one opens the GL context and checks the UVs.
-    warming = jit.start()
-    targets = gutter = ctx = None
+    # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
+    # mesh, so they are prepared (and --uv keep refused) before the solver runs.
+    ctx = create_context()
+    targets = gutter = None
     try:
-        # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
-        # mesh, so they are prepared (and --uv keep refused) before the solver runs.
-        ctx = create_context()
         uvmesh = _uvs(ctx, mesh, params, timings)
         targets, gutter = _bake_ahead(ctx, uvmesh, params, timings)
         if params.cracks is None:
@@ -209,9 +205,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         for ahead in (targets, gutter):  # their threads end before the context
             if ahead is not None:
                 ahead.close()
-        if ctx is not None:
-            ctx.release()
-        warming.join()  # no numba load left running past the run (or its error)
+        ctx.release()
     return RunResult(
         out_dir=Path(params.out_dir),
         files=files,
@@ -238,6 +232,9 @@ def _udim_pages(mesh: Mesh, params: RunParams) -> int:
 
 def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMesh:
     """The UV stage, timed as ``unwrap``."""
+    from crackbake.jit import light_cache_loads
+
+    light_cache_loads()  # before the first kernel: numba's loads without its compiler's set-up
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
 

@@ -1,5 +1,4 @@
-"""crackbake.jit: numba's cache loads without its compiler's set-up, and the first stage's kernels
-loaded on a thread, with the same results."""
+"""crackbake.jit: numba's cache loads without its compiler's set-up, with the same kernels."""
 
 from __future__ import annotations
 
@@ -8,10 +7,7 @@ import os
 import subprocess
 import sys
 import textwrap
-import warnings
 from pathlib import Path
-
-import numpy as np
 
 from crackbake import jit
 
@@ -19,7 +15,6 @@ REPO = Path(__file__).resolve().parents[1]
 
 # A module with one cached kernel that allocates (NRT) and returns an array.
 _KERNEL = """
-import numpy as np
 from numba import njit
 
 @njit(cache=True)
@@ -79,41 +74,3 @@ def test_light_cache_loads_is_idempotent():
     patched = caching.Cache.load_overload
     assert jit.light_cache_loads()
     assert caching.Cache.load_overload is patched
-
-
-def test_warm_loads_every_kernel_the_tangent_stage_calls_on_a_real_mesh():
-    """After the warm-up, the tangents of spot (its own UVs, a seam, wrapped faces) need no
-    new kernel signature: the real stage only finds them loaded."""
-    from crackbake.bake import tangent_kernels
-    from crackbake.bake.context import create_context
-    from crackbake.bake.tangents import with_tangents
-    from crackbake.bake.uv import prepare_uvs
-    from crackbake.grouping import exact_ids
-    from crackbake.io.mesh import load_mesh
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # a warning from the thread would land in a run's list
-        jit.warm_first_kernels()
-    kernels = [exact_ids] + [getattr(tangent_kernels, n) for n in dir(tangent_kernels)
-                             if hasattr(getattr(tangent_kernels, n), "signatures")]
-    warmed = {k.__name__: set(k.signatures) for k in kernels}
-    assert sum(map(len, warmed.values())) >= 8  # the stage's kernels really were loaded
-
-    ctx = create_context()
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # spot's faces past the UV square
-            uvmesh = prepare_uvs(load_mesh(REPO / "examples" / "spot.obj"), mode="auto",
-                                 res=512, padding=None, timeout=60, cache=False, ctx=ctx)
-    finally:
-        ctx.release()
-    out = with_tangents(uvmesh)
-    assert out.tangents is not None and np.isfinite(out.tangents).all()
-    assert {k.__name__: set(k.signatures) for k in kernels} == warmed
-
-
-def test_start_runs_a_daemon_thread_that_ends():
-    thread = jit.start()
-    assert thread.daemon and thread.name == "crackbake-jit-warm"
-    thread.join(120)
-    assert not thread.is_alive()

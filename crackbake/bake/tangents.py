@@ -120,23 +120,6 @@ def with_tangents(uvmesh: UVMesh) -> UVMesh:
     )
 
 
-def warm() -> None:
-    """Run :func:`with_tangents` on a small plate (a UV seam, a mirrored face, an unused vertex):
-    every kernel of the stage loaded from numba's cache, with the argument types a real mesh
-    gives (:func:`_checked` casts every input), so the real stage finds them loaded."""
-    x, y = np.meshgrid(np.linspace(0.0, 1.0, 4), np.linspace(0.0, 1.0, 4))
-    vertices = np.column_stack([x.ravel(), y.ravel(), np.zeros(16)])
-    i = (np.arange(3)[:, None] * 4 + np.arange(3)[None, :]).ravel()
-    faces = np.concatenate([np.column_stack([i, i + 1, i + 5]),
-                            np.column_stack([i, i + 5, i + 4])])[:-1]  # vertex 15 unused
-    uv = vertices[:, :2].copy()
-    uv[[0, 4, 8, 12], 0] = 0.5  # a fold: faces of both orientations
-    normals = np.tile([0.0, 0.0, 1.0], (16, 1))
-    with_tangents(UVMesh(vertices=vertices, faces=faces, uv=uv, normals=normals,
-                         vertex_map=np.arange(16), method="kept", overlap_fraction=0.0,
-                         padding_px=0))
-
-
 def _checked(vertices, faces, uv, normals):
     """Float32-rounded (as float64) positions, normals, UVs and int64 faces, validated."""
     f = np.asarray(faces)
