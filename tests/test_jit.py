@@ -15,6 +15,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 # A module with one cached kernel that allocates (NRT) and returns an array.
 _KERNEL = """
+import numpy as np
 from numba import njit
 
 @njit(cache=True)
