@@ -232,6 +232,9 @@ def _udim_pages(mesh: Mesh, params: RunParams) -> int:
 
 def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMesh:
     """The UV stage, timed as ``unwrap``."""
+    from crackbake.jit import light_cache_loads
+
+    light_cache_loads()  # before the first kernel: numba's loads without its compiler's set-up
     from crackbake.bake.tangents import with_tangents
     from crackbake.bake.uv import prepare_uvs
 

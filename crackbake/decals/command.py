@@ -71,8 +71,10 @@ def decals(quiet: bool, as_json: bool, address: str | None, **options) -> None:
     """Bake N crack decal variants on a flat plate into mip-safe atlases plus decals.json."""
 
     from crackbake.decals.library import LibraryParams, build_library
+    from crackbake.jit import light_cache_loads
 
     params = reported(lambda: LibraryParams(**options).validate(), quiet)
+    light_cache_loads()  # numba's kernels load without its compiler's set-up
     doc = reported(lambda: build_library(params, address), quiet)
     if as_json:
         click.echo(json.dumps(doc, indent=1))

@@ -48,9 +48,11 @@ pieces and the period), manifest.json.
 def tile(quiet: bool, **options) -> None:
     """Grow cracks on a periodic plate and bake a texture set that tiles with no seam."""
 
+    from crackbake.jit import light_cache_loads
     from crackbake.tile.periodic import TileParams, build_tile
 
     params = reported(lambda: TileParams(**options).validate(), quiet)
+    light_cache_loads()  # numba's kernels load without its compiler's set-up
     manifest = reported(lambda: build_tile(params), quiet)
     if not quiet:
         s = manifest["solver"]

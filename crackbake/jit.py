@@ -1,0 +1,46 @@
+"""numba's start-up in a fresh process: kernels loaded from the cache without the compiler's set-up.
+
+Every ``crackbake`` process loads its kernels from numba's disk cache (about 40 of them in a
+bake).  Before its first load numba refreshes its target context (``BaseContext.refresh``):
+it imports and registers every lowering and typing implementation it has (numba.np, numba.typed,
+numba.cpython..., scipy.linalg through its BLAS check) and compiles the NRT runtime.  A
+compilation needs those registries; a load from the cache needs only the runtime (its machine
+code calls NRT and the helper library, registered with LLVM when the runtime initialises).
+:func:`light_cache_loads` makes numba's cache load the runtime only; a kernel that is not in
+the cache still compiles as before (numba's compiler refreshes the context itself).  About
+0.2-0.3 CPU-s of numba's 1 CPU-s start-up, on the critical path of every run, re-bake and
+batch job (docs/benchmarks.md).
+
+The kernels are not loaded ahead on a thread: the start-up is imports and loads that hold the
+GIL, and a thread allocating beside the main one made ``spot_cracks.exr``'s bytes vary between
+runs (ISA-L's deflate output depends on the heap; docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+
+def light_cache_loads() -> bool:
+    """Make numba's cache loads set up its runtime only, not the compiler; True when in place.
+
+    Idempotent.  Leaves numba as it is (False) where its cache class lacks the methods this
+    relies on (another numba version): only the start-up is slower then.
+    """
+    from numba.core import caching
+    from numba.core.runtime import nrt
+
+    cache = caching.Cache
+    if getattr(cache.load_overload, "_crackbake_light", False):
+        return True
+    if not all(hasattr(cache, name) for name in ("_load_overload",
+                                                 "_guard_against_spurious_io_errors")):
+        return False
+
+    def load_overload(self, sig, target_context):
+        # numba's own load_overload calls target_context.refresh() here (every registry)
+        nrt.rtsys.initialize(target_context)
+        with self._guard_against_spurious_io_errors():
+            return self._load_overload(sig, target_context)
+
+    load_overload._crackbake_light = True
+    cache.load_overload = load_overload
+    return True
