@@ -12,8 +12,7 @@ the cache still compiles as before (numba's compiler refreshes the context itsel
 batch job (docs/benchmarks.md).
 
 The kernels are not loaded ahead on a thread: the start-up is imports and loads that hold the
-GIL, and a thread allocating beside the main one made ``spot_cracks.exr``'s bytes vary between
-runs (ISA-L's deflate output depends on the heap; docs/benchmarks.md).
+GIL, so a thread gained little (docs/benchmarks.md).
 """
 
 from __future__ import annotations
