@@ -25,6 +25,7 @@ import ctypes
 import logging
 import os
 import threading
+import time
 from ctypes import POINTER, byref, c_int, c_uint, c_void_p
 
 import numpy as np
@@ -98,6 +99,10 @@ def _shared_context(egl) -> tuple[c_void_p, c_void_p] | None:
     return (display, context) if context else None
 
 
+#: Seconds the thread pauses between two textures, so that the run's thread gets the texture
+#: lock in between (:meth:`TargetPrefetch._textures`).
+_PAUSE = 0.002
+
 #: How much nicer than the run the threads working ahead are: they should take an idle core, not
 #: the solver's (on Linux a thread's nice value is its own).
 BACKGROUND_NICE = 5
@@ -170,7 +175,13 @@ class TargetPrefetch:
             egl.eglDestroyContext(display, context)
             return
         try:
-            for (width, height), components, dtype in specs:
+            for k, ((width, height), components, dtype) in enumerate(specs):
+                if k:
+                    # Mesa holds the share group's texture lock while it zero-fills a texture,
+                    # and its lock is not fair: without a pause between two textures a GL call
+                    # of the run's thread that needs it (a texture of the UV check, of the
+                    # coverage) waits for all of them, not for one.
+                    time.sleep(_PAUSE)
                 internal, fmt, kind = _FORMATS[(components, dtype)]
                 name = c_uint(0)
                 gl.glGenTextures(1, byref(name))
