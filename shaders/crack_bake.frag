@@ -138,7 +138,17 @@ void main() {
     // Two walks over the list (the same pixels as one walk doing everything, at a fraction of
     // its cost: most steps only measure a distance).  First the nearest segment: the walk stops
     // at the first entry whose bound exceeds both the nearest distance so far and the cover
-    // reach, as a single walk measuring everything would; kend is where.
+    // reach, as a single walk measuring everything would; kend is where.  It also marks the
+    // entries near enough to add coverage, depth or a rim.
+    // Farther than add_reach a segment adds exactly nothing: beyond half the widest drawn width
+    // (its rim with a curl) plus two footprints, a texel's ramp, or a thin crack's filtered
+    // tent, has ended (they end within 1.5 footprints across).
+    float floor_half = 0.5 * u_min_px * foot;
+#ifdef CRACK_CURL
+    floor_half *= 1.0 + CURL_REACH;
+#endif
+    float add_reach = max(u_half_width, floor_half) + 2.0 * foot;
+    uvec2 near = uvec2(0u);  // bit j: entry list.x + j lies within add_reach of this texel
     uint kend = list.y;
     float best_t = 0.0;
     for (uint k = list.x; k < list.y; ++k) {
@@ -154,6 +164,10 @@ void main() {
         float t = len2 > 0.0 ? clamp(dot(p - a.xyz, ab) / len2, 0.0, 1.0) : 0.0;
         vec3 g = p - (a.xyz + t * ab);
         float d = length(g);
+        uint j = k - list.x;
+        if (d <= add_reach && j < 64u) {
+            if (j < 32u) near.x |= 1u << j; else near.y |= 1u << (j - 32u);
+        }
         // Ties go to the lowest index, so the result does not depend on the list order.
         if (d < best_d || (d == best_d && best_seg >= 0 && int(si) < best_seg)) {
             best_seg = int(si);
@@ -171,18 +185,25 @@ void main() {
         best_time = mix(s.dt.z, s.dt.w, best_t);
         best_id = s.id.x;
     }
-    // Then the coverage, depth and rims, over the same entries up to where any can add one:
-    // beyond half the widest drawn width (its rim with a curl) plus two footprints (a texel's
-    // ramp, or a thin crack's filtered tent, ends within 1.5 footprints across) each adds
-    // exactly nothing, as in the single walk.
-    float floor_half = 0.5 * u_min_px * foot;
-#ifdef CRACK_CURL
-    floor_half *= 1.0 + CURL_REACH;
-#endif
-    float add_reach = max(u_half_width, floor_half) + 2.0 * foot;
-    for (uint k = list.x; k < kend; ++k) {
+    // Then the coverage, depth and rims over the same entries, but only those near enough to add
+    // any: the first 64 by the texel's own distance (the walk above marked them), the rest by
+    // their bound, in the list's order.
+    uint masked_end = min(kend, list.x + 64u);
+    uint tail = masked_end;
+    for (;;) {
+        uint k;
+        if (near.x != 0u) {
+            k = list.x + uint(findLSB(near.x));
+            near.x &= near.x - 1u;
+        } else if (near.y != 0u) {
+            k = list.x + 32u + uint(findLSB(near.y));
+            near.y &= near.y - 1u;
+        } else {
+            if (tail >= kend) break;
+            k = tail++;
+        }
         uvec2 entry = texelFetch(u_lists, table_texel(k), 0).xy;
-        if (uintBitsToFloat(entry.y) > add_reach) break;
+        if (k >= masked_end && uintBitsToFloat(entry.y) > add_reach) break;
         uint si = entry.x;
         ivec2 at = ivec2((int(si) & ((1 << SEG_ROW_LOG2) - 1)) << 2, int(si) >> SEG_ROW_LOG2);
         Segment s = Segment(texelFetch(u_segments, at, 0),

@@ -1,8 +1,8 @@
 """The crack bake's render targets, allocated ahead on a second thread while the CPU stages run.
 
 llvmpipe zero-fills every new texture on the calling thread: the crack bake's targets at 4096²
-(three RGBA32F surface targets and seven channel targets, 1.2 GB) cost about 0.9 CPU-s of page
-faults and ``memset`` that the bake stage waited for.  Their sizes are known as soon as the run's
+(seven channel targets, 400 MB; 1.2 GB when three RGBA32F surface targets came with them) cost
+about 0.4 CPU-s of page faults and ``memset`` (0.9 then) that the bake stage waited for.  Their sizes are known as soon as the run's
 ``--res`` and ``--tile`` are, long before the crack network is, so :class:`TargetPrefetch`
 creates them in a second EGL context that shares the run context's objects, on a thread of its
 own, while the UVs, the simulation mesh, the stress field and the solver run on the main one.

@@ -1,16 +1,19 @@
 """GPU bake of a crack network into UV-space texture maps.
 
-The asset's faces are drawn at their UV positions in two passes: the first records each texel's
-world position, texel footprint and face bin; the second, once per texel, loops over the crack
-segments listed for that bin (:mod:`crackbake.bake.grid`: nearby faces share one list, so memory
-stays linear in faces + segments) and measures world-space distances; the depth buffer of the
-first pass keeps the second to the texels of faces whose bin lists a segment at all (the others
-take an empty list's values from the targets' clear).  So widths are in mesh
-units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
-images are drawn in bands, and empty texels are then filled from their nearest island
-(dilation) so bilinear filtering and mip-maps never pull in background.  Given tangents, the
-second pass also records which segment's depth wins each texel, and a compute pass over the crack
-texels derives the depth-normal and occlusion maps from it (:mod:`crackbake.bake.normal_map`).
+The asset's faces are drawn at their UV positions in two passes: the first marks the texels on
+a face and, in the depth buffer, whether the face's bin (:mod:`crackbake.bake.grid`: nearby
+faces share one list, so memory stays linear in faces + segments) lists any crack segment; the
+second draws the faces whose bin does, and, once per texel they own (the depth test), loops over
+the listed segments, measuring world-space distances from the texel's point with its footprint
+(the derivatives of the position across one texel); the texels of faces with empty lists take an
+empty list's values from the targets' clear.  So widths are in mesh units whatever the UV
+stretch, and a crack crossing a UV seam continues on both islands.  Large images are drawn in
+bands, and empty texels are then filled from their nearest island (dilation) so bilinear
+filtering and mip-maps never pull in background.  Given tangents, the second pass also records
+each crack texel's point, footprint, face and the segment whose depth wins it, and a compute
+pass over the crack texels derives the depth-normal and occlusion maps from them
+(:mod:`crackbake.bake.normal_map`).  A camera's placement (the decal bake) records each texel's
+point, footprint and bin in float targets first and measures them in one full-screen pass.
 
 All returned images have row 0 at the top (UV v = 1), the order image files store.
 """
@@ -192,7 +195,7 @@ def bake_cracks(
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
         Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
-        texels (73 bytes each on the GL side).
+        texels (25 bytes each on the GL side, 28 with the normal map; 76 placed by a camera).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
     normals : (V, 3) float, optional
@@ -393,7 +396,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
 
 
 #: Texture table rows of ``shaders/crack_bake.frag``: 2**10 segments (4 texels each), and 2**12
-#: list entries, bins or faces (``crack_surface.frag``) a row.
+#: list entries, bins or faces (``crack_surface.frag``, ``crack_classes.frag``) a row.
 SEG_ROW_LOG2 = 10
 LIST_ROW_LOG2 = 12
 
@@ -457,8 +460,8 @@ def _dtypes(with_normals: bool) -> tuple[str, ...]:
 def coverage(ctx, uv: np.ndarray, faces: np.ndarray, res: int, tile: int = TILE_DEFAULT,
              with_normals: bool = True) -> np.ndarray:
     """The texels a UV-placed :func:`bake_cracks` of these triangles finds on a face (its
-    ``inside``), drawn without the cracks: the same placement shader (the surface pass's
-    vertex stage, band by band as ``tile`` makes them, so the same rasterisation), one bit out.
+    ``inside``), drawn without the cracks: the same placement shader (the bake's vertex
+    stage, band by band as ``tile`` makes them, so the same rasterisation), one bit out.
 
     Parameters
     ----------
