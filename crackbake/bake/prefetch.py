@@ -2,10 +2,11 @@
 
 llvmpipe zero-fills every new texture on the calling thread: the crack bake's targets at 4096²
 (seven channel targets, 400 MB; 1.2 GB when three RGBA32F surface targets came with them) cost
-about 0.4 CPU-s of page faults and ``memset`` (0.9 then) that the bake stage waited for.  Their sizes are known as soon as the run's
-``--res`` and ``--tile`` are, long before the crack network is, so :class:`TargetPrefetch`
-creates them in a second EGL context that shares the run context's objects, on a thread of its
-own, while the UVs, the simulation mesh, the stress field and the solver run on the main one.
+about 0.4 CPU-s of page faults and ``memset`` (0.9 then) that the bake stage waited for.  Their
+sizes are known as soon as the run's ``--res`` and ``--tile`` are, long before the crack network
+is, so :class:`TargetPrefetch` creates them in a second EGL context that shares the run
+context's objects, on a thread of its own, while the UVs, the simulation mesh, the stress field
+and the solver run on the main one.
 moderngl holds the GIL in every call; this thread calls EGL and GL through :mod:`ctypes`, which
 releases it, so the main thread's Python and numba are never held up by it.
 

@@ -282,6 +282,13 @@ def bake_cracks(
 #: 3-6 % (a ctx.finish per slice, 32 slices); at 2**21 (8 slices) it equals the unsliced bake's.
 SLICE_TEXELS = 1 << 21
 
+#: Crack texel records the normal map's crack pass makes room for at first: a band's texels over
+#: RECORDS_SHARE, at least RECORDS_LEAST (48 bytes each, paged in only as written; on spot at
+#: 4096² about 2 % of the texels are crack texels).  A band needing more is drawn again with room
+#: for all of them.
+RECORDS_SHARE = 16
+RECORDS_LEAST = 1 << 16
+
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 # width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
 # below 6e-5), while mask and time are 0..1.
@@ -631,9 +638,8 @@ def _render(
             images["normal"][2] = 1.0
             images["occlusion"] = _image(prefetch, (res, res), np.float16)
             images["occlusion"][:] = 1.0
-            # Room for a sixteenth of the band's texels at first (48 bytes each, paged in
-            # only as written); a band that needs more is drawn again with room for all.
-            records = _Records(gl, passes.program, res * band // 16)
+            records = _Records(gl, passes.program,
+                               max(res * band // RECORDS_SHARE, RECORDS_LEAST))  # fmt: skip
         projected = projection is not None
         gfbo, fbo, singles = _targets(gl, res, band, dtypes, prefetch, surface=projected)
         # No blending or culling.  The clear is what crack_bake.frag writes at a face texel
@@ -658,6 +664,7 @@ def _render(
         for y0 in range(0, res, band):
             h = min(band, res - y0)
             tile_rect = (0.0, float(y0), float(res), float(band))
+            reports = progress
             while True:
                 ta = time.perf_counter()
                 # Before the surface pass writes the depth buffer the inside target shares.
@@ -697,13 +704,14 @@ def _render(
                 if passes.cracks is not None:
                     if not projected:
                         passes.program["u_tile"].value = tile_rect
-                    _crack_pass(gl.ctx, fbo, passes.cracks, res, h, y0, progress,
+                    _crack_pass(gl.ctx, fbo, passes.cracks, res, h, y0, reports,
                                 vertices=3 if projected else -1)  # fmt: skip
                 tb = time.perf_counter()
                 t_draw += tb - ta
                 if records is None or records.used() <= records.capacity:
                     break
-                records.grow(records.used())  # and draw the band again
+                records.grow(records.used())  # and draw the band again, reported once
+                reports = None
             for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
                               attachment=k, dtype=d)  # fmt: skip
