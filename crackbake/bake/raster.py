@@ -301,7 +301,7 @@ class _Passes:
     """The programs and vertex arrays of one bake.
 
     ``surface`` draws the faces at their placement: with a UV placement the class pass
-    (``crack_classes.frag``: inside, and the depth class of each face's list), with a camera's
+    (``crack_inside.frag`` on each face at the depth of its list's class), with a camera's
     the surface pass (``crack_surface.frag``: world position, footprint, bin per texel).
     ``cracks`` measures the cracks: with a UV placement the listed faces again
     (``crack_bake.frag`` with ``CRACK_FACES``; None when no face lists a segment), with a
@@ -350,18 +350,26 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
         inside["u_depth"].value = 1.0
         inside_screen = gl.keep(ctx.vertex_array(inside, []))
     else:
+        # The class pass: each face's corners of its own, at the depth of its class (0.25:
+        # its bin lists a segment, 0.75: none), drawn with a constant colour (inside), so
+        # llvmpipe runs no per-texel shader work for it.
         surface = gl.keep(ctx.program(
-            vertex_shader=shader_variant("crack_bake.vert", with_normals),
-            fragment_shader=shader_source("crack_classes.frag")))  # fmt: skip
-        layout = [(vbo, "2f 12x", "in_uv")]  # the class pass reads no position
+            vertex_shader=shader_variant("crack_bake.vert", with_normals, ("CRACK_CLASS_Z",)),
+            fragment_shader=shader_source("crack_inside.frag")))  # fmt: skip
+        bounds = np.asarray(bins.bin_start)
+        listed_face = bounds[face_bin + 1] > bounds[face_bin]
+        corners = np.empty((len(faces), 3, 3), np.float32)
+        corners[:, :, 0:2] = vertex[np.asarray(faces), 0:2]
+        corners[:, :, 2] = np.where(listed_face, -0.5, 0.5)[:, None]
+        cbo = gl.keep(ctx.buffer(corners))
+        layout = [(cbo, "2f 1f", "in_uv", "in_z")]
         prog = gl.keep(ctx.program(
             vertex_shader=shader_variant("crack_bake.vert", with_normals),
             fragment_shader=shader_variant("crack_bake.frag", with_normals,
                                            defines + ("CRACK_FACES",))))  # fmt: skip
         # The crack pass draws only the faces whose bin lists a segment, in their order (so
         # where faces overlap the last drawn still wins), each with its face and bin.
-        bounds = np.asarray(bins.bin_start)
-        listed = np.flatnonzero(bounds[face_bin + 1] > bounds[face_bin])
+        listed = np.flatnonzero(listed_face)
         cracks = inside_screen = None
         if len(listed):
             prim = np.column_stack([listed, face_bin[listed]]).astype(np.uint32)
@@ -370,7 +378,10 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
             cracks = gl.keep(ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")],
                                               index_buffer=sub, index_element_size=4))
         prog["u_res"].value = float(res)
-    vao = gl.keep(ctx.vertex_array(surface, layout, index_buffer=ibo, index_element_size=4))
+    if projected:
+        vao = gl.keep(ctx.vertex_array(surface, layout, index_buffer=ibo, index_element_size=4))
+    else:
+        vao = gl.keep(ctx.vertex_array(surface, layout))
     if with_normals:
         ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
         gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
@@ -403,7 +414,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
 
 
 #: Texture table rows of ``shaders/crack_bake.frag``: 2**10 segments (4 texels each), and 2**12
-#: list entries, bins or faces (``crack_surface.frag``, ``crack_classes.frag``) a row.
+#: list entries, bins or faces (``crack_surface.frag``) a row.
 SEG_ROW_LOG2 = 10
 LIST_ROW_LOG2 = 12
 
@@ -647,7 +658,8 @@ def _render(
         # faces; the gutter fill overwrites every other channel there.
         # A UV placement: the class pass draws the faces (the last drawn wins, as without a
         # depth test), marking them inside and writing each face's class to the depth buffer
-        # (crack_classes.frag: 0.25 where its bin lists a segment, 0.75 where none); the crack
+        # (0.25 where its bin lists a segment, 0.75 where none: a depth per face, given with its
+        # corners, so the pass has no per-texel shader work beyond a constant); the crack
         # pass draws only the listed faces at depth 0.5, shading only where the depth test
         # finds a listed face's class: each such texel is measured by the face that owns it
         # (drawn last), and llvmpipe skips the 4x4 blocks that no listed face owns, which keep
