@@ -722,6 +722,11 @@ def _render(
                 t_draw += tb - ta
                 if records is None or records.used() <= records.capacity:
                     break
+                if records.used() > records.LIMIT:
+                    raise CrackbakeError(
+                        f"{records.used()} crack texels in one band exceed the normal map's "
+                        f"{records.LIMIT}; bake with a smaller --tile"
+                    )
                 records.grow(records.used())  # and draw the band again, reported once
                 reports = None
             for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
