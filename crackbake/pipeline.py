@@ -173,12 +173,18 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     ctx = create_context()
     targets = gutter = None
     try:
-        targets = _targets_ahead(ctx, params, tiles)
+        # A re-bake has no solver to hide the targets' allocation behind: it starts before the
+        # UV stage (which then shares the machine with it); a solving run starts it after its
+        # last GL call before the bake (the coverage), to run beside the solver.
+        if params.cracks is not None:
+            targets = _targets_ahead(ctx, params, tiles)
         uvmesh = _uvs(ctx, mesh, params, timings)
         if uvmesh.udim is not None and targets is not None:  # pages of their own
             targets.close()
             targets = None
         gutter = _bake_ahead(ctx, uvmesh, params, timings)
+        if params.cracks is None and uvmesh.udim is None:
+            targets = _targets_ahead(ctx, params, 1)
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
         maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
@@ -260,11 +266,10 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
 
 def _targets_ahead(ctx, params: RunParams, tiles: int):
     """The crack bake's render targets and readback images, allocated on a thread of their own
-    (:class:`crackbake.bake.prefetch.TargetPrefetch`) from the moment the run's context exists:
-    their sizes follow from ``--res`` and ``--tile`` alone, so the allocation runs beside the
-    UV stage and the solver (a ``--cracks`` re-bake has no solver to hide it).  The bake's UV
-    placement always has tangents (:func:`_uvs`): the normal map's targets.  None for a UDIM
-    set (pages of their own)."""
+    (:class:`crackbake.bake.prefetch.TargetPrefetch`): their sizes follow from ``--res`` and
+    ``--tile`` alone, so the allocation runs beside the solver, or in a ``--cracks`` re-bake
+    (no solver to hide it) beside the UV stage.  The bake's UV placement always has tangents
+    (:func:`_uvs`): the normal map's targets.  None for a UDIM set (pages of their own)."""
     if tiles > 1:
         return None
     from crackbake.bake.prefetch import TargetPrefetch
