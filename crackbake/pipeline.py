@@ -173,8 +173,18 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     ctx = create_context()
     targets = gutter = None
     try:
+        # A re-bake has no solver to hide the targets' allocation behind: it starts before the
+        # UV stage (which then shares the machine with it); a solving run starts it after its
+        # last GL call before the bake (the coverage), to run beside the solver.
+        if params.cracks is not None:
+            targets = _targets_ahead(ctx, params, tiles)
         uvmesh = _uvs(ctx, mesh, params, timings)
-        targets, gutter = _bake_ahead(ctx, uvmesh, params, timings)
+        if uvmesh.udim is not None and targets is not None:  # pages of their own
+            targets.close()
+            targets = None
+        gutter = _bake_ahead(ctx, uvmesh, params, timings)
+        if params.cracks is None and uvmesh.udim is None:
+            targets = _targets_ahead(ctx, params, 1)
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
         maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
@@ -257,19 +267,29 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
     return uvmesh
 
 
-def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
-    """What the crack bake needs that no crack network changes, started on threads of their own
-    to run beside the solver: its render targets and readback images
-    (:class:`crackbake.bake.prefetch.TargetPrefetch`) and its gutter fill, planned from the
-    faces' coverage (:class:`crackbake.bake.dilation.PlanAhead`; the coverage draw timed as
-    ``coverage``).  Started after the last GL call before the bake: llvmpipe zero-fills a
-    texture holding Mesa's shared texture lock, which this thread's GL calls would wait for.
-    (None, None) for a UDIM set."""
-    if uvmesh.udim is not None:
-        return None, None
-    from crackbake.bake.dilation import PlanAhead
+def _targets_ahead(ctx, params: RunParams, tiles: int):
+    """The crack bake's render targets and readback images, allocated on a thread of their own
+    (:class:`crackbake.bake.prefetch.TargetPrefetch`): their sizes follow from ``--res`` and
+    ``--tile`` alone, so the allocation runs beside the solver, or in a ``--cracks`` re-bake
+    (no solver to hide it) beside the UV stage.  The bake's UV placement always has tangents
+    (:func:`_uvs`): the normal map's targets.  None for a UDIM set (pages of their own)."""
+    if tiles > 1:
+        return None
     from crackbake.bake.prefetch import TargetPrefetch
-    from crackbake.bake.raster import coverage, image_specs, target_specs
+    from crackbake.bake.raster import image_specs, target_specs
+
+    return TargetPrefetch(ctx, target_specs(params.res, params.tile, True),
+                          image_specs(params.res, True))  # fmt: skip
+
+
+def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
+    """The crack bake's gutter fill, planned from the faces' coverage on a thread of its own
+    to run beside the solver (:class:`crackbake.bake.dilation.PlanAhead`; the coverage draw
+    timed as ``coverage``).  None for a UDIM set."""
+    if uvmesh.udim is not None:
+        return None
+    from crackbake.bake.dilation import PlanAhead
+    from crackbake.bake.raster import coverage
     from crackbake.bake.uv.uvmesh import bake_arrays
 
     t = time.perf_counter()
@@ -278,9 +298,7 @@ def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float
     inside = coverage(ctx, arrays["uv"], arrays["faces"], params.res, params.tile, with_normals)
     gutter = PlanAhead(inside, params.dilate)
     timings["coverage"] = time.perf_counter() - t
-    targets = TargetPrefetch(ctx, target_specs(params.res, params.tile, with_normals),
-                             image_specs(params.res, with_normals))  # fmt: skip
-    return targets, gutter
+    return gutter
 
 
 def _bake(

@@ -1,12 +1,15 @@
 #version 430 core
-// Second bake pass, once per texel: measures, in world units, the distance from the texel's surface
-// point (recorded by crack_surface.frag) to the crack segments listed for its face's bin
-// (crackbake/bake/grid.py), and turns it into the crack channels.  Working in world space makes
-// the width independent of UV stretch and continuous across UV seams.
-// Compiled with CRACK_NORMALS defined it also records which segment's depth term wins each
-// texel, for crack_normal.comp to compute the depth-normal and occlusion at the crack texels
-// only (llvmpipe runs both sides of a branch, so doing it here cost every texel); the code the
-// other channels run is the same in both variants, so they come out bit-identical.
+// The crack pass, once per texel: measures, in world units, the distance from the texel's surface
+// point to the crack segments listed for its face's bin (crackbake/bake/grid.py), and turns it
+// into the crack channels.  Working in world space makes the width independent of UV stretch and
+// continuous across UV seams.  The surface point and its footprint come either from the face
+// itself (CRACK_FACES: a UV placement draws the listed faces, crackbake/bake/raster.py) or from
+// the surface pass's targets (crack_surface.frag; this pass then one full-screen triangle).
+// Compiled with CRACK_NORMALS defined it also records, at each texel whose depth a segment
+// wins, that segment and the texel's point, footprint and face, for crack_normal.comp to
+// compute the depth-normal and occlusion at the crack texels only (llvmpipe runs both sides of
+// a branch, so doing it here cost every texel); the code the other channels run is the same in
+// both variants, so they come out bit-identical.
 
 struct Segment {
     vec4 a;      // xyz start, w = width at start
@@ -43,9 +46,25 @@ uniform float u_min_px;         // least drawn width, texels (0 = the physical w
 
 // @crack_look.glsl (inserted here by crackbake/bake/normal_map.py)
 
+#ifdef CRACK_FACES
+in vec3 v_world;  // crack_bake.vert
+// Per drawn primitive p, at texel (p % 4096, p / 4096): its face, its face's bin.
+layout(binding = 7) uniform usampler2D u_prim;
+#else
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
-layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y
+layout(binding = 2) uniform sampler2D u_dpy;     // xyz footprint along y, w = face
+#endif
+
+#ifdef CRACK_NORMALS
+// The crack texels' records, appended: point xyz + face, footprint x + segment, footprint y.
+// The inside target says which record is the texel's (2 + its index): where faces overlap,
+// the last face drawn wins the record as it wins the targets.  Records past u_capacity are
+// counted but not stored (crackbake/bake/raster.py draws the band again with room for them).
+layout(std430, binding = 9) buffer Count { uint n_records; };
+layout(std430, binding = 10) writeonly buffer Records { vec4 record[]; };
+uniform uint u_capacity;
+#endif
 
 // One single-channel target per map, so each reads back straight into its own image.
 layout(location = 0) out float o_mask;      // R16F
@@ -54,9 +73,19 @@ layout(location = 2) out float o_time;      // R16F
 layout(location = 3) out float o_depth;     // R32F
 layout(location = 4) out float o_distance;  // R32F
 layout(location = 5) out float o_id;        // R32F
-layout(location = 6) out float o_inside;    // R8; with CRACK_NORMALS R32F: 2 + deepest segment
+layout(location = 6) out float o_inside;    // R8; with CRACK_NORMALS R32F: 2 + its record
 
 void main() {
+#ifdef CRACK_FACES
+    // As crack_surface.frag records them: the same values, measured in place.
+    vec3 p = v_world;
+    // World-space footprint of one texel; the surface is affine inside a face.
+    vec3 dpx = dFdx(v_world);
+    vec3 dpy = dFdy(v_world);
+    uvec2 prim = texelFetch(u_prim, ivec2(gl_PrimitiveID & 4095, gl_PrimitiveID >> 12), 0).xy;
+    uint bin = prim.y;
+    float face = float(prim.x);  // exact below 2^24 faces
+#else
     ivec2 texel = ivec2(gl_FragCoord.xy);
     vec4 point = texelFetch(u_point, texel, 0);
     vec4 gx = texelFetch(u_dpx, texel, 0);
@@ -74,7 +103,10 @@ void main() {
     vec3 p = point.xyz;
     // World-space footprint of one texel; the surface is affine inside a face.
     vec3 dpx = gx.xyz;
-    vec3 dpy = texelFetch(u_dpy, texel, 0).xyz;
+    vec4 gy = texelFetch(u_dpy, texel, 0);
+    vec3 dpy = gy.xyz;
+    float face = gy.w;
+#endif
     float texel_iso = 0.5 * (length(dpx) + length(dpy));
 
     float best_d = u_max_distance;
@@ -103,10 +135,75 @@ void main() {
     float rim_depth = 0.0;      // its depth there (the rim is u_curl times that high)
 #endif
     uvec2 list = texelFetch(u_bins, table_texel(bin), 0).xy;
+    // Two walks over the list (the same pixels as one walk doing everything, at a fraction of
+    // its cost: most steps only measure a distance).  First the nearest segment: the walk stops
+    // at the first entry whose bound exceeds both the nearest distance so far and the cover
+    // reach, as a single walk measuring everything would; kend is where.  It also marks the
+    // entries near enough to add coverage, depth or a rim.
+    // Farther than add_reach a segment adds exactly nothing: beyond half the widest drawn width
+    // (its rim with a curl) plus two footprints, a texel's ramp, or a thin crack's filtered
+    // tent, has ended (they end within 1.5 footprints across).
+    float floor_half = 0.5 * u_min_px * foot;
+#ifdef CRACK_CURL
+    floor_half *= 1.0 + CURL_REACH;
+#endif
+    float add_reach = max(u_half_width, floor_half) + 2.0 * foot;
+    uvec2 near = uvec2(0u);  // bit j: entry list.x + j lies within add_reach of this texel
+    uint kend = list.y;
+    float best_t = 0.0;
     for (uint k = list.x; k < list.y; ++k) {
         // Segments come nearest-bound first: the rest cannot be nearer or add coverage.
         uvec2 entry = texelFetch(u_lists, table_texel(k), 0).xy;
-        if (uintBitsToFloat(entry.y) > max(best_d, cover_reach)) break;
+        if (uintBitsToFloat(entry.y) > max(best_d, cover_reach)) { kend = k; break; }
+        uint si = entry.x;
+        ivec2 at = ivec2((int(si) & ((1 << SEG_ROW_LOG2) - 1)) << 2, int(si) >> SEG_ROW_LOG2);
+        vec4 a = texelFetch(u_segments, at, 0);
+        vec4 b = texelFetch(u_segments, at + ivec2(1, 0), 0);
+        vec3 ab = b.xyz - a.xyz;
+        float len2 = dot(ab, ab);
+        float t = len2 > 0.0 ? clamp(dot(p - a.xyz, ab) / len2, 0.0, 1.0) : 0.0;
+        vec3 g = p - (a.xyz + t * ab);
+        float d = length(g);
+        uint j = k - list.x;
+        if (d <= add_reach && j < 64u) {
+            if (j < 32u) near.x |= 1u << j; else near.y |= 1u << (j - 32u);
+        }
+        // Ties go to the lowest index, so the result does not depend on the list order.
+        if (d < best_d || (d == best_d && best_seg >= 0 && int(si) < best_seg)) {
+            best_seg = int(si);
+            best_d = d;
+            best_t = t;
+        }
+    }
+    if (best_seg >= 0) {
+        ivec2 at = ivec2((best_seg & ((1 << SEG_ROW_LOG2) - 1)) << 2, best_seg >> SEG_ROW_LOG2);
+        Segment s = Segment(texelFetch(u_segments, at, 0),
+                            texelFetch(u_segments, at + ivec2(1, 0), 0),
+                            texelFetch(u_segments, at + ivec2(2, 0), 0),
+                            texelFetch(u_segments, at + ivec2(3, 0), 0));
+        best_w = mix(s.a.w, s.b.w, best_t);
+        best_time = mix(s.dt.z, s.dt.w, best_t);
+        best_id = s.id.x;
+    }
+    // Then the coverage, depth and rims over the same entries, but only those near enough to add
+    // any: the first 64 by the texel's own distance (the walk above marked them), the rest by
+    // their bound, in the list's order.
+    uint masked_end = min(kend, list.x + 64u);
+    uint tail = masked_end;
+    for (;;) {
+        uint k;
+        if (near.x != 0u) {
+            k = list.x + uint(findLSB(near.x));
+            near.x &= near.x - 1u;
+        } else if (near.y != 0u) {
+            k = list.x + 32u + uint(findLSB(near.y));
+            near.y &= near.y - 1u;
+        } else {
+            if (tail >= kend) break;
+            k = tail++;
+        }
+        uvec2 entry = texelFetch(u_lists, table_texel(k), 0).xy;
+        if (k >= masked_end && uintBitsToFloat(entry.y) > add_reach) break;
         uint si = entry.x;
         ivec2 at = ivec2((int(si) & ((1 << SEG_ROW_LOG2) - 1)) << 2, int(si) >> SEG_ROW_LOG2);
         Segment s = Segment(texelFetch(u_segments, at, 0),
@@ -175,14 +272,6 @@ void main() {
         }
 #endif
         depth = max(depth, dd);
-        // Ties go to the lowest index, so the result does not depend on the list order.
-        if (d < best_d || (d == best_d && best_seg >= 0 && int(si) < best_seg)) {
-            best_seg = int(si);
-            best_d = d;
-            best_w = w_phys;
-            best_time = mix(s.dt.z, s.dt.w, t);
-            best_id = s.id.x;
-        }
     }
     o_mask = coverage;
     o_width = best_w;
@@ -199,11 +288,21 @@ void main() {
     o_distance = best_d;
     o_id = best_id;
 #ifdef CRACK_NORMALS
-    // 1 on a face with no crack depth, 2 + the segment whose depth term wins (exact < 2^24).
+    // 1 on a face with no crack depth, 2 + the record of the segment whose depth term wins.
 #ifdef CRACK_CURL
     if (deepest_seg < 0 && rim_seg >= 0) deepest_seg = rim_seg;  // on a curled rim
 #endif
-    o_inside = float(deepest_seg + 2);
+    float code = 1.0;
+    if (deepest_seg >= 0) {
+        uint e = atomicAdd(n_records, 1u);
+        if (e < u_capacity) {
+            record[3u * e] = vec4(p, face);
+            record[3u * e + 1u] = vec4(dpx, float(deepest_seg));  // exact below 2^24
+            record[3u * e + 2u] = vec4(dpy, 0.0);
+        }
+        code = 2.0 + float(e);  // exact: the raster keeps e below 2^24 - 2
+    }
+    o_inside = code;
 #else
     o_inside = 1.0;
 #endif

@@ -529,3 +529,21 @@ def test_bake_memory_grows_with_faces_and_texels_not_their_product(tmp_path):
     # Crackle cracks are thinner than a texel at 1024: coverage, not a solid line.
     assert 0.005 < float((mask > 0).mean()) < 0.5  # a crack network, neither empty nor flooded
     assert float(mask.max()) <= 1.0
+
+
+@pytest.mark.parametrize("crack_last", [False, True])
+def test_stacked_islands_take_the_face_drawn_last(gl_ctx, crack_last):
+    # Two unit plates on the same UVs (a stacked island): one crossed by a crack, one far from
+    # every crack (its faces' lists are empty).  Each texel takes the face drawn last there, as
+    # if that plate were baked alone, whichever of the two lists segments.
+    v, f, uv = plate(lambda x, y: (x, y))
+    far = v + [0.0, 0.0, 10.0]
+    segs = make_segments([[0.1, 0.3, 0.0]], [[0.9, 0.6, 0.0]], width=0.05)
+    kw = {"max_distance": 0.2, "ctx": gl_ctx}
+    first, last = (far, v) if crack_last else (v, far)
+    stacked = bake_cracks(np.vstack([first, last]), np.vstack([f, f + len(first)]),
+                          np.vstack([uv, uv]), segs, 64, **kw)  # fmt: skip
+    alone = bake_cracks(last, f, uv, segs, 64, **kw)
+    for name, arr in alone.channels().items():
+        assert np.array_equal(arr, stacked.channels()[name]), name
+    assert (float(alone.mask.max()) > 0.9) == crack_last

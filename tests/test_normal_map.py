@@ -18,7 +18,7 @@ from conftest import grid_faces
 from PIL import Image
 from test_bake import make_segments
 
-from crackbake.bake import normal_map
+from crackbake.bake import normal_map, raster
 from crackbake.bake.raster import bake_cracks
 from crackbake.errors import CrackbakeError
 from crackbake.exchange.packing import normal_q
@@ -454,6 +454,13 @@ def test_normals_leave_the_other_channels_bit_identical_and_tile(gl_ctx, monkeyp
                         ctx=gl_ctx)  # fmt: skip
     assert np.array_equal(split.normal, full.normal)
     assert np.array_equal(split.occlusion, full.occlusion)
+    # Room for one crack texel record: the band is drawn again with room for all, same maps.
+    monkeypatch.setattr(raster, "RECORDS_SHARE", 1 << 30)
+    monkeypatch.setattr(raster, "RECORDS_LEAST", 1)
+    again = bake_cracks(v, f, uv, segs, RES, max_distance=0.1, normals=n, tangents=tan,
+                        ctx=gl_ctx)  # fmt: skip
+    for name, arr in full.channels().items():
+        assert np.array_equal(arr, again.channels()[name]), name
     # The gutters are filled from the islands like the other channels.
     assert not full.inside.all()
     np.testing.assert_allclose(np.linalg.norm(full.normal, axis=-1), 1, atol=1e-5)

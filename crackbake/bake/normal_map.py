@@ -127,8 +127,8 @@ _DISPATCH = 65535 * 64
 
 class NormalPass:
     """The compute pass (``shaders/crack_normal.comp``) that fills the normal and occlusion at
-    the crack texels of each band, reading the band's surface-pass targets (texture units 0-2)
-    and the segment, face and frame buffers (storage bindings 0, 5, 6) the crack pass set up.
+    the crack texels of each band, reading the records the crack pass appended (storage binding
+    10) and the segment, face and frame buffers (storage bindings 0, 5, 6) the bake set up.
 
     Parameters
     ----------
@@ -163,7 +163,9 @@ class NormalPass:
         ----------
         code : (h, res) float32
             The crack pass's inside target of the band: 0 off the faces, 1 on a face with no
-            crack depth, ``2 + segment`` where that segment's depth term wins.
+            crack depth, ``2 + record`` where a segment's depth term wins: the index of the
+            record the crack pass appended there (storage binding 10: the texel's point, face,
+            footprint and that segment).
         planes : list of four (res, res) arrays
             Written at rows ``y0 + row`` of the crack texels (others keep their flat value).
         y0 : int

@@ -1,11 +1,12 @@
 """The crack bake's render targets, allocated ahead on a second thread while the CPU stages run.
 
 llvmpipe zero-fills every new texture on the calling thread: the crack bake's targets at 4096²
-(three RGBA32F surface targets and seven channel targets, 1.2 GB) cost about 0.9 CPU-s of page
-faults and ``memset`` that the bake stage waited for.  Their sizes are known as soon as the run's
-``--res`` and ``--tile`` are, long before the crack network is, so :class:`TargetPrefetch`
-creates them in a second EGL context that shares the run context's objects, on a thread of its
-own, while the UVs, the simulation mesh, the stress field and the solver run on the main one.
+(seven channel targets, 400 MB; 1.2 GB when three RGBA32F surface targets came with them) cost
+about 0.4 CPU-s of page faults and ``memset`` (0.9 then) that the bake stage waited for.  Their
+sizes are known as soon as the run's ``--res`` and ``--tile`` are, long before the crack network
+is, so :class:`TargetPrefetch` creates them in a second EGL context that shares the run
+context's objects, on a thread of its own, while the UVs, the simulation mesh, the stress field
+and the solver run on the main one.
 moderngl holds the GIL in every call; this thread calls EGL and GL through :mod:`ctypes`, which
 releases it, so the main thread's Python and numba are never held up by it.
 
@@ -25,6 +26,7 @@ import ctypes
 import logging
 import os
 import threading
+import time
 from ctypes import POINTER, byref, c_int, c_uint, c_void_p
 
 import numpy as np
@@ -98,6 +100,10 @@ def _shared_context(egl) -> tuple[c_void_p, c_void_p] | None:
     return (display, context) if context else None
 
 
+#: Seconds the thread pauses between two textures, so that the run's thread gets the texture
+#: lock in between (:meth:`TargetPrefetch._textures`).
+_PAUSE = 0.002
+
 #: How much nicer than the run the threads working ahead are: they should take an idle core, not
 #: the solver's (on Linux a thread's nice value is its own).
 BACKGROUND_NICE = 5
@@ -170,7 +176,13 @@ class TargetPrefetch:
             egl.eglDestroyContext(display, context)
             return
         try:
-            for (width, height), components, dtype in specs:
+            for k, ((width, height), components, dtype) in enumerate(specs):
+                if k:
+                    # Mesa holds the share group's texture lock while it zero-fills a texture,
+                    # and its lock is not fair: without a pause between two textures a GL call
+                    # of the run's thread that needs it (a texture of the UV check, of the
+                    # coverage) waits for all of them, not for one.
+                    time.sleep(_PAUSE)
                 internal, fmt, kind = _FORMATS[(components, dtype)]
                 name = c_uint(0)
                 gl.glGenTextures(1, byref(name))

@@ -1,16 +1,19 @@
 """GPU bake of a crack network into UV-space texture maps.
 
-The asset's faces are drawn at their UV positions in two passes: the first records each texel's
-world position, texel footprint and face bin; the second, once per texel, loops over the crack
-segments listed for that bin (:mod:`crackbake.bake.grid`: nearby faces share one list, so memory
-stays linear in faces + segments) and measures world-space distances; the depth buffer of the
-first pass keeps the second to the texels of faces whose bin lists a segment at all (the others
-take an empty list's values from the targets' clear).  So widths are in mesh
-units whatever the UV stretch, and a crack crossing a UV seam continues on both islands.  Large
-images are drawn in bands, and empty texels are then filled from their nearest island
-(dilation) so bilinear filtering and mip-maps never pull in background.  Given tangents, the
-second pass also records which segment's depth wins each texel, and a compute pass over the crack
-texels derives the depth-normal and occlusion maps from it (:mod:`crackbake.bake.normal_map`).
+The asset's faces are drawn at their UV positions in two passes: the first marks the texels on
+a face and, in the depth buffer, whether the face's bin (:mod:`crackbake.bake.grid`: nearby
+faces share one list, so memory stays linear in faces + segments) lists any crack segment; the
+second draws the faces whose bin does, and, once per texel they own (the depth test), loops over
+the listed segments, measuring world-space distances from the texel's point with its footprint
+(the derivatives of the position across one texel); the texels of faces with empty lists take an
+empty list's values from the targets' clear.  So widths are in mesh units whatever the UV
+stretch, and a crack crossing a UV seam continues on both islands.  Large images are drawn in
+bands, and empty texels are then filled from their nearest island (dilation) so bilinear
+filtering and mip-maps never pull in background.  Given tangents, the second pass also records
+each crack texel's point, footprint, face and the segment whose depth wins it, and a compute
+pass over the crack texels derives the depth-normal and occlusion maps from them
+(:mod:`crackbake.bake.normal_map`).  A camera's placement (the decal bake) records each texel's
+point, footprint and bin in float targets first and measures them in one full-screen pass.
 
 All returned images have row 0 at the top (UV v = 1), the order image files store.
 """
@@ -192,7 +195,7 @@ def bake_cracks(
         Limit of the gutter fill in texels; ``None`` fills every empty texel.
     tile : int
         Largest framebuffer edge; bigger images are drawn in bands of at most ``tile**2``
-        texels (73 bytes each on the GL side).
+        texels (25 bytes each on the GL side, 28 with the normal map; 76 placed by a camera).
     ctx : moderngl.Context, optional
         The run's context; a temporary one is created (and released) when not given.
     normals : (V, 3) float, optional
@@ -279,6 +282,13 @@ def bake_cracks(
 #: 3-6 % (a ctx.finish per slice, 32 slices); at 2**21 (8 slices) it equals the unsliced bake's.
 SLICE_TEXELS = 1 << 21
 
+#: Crack texel records the normal map's crack pass makes room for at first: a band's texels over
+#: RECORDS_SHARE, at least RECORDS_LEAST (48 bytes each; llvmpipe zero-fills the buffer: 0.035
+#: CPU-s at 4096²).  A band needing more is drawn again with room for all of them (the crack pass
+#: twice); spot glass at 4096² has 25k crack texels (0.15 %), dense networks many more.
+RECORDS_SHARE = 16
+RECORDS_LEAST = 1 << 16
+
 _NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
 # width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
 # below 6e-5), while mask and time are 0..1.
@@ -286,56 +296,95 @@ _DTYPES = ("f2", "f4", "f2", "f4", "f4", "f4", "f1")
 _NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 
+@dataclass(eq=False)
+class _Passes:
+    """The programs and vertex arrays of one bake.
+
+    ``surface`` draws the faces at their placement: with a UV placement the class pass
+    (``crack_inside.frag`` on each face at the depth of its list's class), with a camera's
+    the surface pass (``crack_surface.frag``: world position, footprint, bin per texel).
+    ``cracks`` measures the cracks: with a UV placement the listed faces again
+    (``crack_bake.frag`` with ``CRACK_FACES``; None when no face lists a segment), with a
+    camera's one full-screen triangle reading the surface targets, after ``inside`` marked the
+    face texels."""
+
+    surface: object
+    cracks: object | None
+    inside: object | None
+    program: object
+
+
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
               max_distance: float, profile_shape: float, frames: np.ndarray | None,
               projection: np.ndarray | None = None, min_px: float = 0.0,
-              terms: dict | None = None):
-    """The surface pass (faces at their placement -> world position, footprint, bin per texel;
-    with ``frames``, the face too) and the crack pass (one full-screen triangle measuring the
-    cracks per texel; with ``frames``, reading the faces' vertex frames), with their buffers.
+              terms: dict | None = None) -> _Passes:
+    """The bake's passes (:class:`_Passes`) with their buffers and tables.
 
     The placement is the vertex shader: ``crack_bake.vert`` puts each face at its UVs,
-    ``decal_project.vert`` through the ``projection`` camera; the passes after it are shared."""
+    ``decal_project.vert`` through the ``projection`` camera."""
     ctx = gl.ctx
     with_normals = frames is not None
+    projected = projection is not None
     terms = terms or look_terms(None, segments)
     defines = tuple(terms["defines"]) + (("CRACK_CELLS",) if bins.cell else ())
     vertex = np.empty((len(vertices), 5), np.float32)
     vertex[:, 0:2] = uv
     vertex[:, 2:5] = vertices
-    placement = "crack_bake.vert" if projection is None else "decal_project.vert"
-    # A UV placement sorts the faces' texels by depth: bin with or without a list.
-    classes = ("CRACK_LIST_DEPTH",) if projection is None else ()
-    surface = gl.keep(
-        ctx.program(
-            vertex_shader=shader_variant(placement, with_normals),
-            fragment_shader=shader_variant("crack_surface.frag", with_normals, classes),
-        )
-    )
-    prog = gl.keep(
-        ctx.program(
-            vertex_shader=shader_variant("crack_screen.vert", with_normals),
-            fragment_shader=shader_variant("crack_bake.frag", with_normals, defines),
-        )
-    )
     vbo = gl.keep(ctx.buffer(vertex))
     ibo = gl.keep(ctx.buffer(np.ascontiguousarray(faces, np.uint32)))
-    layout = [(vbo, "2f 3f", "in_uv", "in_pos")] if projection is None else [
-        (vbo, "8x 3f", "in_pos")
-    ]
-    vao = gl.keep(ctx.vertex_array(surface, layout, index_buffer=ibo, index_element_size=4))
-    if projection is not None:
+    face_bin = np.asarray(bins.face_bin, np.uint32)
+    if projected:
+        surface = gl.keep(ctx.program(
+            vertex_shader=shader_variant("decal_project.vert", with_normals),
+            fragment_shader=shader_variant("crack_surface.frag", with_normals)))  # fmt: skip
         # Column vectors in GLSL's column-major order: the transpose of the row-major array.
         surface["u_projection"].write(np.asarray(projection, np.float32).T.tobytes())
+        layout = [(vbo, "8x 3f", "in_pos")]
+        prog = gl.keep(ctx.program(
+            vertex_shader=shader_variant("crack_screen.vert", with_normals),
+            fragment_shader=shader_variant("crack_bake.frag", with_normals, defines)))  # fmt: skip
+        prog["u_depth"].value = 1.0  # every face texel
+        cracks = gl.keep(ctx.vertex_array(prog, []))
+        inside = gl.keep(ctx.program(vertex_shader=shader_source("crack_screen.vert"),
+                                     fragment_shader=shader_source("crack_inside.frag")))
+        inside["u_depth"].value = 1.0
+        inside_screen = gl.keep(ctx.vertex_array(inside, []))
+    else:
+        # The class pass: each face's corners of its own, at the depth of its class (0.25:
+        # its bin lists a segment, 0.75: none), drawn with a constant colour (inside), so
+        # llvmpipe runs no per-texel shader work for it.
+        surface = gl.keep(ctx.program(
+            vertex_shader=shader_variant("crack_bake.vert", with_normals, ("CRACK_CLASS_Z",)),
+            fragment_shader=shader_source("crack_inside.frag")))  # fmt: skip
+        bounds = np.asarray(bins.bin_start)
+        listed_face = bounds[face_bin + 1] > bounds[face_bin]
+        corners = np.empty((len(faces), 3, 3), np.float32)
+        corners[:, :, 0:2] = vertex[np.asarray(faces), 0:2]
+        corners[:, :, 2] = np.where(listed_face, -0.5, 0.5)[:, None]
+        cbo = gl.keep(ctx.buffer(corners))
+        layout = [(cbo, "2f 1f", "in_uv", "in_z")]
+        prog = gl.keep(ctx.program(
+            vertex_shader=shader_variant("crack_bake.vert", with_normals),
+            fragment_shader=shader_variant("crack_bake.frag", with_normals,
+                                           defines + ("CRACK_FACES",))))  # fmt: skip
+        # The crack pass draws only the faces whose bin lists a segment, in their order (so
+        # where faces overlap the last drawn still wins), each with its face and bin.
+        listed = np.flatnonzero(listed_face)
+        cracks = inside_screen = None
+        if len(listed):
+            prim = np.column_stack([listed, face_bin[listed]]).astype(np.uint32)
+            _table_texture(gl, prim, 1 << LIST_ROW_LOG2, "u4", 2).use(7)
+            sub = gl.keep(ctx.buffer(np.ascontiguousarray(faces[listed], np.uint32)))
+            cracks = gl.keep(ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")],
+                                              index_buffer=sub, index_element_size=4))
+        prog["u_res"].value = float(res)
+    if projected:
+        vao = gl.keep(ctx.vertex_array(surface, layout, index_buffer=ibo, index_element_size=4))
+    else:
+        vao = gl.keep(ctx.vertex_array(surface, layout))
     if with_normals:
         ibo.bind_to_storage_buffer(5)  # the triangles, read by crack_normal.glsl
         gl.keep(ctx.buffer(frames)).bind_to_storage_buffer(6)
-    screen = gl.keep(ctx.vertex_array(prog, []))
-    inside = gl.keep(ctx.program(vertex_shader=shader_source("crack_screen.vert"),
-                                 fragment_shader=shader_source("crack_inside.frag")))
-    inside["u_depth"].value = 1.0  # every face texel
-    prog["u_depth"].value = 1.0 if projection is not None else 0.0  # ... or the listed ones
-    inside_screen = gl.keep(ctx.vertex_array(inside, []))
     seg_buffer = _segment_buffer(segments)
     # The crack normals' compute pass reads the segments as a storage buffer (binding 0); the
     # crack pass reads them, and the lists, as textures (units 3, 4: shaders/crack_bake.frag).
@@ -348,8 +397,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     _table_texture(gl, lists, row, "u4", 2).use(4)
     ranges = np.column_stack([bins.bin_start[:-1], bins.bin_start[1:]]).astype(np.uint32)
     _table_texture(gl, ranges, row, "u4", 2).use(5)
-    face_bin = np.asarray(bins.face_bin, np.uint32).reshape(-1, 1)
-    _table_texture(gl, face_bin, row, "u4", 1).use(6)
+    _table_texture(gl, face_bin.reshape(-1, 1), row, "u4", 1).use(6)
     surface["u_res"].value = float(res)
     prog["u_max_distance"].value = max_distance
     half = 0.5 * float(segments.width.max()) * terms["reach"] if len(segments.a) else 0.0
@@ -362,7 +410,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     if bins.cell:
         prog["u_cell"].value = bins.cell
         prog["u_cells_x"].value = bins.cells_x
-    return surface, vao, screen, inside_screen
+    return _Passes(vao, cracks, inside_screen, prog)
 
 
 #: Texture table rows of ``shaders/crack_bake.frag``: 2**10 segments (4 texels each), and 2**12
@@ -398,9 +446,9 @@ def band_rows(res: int, tile: int) -> int:
 def target_specs(res: int, tile: int, with_normals: bool) -> list[Spec]:
     """The textures a UV-placed bake of ``res`` texels draws into (``tile`` as given to
     :func:`bake_cracks`, ``with_normals``: tangents given), for a :class:`TargetPrefetch`:
-    the surface pass's three RGBA32F targets and one target per channel, a band each."""
+    one target per channel, a band each (a camera's placement adds the surface targets)."""
     size = (res, band_rows(res, tile))
-    return [(size, 4, "f4")] * 3 + [(size, 1, d) for d in _dtypes(with_normals)]
+    return [(size, 1, d) for d in _dtypes(with_normals)]
 
 
 def image_specs(res: int, with_normals: bool) -> list[ArraySpec]:
@@ -430,8 +478,8 @@ def _dtypes(with_normals: bool) -> tuple[str, ...]:
 def coverage(ctx, uv: np.ndarray, faces: np.ndarray, res: int, tile: int = TILE_DEFAULT,
              with_normals: bool = True) -> np.ndarray:
     """The texels a UV-placed :func:`bake_cracks` of these triangles finds on a face (its
-    ``inside``), drawn without the cracks: the same placement shader (the surface pass's
-    vertex stage, band by band as ``tile`` makes them, so the same rasterisation), one bit out.
+    ``inside``), drawn without the cracks: the same placement shader (the bake's vertex
+    stage, band by band as ``tile`` makes them, so the same rasterisation), one bit out.
 
     Parameters
     ----------
@@ -486,28 +534,71 @@ def _texture(gl: GLScope, size: tuple[int, int], components: int, dtype: str,
 
 
 def _targets(gl: GLScope, res: int, band: int, dtypes: tuple[str, ...],
-             prefetch: TargetPrefetch | None = None):
-    """Framebuffers of one band: the surface pass's three float targets (bound as textures for
-    the crack pass) and the crack pass's one target per channel, sharing one depth buffer (the
-    surface pass's faces: the crack pass shades only where it holds one); one framebuffer per
-    crack target, to clear each to its own value, the inside target's with the depth buffer."""
+             prefetch: TargetPrefetch | None = None, surface: bool = False):
+    """Framebuffers of one band: the crack pass's one target per channel, with a depth buffer
+    (the faces' classes, or the surface pass's faces: the crack pass shades only where it
+    allows); one framebuffer per crack target, to clear each to its own value, the inside
+    target's with the depth buffer.  With ``surface``, also the surface pass's three float
+    targets (bound as textures for the crack pass) and their framebuffer, else None."""
     import moderngl
 
     ctx = gl.ctx
-    gbuffer = [_texture(gl, (res, band), 4, "f4", prefetch) for _ in range(3)]
-    for unit, tex in enumerate(gbuffer):
-        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        tex.use(unit)
     zbuffer = gl.keep(ctx.depth_renderbuffer((res, band)))
-    gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer, depth_attachment=zbuffer))
+    gfbo = None
+    if surface:
+        gbuffer = [_texture(gl, (res, band), 4, "f4", prefetch) for _ in range(3)]
+        for unit, tex in enumerate(gbuffer):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            tex.use(unit)
+        gfbo = gl.keep(ctx.framebuffer(color_attachments=gbuffer, depth_attachment=zbuffer))
     textures = [_texture(gl, (res, band), 1, d, prefetch) for d in dtypes]
     fbo = gl.keep(ctx.framebuffer(color_attachments=textures, depth_attachment=zbuffer))
     fbo.depth_mask = False
     singles = [gl.keep(ctx.framebuffer(color_attachments=[t])) for t in textures[:-1]]
     singles.append(gl.keep(ctx.framebuffer(color_attachments=[textures[-1]],
                                            depth_attachment=zbuffer)))
-    singles[-1].depth_mask = False
     return gfbo, fbo, singles
+
+
+class _Records:
+    """The crack texels' records the crack pass appends with the normal map
+    (``shaders/crack_bake.frag``: storage bindings 9, the count, and 10, the records), read by
+    the normal's compute pass; room for ``capacity`` of them, grown when a band needs more."""
+
+    #: Most records of one band: the inside target holds 2 + the index as float32.
+    LIMIT = (1 << 24) - 2
+
+    def __init__(self, gl: GLScope, program, capacity: int) -> None:
+        self.gl = gl
+        self.program = program
+        self.count = gl.keep(gl.ctx.buffer(reserve=4))
+        self.count.bind_to_storage_buffer(9)
+        self.records = None
+        self.capacity = 0
+        self.grow(capacity)
+
+    def grow(self, capacity: int) -> None:
+        capacity = max(1, min(int(capacity), self.LIMIT))
+        if self.records is not None:
+            self.records.release()
+        # llvmpipe zero-fills it (RECORDS_SHARE sizes it).
+        self.records = self.gl.ctx.buffer(reserve=48 * capacity)
+        self.records.bind_to_storage_buffer(10)
+        self.capacity = capacity
+        self.program["u_capacity"].value = capacity
+
+    def reset(self) -> None:
+        self.count.write(np.zeros(1, np.uint32).tobytes())
+
+    def used(self) -> int:
+        """Records the last pass appended (stored or not)."""
+        self.gl.ctx.memory_barrier()
+        return int(np.frombuffer(self.count.read(), np.uint32)[0])
+
+    def release(self) -> None:
+        if self.records is not None:
+            self.records.release()
+            self.records = None
 
 
 def _render(
@@ -535,19 +626,21 @@ def _render(
     with_normals = frames is not None
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
-        surface, vao, screen, inside_screen = _programs(
+        passes = _programs(
             gl, vertices, faces, uv, segments, res, bins, max_distance, profile_shape, frames,
             projection, min_px, terms,
         )  # fmt: skip
-        prog_row0 = screen.program["u_row0"] if bins.cell else None
+        prog_row0 = passes.program["u_row0"] if bins.cell else None
         # Full-width bands of at most tile*tile texels: each band reads straight into the rows
         # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (73 bytes a texel: 48 for the surface pass, 4 of depth, 21 for the maps; 76 with the
-        # normal map, whose inside target holds the winning segment as R32F).
+        # (25 bytes a texel: 4 of depth, 21 for the maps; 28 with the normal map, whose inside
+        # target holds the crack texels' records as R32F; a camera's placement adds 48 for the
+        # surface pass).
         band = band_rows(res, tile)
         dtypes = _dtypes(with_normals)
         images = {n: _image(prefetch, (res, res), _NUMPY[d])
                   for n, d in zip(_NAMES, dtypes, strict=True)}  # fmt: skip
+        records = None
         if with_normals:
             normal_pass = NormalPass(gl, profile_shape, min_px, terms)
             # Flat and open wherever no crack's depth reaches.  Planar storage: each component
@@ -556,65 +649,98 @@ def _render(
             images["normal"][2] = 1.0
             images["occlusion"] = _image(prefetch, (res, res), np.float16)
             images["occlusion"][:] = 1.0
+            records = _Records(gl, passes.program,
+                               max(res * band // RECORDS_SHARE, RECORDS_LEAST))  # fmt: skip
         projected = projection is not None
-        gfbo, fbo, singles = _targets(gl, res, band, dtypes, prefetch)
-        # No blending or culling.  The depth test: a camera placement keeps the surface nearest
-        # to it, a UV placement the last face drawn (as without a test).  The crack pass's
-        # triangle shades only the texels nearer than it (shaders/crack_screen.vert): llvmpipe
-        # skips the shader for the 4x4 blocks with none, which keep the targets' clear.
-        # The clear is what crack_bake.frag writes at a face texel whose list is empty (no
-        # crack within reach), except for the inside target: 0, off the faces; the gutter fill
-        # overwrites every other channel there.  So with a UV placement the full crack shader
-        # runs only at the texels of faces with a list (crack_surface.frag's depth 0.25: on
-        # spot, 90 % of the face texels take no loop step), and a one-output pass marks the
-        # other face texels inside.
-        # A camera's placement has no such classes (its depth is the camera's): the crack
-        # shader runs at every face texel.
-        gl.ctx.enable_only(moderngl.DEPTH_TEST)
-        surface_test = "<" if projected else "1"
+        gfbo, fbo, singles = _targets(gl, res, band, dtypes, prefetch, surface=projected)
+        # No blending or culling.  The clear is what crack_bake.frag writes at a face texel
+        # whose list is empty (no crack within reach), except for the inside target: 0, off the
+        # faces; the gutter fill overwrites every other channel there.
+        # A UV placement: the class pass draws the faces (the last drawn wins, as without a
+        # depth test), marking them inside and writing each face's class to the depth buffer
+        # (0.25 where its bin lists a segment, 0.75 where none: a depth per face, given with its
+        # corners, so the pass has no per-texel shader work beyond a constant); the crack
+        # pass draws only the listed faces at depth 0.5, shading only where the depth test
+        # finds a listed face's class: each such texel is measured by the face that owns it
+        # (drawn last), and llvmpipe skips the 4x4 blocks that no listed face owns, which keep
+        # the targets' clear (on spot, 90 % of the face texels take no loop step).  No surface
+        # targets: the crack shader measures the point and footprint in place.
+        # A camera's placement keeps the surface nearest to it (the depth test "<"): the
+        # surface pass records each texel's point, footprint and bin in float targets, a
+        # one-output pass marks the face texels inside, and the crack pass's full-screen
+        # triangle shades every face texel (its depth is the camera's: no classes).
         clear = (0.0, 0.0, 0.0, 0.0, max_distance, -1.0, 0.0)  # _NAMES' order
+        gl.ctx.enable_only(moderngl.DEPTH_TEST)
         timings["setup"] = time.perf_counter() - t1
         t_surface = t_draw = t_read = t_normals = 0.0
         for y0 in range(0, res, band):
             h = min(band, res - y0)
-            ta = time.perf_counter()
-            # Before the surface pass writes the depth buffer the inside target shares.
-            for single, value in zip(singles, clear, strict=True):
-                single.clear(value, value, value, value)
-            gfbo.use()
-            # The depth only: the passes after read the surface targets only where a face was
-            # drawn (the depth test), so their colours need no clear (805 MB at 4096²).
-            gfbo.color_mask = ((False,) * 4,) * 3
-            gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            gfbo.color_mask = ((True,) * 4,) * 3
-            gfbo.use()
-            surface["u_tile"].value = (0.0, float(y0), float(res), float(band))
-            gl.ctx.depth_func = surface_test
-            vao.render(moderngl.TRIANGLES)
-            # Finished here only so the profile splits the two passes (the crack pass waits
-            # for the surface targets anyway).
-            gl.ctx.finish()
-            t_surface += time.perf_counter() - ta
-            gl.ctx.depth_func = ">"
-            if not projected:
-                singles[-1].use()
-                inside_screen.render(moderngl.TRIANGLES, vertices=3)
-            fbo.use()
-            if bins.cell:
-                prog_row0.value = y0
-            _crack_pass(gl.ctx, fbo, screen, res, h, y0, progress)
-            tb = time.perf_counter()
+            tile_rect = (0.0, float(y0), float(res), float(band))
+            reports = progress
+            while True:
+                ta = time.perf_counter()
+                # Before the surface pass writes the depth buffer the inside target shares.
+                for single, value in zip(singles, clear, strict=True):
+                    single.clear(value, value, value, value)
+                if projected:
+                    gfbo.use()
+                    # The depth only: the passes after read the surface targets only where a
+                    # face was drawn (the depth test), so their colours need no clear (805 MB
+                    # at 4096²).
+                    gfbo.color_mask = ((False,) * 4,) * 3
+                    gfbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                    gfbo.color_mask = ((True,) * 4,) * 3
+                    gfbo.use()
+                    gl.ctx.depth_func = "<"
+                else:
+                    singles[-1].depth_mask = True
+                    singles[-1].clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                    singles[-1].use()
+                    gl.ctx.depth_func = "1"
+                passes.surface.program["u_tile"].value = tile_rect
+                passes.surface.render(moderngl.TRIANGLES)
+                # Finished here only so the profile splits the two passes (the crack pass
+                # waits for the surface targets anyway).
+                gl.ctx.finish()
+                t_surface += time.perf_counter() - ta
+                gl.ctx.depth_func = ">"
+                singles[-1].depth_mask = False
+                if projected:
+                    singles[-1].use()
+                    passes.inside.render(moderngl.TRIANGLES, vertices=3)
+                if records is not None:
+                    records.reset()
+                fbo.use()
+                if bins.cell:
+                    prog_row0.value = y0
+                if passes.cracks is not None:
+                    if not projected:
+                        passes.program["u_tile"].value = tile_rect
+                    _crack_pass(gl.ctx, fbo, passes.cracks, res, h, y0, reports,
+                                vertices=3 if projected else -1)  # fmt: skip
+                tb = time.perf_counter()
+                t_draw += tb - ta
+                if records is None or records.used() <= records.capacity:
+                    break
+                if records.used() > records.LIMIT:
+                    raise CrackbakeError(
+                        f"{records.used()} crack texels in one band exceed the normal map's "
+                        f"{records.LIMIT}; bake with a smaller --tile"
+                    )
+                records.grow(records.used())  # and draw the band again, reported once
+                reports = None
             for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
                               attachment=k, dtype=d)  # fmt: skip
             tc = time.perf_counter()
             if with_normals:
-                # Only the crack texels, while this band's surface targets are still bound.
+                # Only the crack texels, from the records the crack pass appended.
                 planes = [*images["normal"], images["occlusion"]]
                 normal_pass.run(images["inside"][y0 : y0 + h], planes, y0)
-            t_draw += tb - ta
             t_read += tc - tb
             t_normals += time.perf_counter() - tc
+        if records is not None:
+            records.release()
         # The state a bake left before the depth classes, for the run's later draws.
         gl.ctx.depth_func = "<"
         gl.ctx.enable_only(moderngl.DEPTH_TEST if projected else moderngl.NOTHING)
@@ -627,9 +753,11 @@ def _render(
     return images
 
 
-def _crack_pass(ctx, fbo, screen, res: int, rows: int, y0: int = 0, progress=None) -> None:
-    """Run the crack pass over the band's first ``rows`` rows (image rows ``y0 ..``), in slices
-    of at most :data:`SLICE_TEXELS` texels, each finished before the next is drawn."""
+def _crack_pass(ctx, fbo, cracks, res: int, rows: int, y0: int = 0, progress=None,
+                vertices: int = -1) -> None:
+    """Run the crack pass (``cracks``: its vertex array, ``vertices`` as its render takes)
+    over the band's first ``rows`` rows (image rows ``y0 ..``), in slices of at most
+    :data:`SLICE_TEXELS` texels, each finished before the next is drawn."""
     import moderngl
 
     step = max(1, SLICE_TEXELS // res)
@@ -637,7 +765,7 @@ def _crack_pass(ctx, fbo, screen, res: int, rows: int, y0: int = 0, progress=Non
         for r0 in range(0, rows, step):
             if step < rows:
                 fbo.scissor = (0, r0, res, min(step, rows - r0))
-            screen.render(moderngl.TRIANGLES, vertices=3)
+            cracks.render(moderngl.TRIANGLES, vertices=vertices)
             ctx.finish()
             if progress is not None:
                 progress(y0 + min(r0 + step, rows), res)
