@@ -105,3 +105,20 @@ def test_started_is_set_before_the_kernel_and_changes_nothing():
     assert started.is_set()
     qv, qf = decimate_shortest(v, f, 6)
     assert np.array_equal(pv, qv) and np.array_equal(pf, qf) and len(pf) < len(f)
+
+
+def test_border_edges_match_the_edge_counts():
+    """The proxy's asset-border list (a per-vertex kernel) is exactly the sorted edges that
+    ``geometry.edges`` counts once, on a plate with holes punched in it and a closed sphere."""
+    from crackbake.simulate.simmesh.collapse_kernels import border_edges
+
+    v, f = _plate(60)
+    holed = f[np.random.default_rng(5).random(len(f)) > 0.05]
+    sphere = trimesh.creation.icosphere(4)
+    cases = ((f, len(v)), (holed, len(v)), (np.asarray(sphere.faces), len(sphere.vertices)))
+    for faces, n_v in cases:
+        ae, count = edges(faces, n_v)
+        got = border_edges(np.ascontiguousarray(faces, np.int64), n_v)
+        np.testing.assert_array_equal(got, ae[count == 1])
+    assert len(border_edges(np.ascontiguousarray(holed, np.int64), len(v))) > 4 * 60
+    assert len(border_edges(np.asarray(sphere.faces, np.int64), len(sphere.vertices))) == 0

@@ -49,3 +49,25 @@ def test_duplicate_faces_flag_later_copies_with_either_sort():
         f = np.array([[0, 1, 2], [2, 0, 1], [3, 4, 5], [1, 0, 2], [5, 4, 6], [4, 5, 3]]) + offset
         assert duplicate_faces(f).tolist() == [False, True, False, True, False, True]
     assert duplicate_faces(np.zeros((0, 3), np.int64)).shape == (0,)
+
+
+def test_sorted_sides_is_the_stable_sort_by_edge():
+    """The bucket kernel gives numpy's stable argsort of the edge keys, each side's edge rank and
+    the per-edge counts, on random faces with repeated, reversed and crowded edges."""
+    from crackbake.simulate.simmesh.manifold_kernels import sorted_sides
+
+    rng = np.random.default_rng(7)
+    n_v = 40
+    faces = rng.integers(0, n_v, (300, 3))
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+                  & (faces[:, 0] != faces[:, 2])]
+    faces = np.concatenate([faces, faces[:20, ::-1], faces[:5]])
+    a = faces.ravel()
+    b = faces[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b) * n_v + np.maximum(a, b)
+    uniq, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    got_inv, got_count, by_edge = sorted_sides(a, b, n_v)
+    np.testing.assert_array_equal(by_edge, np.argsort(key, kind="stable"))
+    np.testing.assert_array_equal(got_inv, inv)
+    np.testing.assert_array_equal(got_count, count)
+    assert count.max() > 2

@@ -68,8 +68,12 @@ def decimate_shortest(vertices: np.ndarray, faces: np.ndarray, n_faces: int,
 def warm() -> None:
     """Compile (or load from numba's cache) the decimation kernel, which only assets above
     200k faces reach (:mod:`crackbake.precompile`'s runs are smaller): a fan of eight faces
-    taken to six."""
+    taken to six, and its border
+    (:func:`.proxy.decimate` lists the asset's border edges)."""
     ring = np.array([[np.cos(a), np.sin(a), 0.0] for a in np.linspace(0, 2 * np.pi, 9)[:-1]])
     v = np.vstack([[0.0, 0.0, 0.1], ring])
     f = np.array([[0, 1 + i, 1 + (i + 1) % 8] for i in range(8)], np.int64)
     decimate_shortest(v, f, 6)
+    from crackbake.simulate.simmesh.collapse_kernels import border_edges
+
+    border_edges(f, len(v))

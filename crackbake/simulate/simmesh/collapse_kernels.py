@@ -35,6 +35,8 @@ def collapse_rounds(v, f, target, share, close, max_rounds):  # pragma: no cover
     ea = np.empty(3 * m, np.int64)
     eb = np.empty(3 * m, np.int64)
     el = np.empty(3 * m, np.float64)
+    stamp = np.full(n_v, -1, np.int64)
+    twin = np.zeros((m, 3), np.bool_)  # a live face's edge c -> c + 1 is also run down
     for rnd in range(1, max_rounds + 1):
         if n_alive - target <= close * target:
             break
@@ -55,6 +57,7 @@ def collapse_rounds(v, f, target, share, close, max_rounds):  # pragma: no cover
                     pool[hi[x]] = t
                     hi[x] += 1
         end = total
+        _twins(f, pool, lo, hi, rnd * n_v, stamp, twin)
         k = 0
         for t in range(m):
             if not alive[t]:
@@ -63,7 +66,7 @@ def collapse_rounds(v, f, target, share, close, max_rounds):  # pragma: no cover
                 a = f[t, c]
                 b = f[t, (c + 1) % 3]
                 # each edge once: from the face where it runs up, or from its only face
-                if a > b and _has_edge(f, alive, pool, lo, hi, b, a):
+                if a > b and twin[t, c]:
                     continue
                 ea[k] = min(a, b)
                 eb[k] = max(a, b)
@@ -144,15 +147,25 @@ def collapse_rounds(v, f, target, share, close, max_rounds):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True)
-def _has_edge(f, alive, pool, lo, hi, a, b):  # pragma: no cover - numba
-    """A live face around ``a`` has the directed edge a -> b."""
-    for q in range(lo[a], hi[a]):
-        t = pool[q]
-        if alive[t]:
-            for c in range(3):
-                if f[t, c] == a and f[t, (c + 1) % 3] == b:
-                    return True
-    return False
+def _twins(f, pool, lo, hi, base, stamp, twin):  # pragma: no cover - numba
+    """For every live face's edge a -> b (corner c -> c + 1) with a > b, whether a live face
+    has b -> a: ``twin[t, c]``.  Vertex by vertex (each b's faces are read twice, close
+    together) instead of a search of b's faces per edge; ``pool`` holds only live faces.
+    ``base`` differs per call by at least the vertex count: no stamp of an earlier call
+    matches."""
+    for x in range(len(lo)):
+        key = base + x
+        for q in range(lo[x], hi[x]):
+            t = pool[q]
+            c = 0 if f[t, 0] == x else (1 if f[t, 1] == x else 2)
+            stamp[f[t, (c + 1) % 3]] = key  # x -> y
+        for q in range(lo[x], hi[x]):
+            t = pool[q]
+            c = 0 if f[t, 0] == x else (1 if f[t, 1] == x else 2)
+            p = (c + 2) % 3
+            w = f[t, p]  # edge w -> x at corner p
+            if w > x:
+                twin[t, p] = stamp[w] == key
 
 
 @njit(cache=True, nogil=True)
@@ -226,3 +239,49 @@ def _normal(ax, ay, az, bx, by, bz, cx, cy, cz):  # pragma: no cover - numba
     ux, uy, uz = bx - ax, by - ay, bz - az
     wx, wy, wz = cx - ax, cy - ay, cz - az
     return (uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx)
+
+
+@njit(cache=True, nogil=True)
+def border_edges(f, n_v):  # pragma: no cover - numba
+    """The edges (B, 2) used by exactly one face of ``f`` (F, 3), low index first, sorted
+    (as ``geometry.edges`` with a count of 1 gives them): each edge listed under its low
+    vertex and each vertex's few high ends sorted in place, instead of one sort of all 3F
+    keys."""
+    start = np.zeros(n_v + 1, np.int64)
+    for t in range(len(f)):
+        for c in range(3):
+            start[min(f[t, c], f[t, (c + 1) % 3]) + 1] += 1
+    for x in range(n_v):
+        start[x + 1] += start[x]
+    fill = start[:-1].copy()
+    high = np.empty(3 * len(f), np.int64)
+    for t in range(len(f)):
+        for c in range(3):
+            a = f[t, c]
+            b = f[t, (c + 1) % 3]
+            lo_ = min(a, b)
+            high[fill[lo_]] = max(a, b)
+            fill[lo_] += 1
+    out = np.empty((3 * len(f), 2), np.int64)
+    n = 0
+    for x in range(n_v):
+        s0 = start[x]
+        s1 = start[x + 1]
+        for i in range(s0 + 1, s1):  # insertion sort: a vertex has a handful of high ends
+            y = high[i]
+            j = i - 1
+            while j >= s0 and high[j] > y:
+                high[j + 1] = high[j]
+                j -= 1
+            high[j + 1] = y
+        i = s0
+        while i < s1:
+            j = i + 1
+            while j < s1 and high[j] == high[i]:
+                j += 1
+            if j - i == 1:
+                out[n, 0] = x
+                out[n, 1] = high[i]
+                n += 1
+            i = j
+    return out[:n].copy()

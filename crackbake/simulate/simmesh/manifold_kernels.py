@@ -63,3 +63,49 @@ def fan_split(a: np.ndarray, rows: np.ndarray, cols: np.ndarray,
         else:
             vertex[c] = vertex[r]
     return vertex, extra[:n_extra].copy()
+
+
+@njit(cache=True)
+def sorted_sides(a, b, n_vertices):  # pragma: no cover - numba
+    """The face sides (a -> b, (3F,) each) in a stable order by undirected edge (by low, then
+    high vertex, then side index: ``np.argsort(lo * n + hi, kind="stable")``), each side's
+    edge rank (3F,) and each edge's side count (E,).  Sides bucketed by their low vertex in
+    side order, then a vertex's few sides insertion-sorted by their high vertex (stable), in
+    place of one sort of all 3F keys."""
+    n = len(a)
+    start = np.zeros(n_vertices + 1, np.int64)
+    for s in range(n):
+        start[min(a[s], b[s]) + 1] += 1
+    for x in range(n_vertices):
+        start[x + 1] += start[x]
+    fill = start[:-1].copy()
+    by_edge = np.empty(n, np.int64)
+    for s in range(n):
+        lo = min(a[s], b[s])
+        by_edge[fill[lo]] = s
+        fill[lo] += 1
+    inv = np.empty(n, np.int64)
+    count = np.empty(n, np.int64)
+    n_e = 0
+    for x in range(n_vertices):
+        s0 = start[x]
+        s1 = start[x + 1]
+        for i in range(s0 + 1, s1):
+            s = by_edge[i]
+            key = max(a[s], b[s])
+            j = i - 1
+            while j >= s0 and max(a[by_edge[j]], b[by_edge[j]]) > key:
+                by_edge[j + 1] = by_edge[j]
+                j -= 1
+            by_edge[j + 1] = s
+        i = s0
+        while i < s1:
+            key = max(a[by_edge[i]], b[by_edge[i]])
+            j = i
+            while j < s1 and max(a[by_edge[j]], b[by_edge[j]]) == key:
+                inv[by_edge[j]] = n_e
+                j += 1
+            count[n_e] = j - i
+            n_e += 1
+            i = j
+    return inv, count[:n_e].copy(), by_edge

@@ -110,8 +110,9 @@ def _asset_border(v: np.ndarray, f: np.ndarray):
     """The asset's open-border edges (B, 2) and their AABB tree (None without a border)."""
     import igl
 
-    ae, a_count = edges(f, len(v))
-    asset_border = np.ascontiguousarray(ae[a_count == 1], dtype=np.int64)
+    from crackbake.simulate.simmesh.collapse_kernels import border_edges
+
+    asset_border = border_edges(f, len(v))
     if not len(asset_border):
         return asset_border, None
     tree = igl.AABB()
