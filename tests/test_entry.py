@@ -7,7 +7,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from crackbake.entry import platform_error
+import pytest
+
+from crackbake.entry import platform_error, quiet_blas
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,3 +72,33 @@ def test_the_exit_is_pythons_own_under_a_profiler():
              "try:\n    main()\nexcept SystemExit as e:\n    p.disable(); print('exit', e.code)\n")
     assert r.returncode == 0, r.stderr
     assert "exit 0" in r.stdout
+
+
+def test_quiet_blas_keeps_a_users_choice():
+    env: dict[str, str] = {}
+    quiet_blas(env)
+    assert env == {"OPENBLAS_NUM_THREADS": "1"}
+    for chosen in ({"OPENBLAS_NUM_THREADS": "8"}, {"OMP_NUM_THREADS": "4"}):
+        env = dict(chosen)
+        quiet_blas(env)
+        assert env == chosen
+
+
+@pytest.mark.skipif(os.cpu_count() < 2, reason="OpenBLAS starts no threads on one core")
+def test_numpy_after_quiet_blas_starts_no_blas_threads():
+    # Threads of a fresh interpreter once numpy is imported (its import calls BLAS): OpenBLAS
+    # starts one per core unless told otherwise, and none after quiet_blas.
+    code = ("import os, sys; from crackbake.entry import quiet_blas; "
+            "sys.argv[1:] == ['quiet'] and quiet_blas(); import numpy; "
+            "print(len(os.listdir('/proc/self/task')))")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    env["PYTHONPATH"] = str(ROOT)
+
+    def threads(*args: str) -> int:
+        out = subprocess.run([sys.executable, "-c", code, *args], env=env, text=True,
+                             capture_output=True, check=True).stdout
+        return int(out)
+
+    assert threads("quiet") == 1
+    assert threads() > 1
