@@ -224,7 +224,7 @@ def test_half_extremes_from_the_bits_order_every_pattern():
     sort of the widened values with -0 below +0, on planes drawn from the edge patterns
     (both zeros, the smallest subnormals, the largest finite, the infinities and NaNs) and
     from every finite pattern of each sign."""
-    from crackbake.exchange.inspect import _half_nonzero, _half_range
+    from crackbake.exchange.exrstats import _half_nonzero, _half_range
 
     edges = np.array([0x0000, 0x8000, 0x0001, 0x8001, 0x03FF, 0x0400, 0x3C00, 0xBC00,
                       0x7BFF, 0xFBFF, 0x7C00, 0xFC00, 0x7C01, 0x7E00, 0xFE00, 0xFFFF],

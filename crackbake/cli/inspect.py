@@ -51,13 +51,13 @@ def _inspect(exr: Path, png_dir: Path | None):
     from crackbake.exchange.inspect import UDIM_TOKEN, inspect_exr, inspect_udim, write_pictures
 
     if UDIM_TOKEN in exr.name:
-        info, per_tile = inspect_udim(exr)
+        info, per_tile = inspect_udim(exr, pixels=png_dir is not None)
     else:
         if not exr.exists():  # a FIFO or device exists: inspect_exr names what it is
             raise CrackbakeError(
                 f"EXR '{exr}' does not exist; check the path (a UDIM set is name.<UDIM>.exr)"
             )
-        info, channels = inspect_exr(exr)
+        info, channels = inspect_exr(exr, pixels=png_dir is not None)
         per_tile = None
     if png_dir is None:
         return info, []

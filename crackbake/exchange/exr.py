@@ -250,6 +250,30 @@ def _memory_bytes() -> int:
         return 8 << 30
 
 
+def read_header(path: PathLike) -> dict:
+    """The header of ``path``'s first part as :func:`read_exr` gives it, pixels unread.
+
+    Raises
+    ------
+    CrackbakeError
+        When the file cannot be read as an EXR.
+    """
+    import OpenEXR
+
+    try:
+        check_regular(path)  # OpenEXR would block on a FIFO forever
+        with _stderr_captured(), OpenEXR.File(os.fspath(path), header_only=True) as f:
+            header = dict(f.parts[0].header)
+    except (RuntimeError, ValueError, OSError, IndexError, KeyError, TypeError) as exc:
+        raise CrackbakeError(
+            f"cannot read EXR '{path}': {str(exc).splitlines()[0] if str(exc) else exc}; "
+            "check the path and that the file is a complete OpenEXR image"
+        ) from exc
+    if "compression" in header:
+        header["compression"] = _compression_name(header["compression"])
+    return header
+
+
 def read_exr(path: PathLike) -> tuple[dict[str, np.ndarray], dict]:
     """Read every channel of a (single-part or first-part) EXR with the OpenEXR bindings.
 

@@ -37,6 +37,8 @@ from numba import njit
 from numba.core import types
 from numba.extending import intrinsic
 
+from crackbake.exchange.exrstats import STATS_ATTRIBUTE, fingerprint, plane_stats, stats_text
+
 try:  # the same module pngenc uses; stdlib zlib writes valid (slower) files too
     from zlib_ng import zlib_ng as _zlib
 except ImportError:  # pragma: no cover - zlib-ng is a dependency
@@ -217,7 +219,7 @@ def _chunks(rows: list[np.ndarray], starts: range, lines: int, height: int,
 
 def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attributes: dict,
                    compression: str = "zip", threads: int = 0,
-                   level: int | None = None) -> None:  # fmt: skip
+                   level: int | None = None, stats: bool = True) -> None:  # fmt: skip
     """Write one part of (H, W) planes as a scanline EXR with ZIP or ZIPS compression.
 
     Parameters
@@ -234,6 +236,10 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
         split among them in contiguous runs, so the file is the same for any count.
     level : int, optional
         zlib-ng's deflate level 1..9; None: :data:`ZIP_LEVEL`.
+    stats : bool
+        Record each plane's statistics and the pixel data's fingerprint in the
+        ``crackbake:stats`` attribute (:mod:`crackbake.exchange.exrstats`: what ``crackbake
+        inspect`` then shows without reading the pixels); taken on the encoder's threads.
 
     Raises
     ------
@@ -248,24 +254,49 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
     height, width = arrays[0].shape
     rows = [a.view(np.uint8).reshape(height, -1) for a in arrays]
     line_bytes = sum(r.shape[1] for r in rows)
-    head, _ = header_bytes(names, [a.dtype for a in arrays], width, height, code, attributes)
     starts = range(0, height, lines)
     groups = max(1, min(int(threads) + 1, len(starts)))
     cut = np.linspace(0, len(starts), groups + 1).round().astype(int)
     parts = [starts[a:b] for a, b in zip(cut[:-1], cut[1:], strict=True)]
     args = (lines, height, line_bytes, None if level is None else int(level))
+    figures: list[dict] = []
     if groups == 1:
         chunks = _chunks(rows, parts[0], *args)
+        figures = [plane_stats(a) for a in arrays] if stats else []
     else:
         with ThreadPoolExecutor(groups - 1, thread_name_prefix="crackbake-exr") as pool:
             later = [pool.submit(_chunks, rows, p, *args) for p in parts[1:]]
+            # Each plane's statistics (numpy's reductions release the GIL) queue behind the
+            # chunks; the calling thread, done with its own chunks, takes those no worker
+            # has started yet, from the last.
+            jobs = [pool.submit(plane_stats, a) for a in arrays] if stats else []
             chunks = _chunks(rows, parts[0], *args)
+            figures = [None] * len(jobs)  # type: ignore[list-item]
+            for i in reversed(range(len(jobs))):
+                if jobs[i].cancel():
+                    figures[i] = plane_stats(arrays[i])
             for job in later:
                 chunks += job.result()
+            for i, job in enumerate(jobs):
+                if figures[i] is None:
+                    figures[i] = job.result()
     sizes = [8 + len(data) for _, data in chunks]
+
+    def header(digest: str) -> bytes:
+        extra = dict(attributes)
+        if stats:
+            extra[STATS_ATTRIBUTE] = stats_text(dict(zip(names, figures, strict=True)), digest)
+        return header_bytes(names, [a.dtype for a in arrays], width, height, code, extra)[0]
+
+    head = header("0" * 64)  # the digest's length: the offsets do not depend on its value
     offsets = len(head) + 8 * len(chunks) + np.cumsum([0] + sizes[:-1], dtype=np.uint64)
+    table = offsets.astype("<u8").tobytes()
+    if stats:
+        final = header(fingerprint(head, [table, *(b for pair in chunks for b in pair)]))
+        assert len(final) == len(head), "the offsets assumed the digest's length"
+        head = final
     with open(path, "wb") as fh:
         fh.write(head)
-        fh.write(offsets.astype("<u8").tobytes())
+        fh.write(table)
         for pair in chunks:
             fh.writelines(pair)

@@ -18,10 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from crackbake.exchange.exr import read_exr
+from crackbake.exchange.exrstats import plane_stats, recorded_stats
 from crackbake.exchange.layers import layer_of
-
-_TYPES = {np.dtype(np.float16): "half", np.dtype(np.float32): "float", np.dtype(np.uint32): "uint"}
-
 
 @dataclass
 class ChannelStats:
@@ -55,80 +53,18 @@ class Inspection:
         return json.dumps(asdict(self), indent=2)
 
 
-#: The bit patterns of +inf and -inf: a pattern at or above one of them (of its sign) is an
-#: inf or a NaN.
-_HALF_INF, _HALF_NEG_INF = 0x7C00, 0xFC00
-
-
-def _half_range(arr: np.ndarray) -> tuple[float, float, bool] | None:
-    """min and max of a float16 plane and whether it holds a negative (-0 included), or
-    None when it holds a NaN or an inf.
-
-    Works on the bit patterns, as integer reductions of two views of the plane, no copy:
-    the non-negative halves are the non-negative int16 patterns, in float order; the negative
-    ones the uint16 patterns from 0x8000 (-0) up, in order of magnitude.  So the max is the
-    largest int16 pattern (the smallest uint16 one when every texel is negative), the min the
-    largest uint16 pattern (the smallest int16 one when none is), -0 just below +0; the
-    patterns from +inf and -inf up are the infinities and NaNs.  (numpy's half reductions
-    run an element at a time, about 85 ms a 4096² plane; these four take a few.)
-    """
-    signed, unsigned = arr.view(np.int16), arr.view(np.uint16)
-    top, utop = int(signed.max()), int(unsigned.max())
-    if top >= _HALF_INF or utop >= _HALF_NEG_INF:
-        return None
-    negative = utop >= 0x8000
-    hi = top if top >= 0 else int(unsigned.min())
-    lo = utop if negative else int(signed.min())
-    both = np.array([lo, hi], np.uint16).view(np.float16)
-    return float(both[0]), float(both[1]), negative
-
-
-def _half_nonzero(arr: np.ndarray, negative: bool) -> int:
-    """Texels of a float16 plane other than +0 and -0 (-0 looked for only where the plane
-    holds a negative)."""
-    signed = arr.view(np.int16)
-    count = np.count_nonzero(signed)
-    return count - int(np.count_nonzero(signed == -0x8000)) if negative else count
+def _row(name: str, stats: dict, meta: dict) -> ChannelStats:
+    """A table row from :func:`~crackbake.exchange.exrstats.plane_stats`'s figures (taken
+    now, or recorded by the writer) and the channel's ``crackbake:channels`` entry."""
+    return ChannelStats(
+        name, layer_of(name), name.rpartition(".")[2], stats["type"], stats["min"],
+        stats["max"], stats["mean"], stats["nonzero"], stats["nonfinite"], meta.get("units"),
+        meta.get("role"),
+    )  # fmt: skip
 
 
 def _stats(name: str, arr: np.ndarray, meta: dict) -> ChannelStats:
-    # The common case, every texel finite, costs no copy of the plane: min and max (of the
-    # half bits' two integer views, or of the floats, whose NaN would show as a NaN extreme
-    # and inf as an infinite one), the mean summed in float64 as numpy casts it (the same
-    # buffered sum whatever the source type, so a half plane gives the same bits as its
-    # float32 copy would), the non-zero count of the bits without the sign (-0 is zero).  A
-    # plane with a NaN or an inf is widened and masked.
-    lo = hi = mean = None
-    good = None
-    if arr.size and arr.dtype == np.float16:
-        extremes = _half_range(arr)
-        if extremes is not None:
-            good, (lo, hi, negative) = arr, extremes
-            nonzero = _half_nonzero(arr, negative)
-        else:
-            nonzero = np.count_nonzero(arr.view(np.uint16) & np.uint16(0x7FFF))
-    else:
-        if arr.size and arr.dtype.kind == "f":
-            lo, hi = float(arr.min()), float(arr.max())
-            if np.isfinite(lo) and np.isfinite(hi):
-                good = arr
-        elif arr.size:
-            good, lo, hi = arr, float(arr.min()), float(arr.max())
-        nonzero = np.count_nonzero(arr)
-    if good is None:  # NaN or inf present (or an empty plane): skip them
-        wide = arr.astype(np.float32) if arr.dtype == np.float16 else arr
-        good = wide[np.isfinite(wide)] if wide.dtype.kind == "f" else wide
-        lo = hi = None
-        if good.size:
-            lo, hi = float(good.min()), float(good.max())
-    if good.size:
-        mean = float(good.mean(dtype=np.float64))
-    nonfinite = int(arr.size - good.size)
-    return ChannelStats(
-        name, layer_of(name), name.rpartition(".")[2], _TYPES.get(arr.dtype, str(arr.dtype)),
-        lo, hi, mean, float(nonzero) / arr.size if arr.size else 0.0, nonfinite,
-        meta.get("units"), meta.get("role"),
-    )  # fmt: skip
+    return _row(name, plane_stats(arr), meta)
 
 
 def _all_stats(channels: dict[str, np.ndarray], table: dict) -> list[ChannelStats]:
@@ -173,23 +109,44 @@ def _attribute_text(value) -> str:
     return value if isinstance(value, str) else repr(value)
 
 
-def inspect_exr(path: str | os.PathLike) -> tuple[Inspection, dict[str, np.ndarray]]:
+def inspect_exr(
+    path: str | os.PathLike, pixels: bool = True
+) -> tuple[Inspection, dict[str, np.ndarray] | None]:
     """Read ``path`` and describe every channel.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    pixels : bool
+        Read and return the pixels (for :func:`write_pictures`).  When False and the file
+        carries a ``crackbake:stats`` record that matches its bytes
+        (:func:`~crackbake.exchange.exrstats.recorded_stats`: a file crackbake wrote, as it
+        wrote it), the statistics are the record's and only the header is read: the same
+        rows as from the pixels, to the bit.
 
     Returns
     -------
     inspection : Inspection
         Size, compression, the header's attributes as text, one :class:`ChannelStats` per
         channel (sorted by name, as files store them).
-    channels : dict of str to (H, W) ndarray
-        The pixels, for :func:`write_pictures`.
+    channels : dict of str to (H, W) ndarray, or None
+        The pixels, for :func:`write_pictures`; None when they were not read.
 
     Raises
     ------
     CrackbakeError
         When the file cannot be read as an EXR.
     """
-    channels, header = read_exr(path)
+    recorded = None if pixels else recorded_stats(path)
+    if recorded is not None:
+        from crackbake.exchange.exr import read_header
+
+        header, channels = read_header(path), None
+        (x0, y0), (x1, y1) = header["dataWindow"]
+        h, w = int(y1) - int(y0) + 1, int(x1) - int(x0) + 1
+    else:
+        channels, header = read_exr(path)
+        h, w = next(iter(channels.values())).shape if channels else (0, 0)
     table: dict = {}
     if isinstance(header.get("crackbake:channels"), str):
         try:
@@ -198,8 +155,10 @@ def inspect_exr(path: str | os.PathLike) -> tuple[Inspection, dict[str, np.ndarr
             table = {}
     skip = {"channels", "compression"}
     attributes = {k: _attribute_text(v) for k, v in sorted(header.items()) if k not in skip}
-    rows = _all_stats(channels, table)
-    h, w = next(iter(channels.values())).shape if channels else (0, 0)
+    if recorded is not None:
+        rows = [_row(n, recorded[n], table.get(n, {})) for n in sorted(recorded)]
+    else:
+        rows = _all_stats(channels, table)
     info = Inspection(
         os.fspath(path), int(w), int(h), str(header.get("compression", "")), attributes, rows
     )
@@ -239,10 +198,13 @@ def udim_files(path: str | os.PathLike) -> dict[int, Path]:
     return dict(sorted(found.items()))
 
 
-def inspect_udim(path: str | os.PathLike) -> tuple[Inspection, dict[int, dict]]:
+def inspect_udim(
+    path: str | os.PathLike, pixels: bool = True
+) -> tuple[Inspection, dict[int, dict | None]]:
     """Inspect every tile of a UDIM set ``<name>.<UDIM>.exr``: one row per channel over all
     tiles (min, max and non-finite over every texel, mean and non-zero share averaged over the
-    tiles, which are the same size); the channels of each tile by UDIM number.
+    tiles, which are the same size); the channels of each tile by UDIM number (None for the
+    tiles whose pixels were not read: ``pixels`` as in :func:`inspect_exr`).
 
     Raises
     ------
@@ -252,7 +214,7 @@ def inspect_udim(path: str | os.PathLike) -> tuple[Inspection, dict[int, dict]]:
     from crackbake.errors import CrackbakeError
 
     tiles = udim_files(path)
-    parts = {n: inspect_exr(f) for n, f in tiles.items()}
+    parts = {n: inspect_exr(f, pixels) for n, f in tiles.items()}
     first_n = next(iter(parts))
     first, _ = parts[first_n]
     for n, (info, _) in parts.items():
