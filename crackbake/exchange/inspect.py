@@ -21,6 +21,7 @@ from crackbake.exchange.exr import read_exr
 from crackbake.exchange.exrstats import plane_stats, recorded_stats
 from crackbake.exchange.layers import layer_of
 
+
 @dataclass
 class ChannelStats:
     """One channel's row of the table.  Statistics skip NaN and +-inf (counted apart)."""
