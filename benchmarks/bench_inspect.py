@@ -1,5 +1,6 @@
 """Where ``crackbake inspect`` of a 4096² crack master spends its time, and what a faster
-reader could save (issue 25: ≤ 0.5 s whole process on 2 cores).
+reader could save (issue 25: ≤ 0.5 s whole process on 2 cores); the whole command is
+``bench_process.py --cases inspect``.
 
 Each figure is measured in a fresh interpreter (what the command pays), median of N, as wall
 and CPU seconds (all threads):
@@ -14,9 +15,16 @@ and CPU seconds (all threads):
 - ``numba reader``: ``benchmarks/inspect_numba_reader.py`` (a numba decoder that takes the
   same statistics in one pass, keeping no plane) on the file, numba's start-up included;
 - ``inflate``: the file's ZIP chunks inflated alone, one thread, with zlib-ng and (when the
-  ``deflate`` package is installed) libdeflate: the floor of any reader of these files.
+  ``deflate`` package is installed) libdeflate: the floor of any reader of these files;
+- ``recorded``: what the command does instead on a file crackbake wrote (no ``--png``): the
+  ``crackbake:stats`` record checked against the SHA-256 of the file's pixel data
+  (:func:`crackbake.exchange.exrstats.recorded_stats`) and the header read by the bindings; on
+  a file without a valid record (an older crackbake's, another tool's) it prints ``None`` and
+  the command reads the pixels (``read`` + ``stats``).
 
-``numba reader`` against ``read`` + ``stats`` is why the command keeps the bindings: numba's
+The command on crackbake's own files is ``imports`` + ``recorded`` (no pixel decoded); on any
+other file ``imports`` + ``read`` + ``stats``.  ``numba reader`` against ``read`` + ``stats`` is
+why that second route keeps the bindings: numba's
 start-up alone cost a fresh process 1.0 CPU-s where the bindings' read and numpy's statistics
 together took 1.4 (loaded 2-core machine, 2026-11-26), and the reader's own pass
 (libdeflate's inflate is cheap; the ZIP predictor is a running sum over every byte) costs
@@ -122,6 +130,16 @@ if deflate is not None:
     out["libdeflate"] = cpu() - c
 print(json.dumps({"wall": wall, "cpu": out["zlib-ng"], **out, "bytes": sum(sizes)}))
 """,
+    "recorded": _CLOCK + """
+from crackbake.exchange.exr import read_header
+from crackbake.exchange.exrstats import recorded_stats
+t, c = time.perf_counter(), cpu()
+found = recorded_stats(sys.argv[1])
+if found is not None:
+    read_header(sys.argv[1])
+print(json.dumps({"wall": time.perf_counter() - t, "cpu": cpu() - c,
+                  "taken": found is not None}))
+""",
 }
 
 _KERNEL = """
@@ -199,6 +217,8 @@ def main() -> None:
         wall = statistics.median(r["wall"] for r in runs)
         cpu = statistics.median(r["cpu"] for r in runs)
         print(f"| {name} | {wall:.3f} | {cpu:.3f} |")
+    if not all(r.get("taken") for r in rows["recorded"]):
+        print("| recorded | (no valid crackbake:stats record: the command reads the pixels) | |")
     for lib in ("zlib-ng", "libdeflate"):
         vals = [r[lib] for r in rows["inflate"] if lib in r]
         if vals:

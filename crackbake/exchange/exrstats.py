@@ -220,9 +220,25 @@ def recorded_stats(path: str | os.PathLike) -> dict[str, dict] | None:
             return None
         if sorted(channels) != _channel_names(attrs["channels"][1]):
             return None
+        if not all(_well_formed(row) for row in channels.values()):
+            return None
     except (OSError, ValueError, KeyError, TypeError, UnicodeDecodeError):
         return None
     return channels
+
+
+def _well_formed(row) -> bool:
+    """A record's row has :func:`plane_stats`'s keys and value types (a file made to match
+    its own hash could hold anything)."""
+    number = (int, float)
+    return (
+        isinstance(row, dict) and set(row) == _KEYS and row["type"] in _TYPES.values()
+        and all(row[k] is None or isinstance(row[k], number) for k in ("min", "max", "mean"))
+        and isinstance(row["nonzero"], number) and isinstance(row["nonfinite"], int)
+    )  # fmt: skip
+
+
+_KEYS = frozenset({"type", "min", "max", "mean", "nonzero", "nonfinite"})
 
 
 def _channel_names(chlist: bytes) -> list[str]:

@@ -10,7 +10,9 @@ each channel's rows where they lie (:func:`_predict_channel`): no gathered copy 
 scanlines (it was 0.09 CPU-s and a pass over the 0.47 GB).  The files are standard
 OpenEXR 2.0 single-part scanline images: the same header attributes, channel list and
 pixels as the bindings write (``tests/test_exrzip.py`` reads them back with OpenEXR and
-OpenImageIO, Blender in the reference checks); only the deflate streams differ.  No
+OpenImageIO, Blender in the reference checks); only the deflate streams differ, and one
+attribute is added, ``crackbake:stats``: each plane's statistics for ``crackbake inspect``,
+tied to the chunks by their SHA-256 (:mod:`crackbake.exchange.exrstats`).  No
 compression, PIZ, RLE and ZSTD are left to the bindings
 (:func:`crackbake.exchange.exr.write_exr`).
 
