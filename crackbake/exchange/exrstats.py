@@ -20,6 +20,7 @@ Imports numpy alone (no numba, no OpenEXR): ``crackbake inspect`` loads it at st
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 import stat
@@ -213,14 +214,20 @@ def recorded_stats(path: str | os.PathLike) -> dict[str, dict] | None:
             record = json.loads(value.decode("utf-8"))
             if not isinstance(record, dict) or record.get("version") != STATS_VERSION:
                 return None
-            rest = fh.read()
-        digest = fingerprint(head[:end], (memoryview(head)[end:], rest))
-        channels = record.get("channels")
-        if digest != record.get("sha256") or not isinstance(channels, dict):
-            return None
-        if sorted(channels) != _channel_names(attrs["channels"][1]):
-            return None
-        if not all(_well_formed(row) for row in channels.values()):
+            channels = record.get("channels")
+            # What crackbake writes with a record (ZIP or ZIPS, every channel's row well
+            # formed), checked before the pixel data is read: a big file of another kind is
+            # not read twice.
+            if attrs.get("compression", (b"", b""))[1] not in (b"\x02", b"\x03"):
+                return None
+            if not isinstance(channels, dict) or sorted(channels) != _channel_names(
+                    attrs["channels"][1]):  # fmt: skip
+                return None
+            if not all(_well_formed(row) for row in channels.values()):
+                return None
+            rest = iter(lambda: fh.read(1 << 22), b"")  # hashed as read, 4 MB at a time
+            digest = fingerprint(head[:end], itertools.chain([memoryview(head)[end:]], rest))
+        if digest != record.get("sha256"):
             return None
     except (OSError, ValueError, KeyError, TypeError, UnicodeDecodeError):
         return None
