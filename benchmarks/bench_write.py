@@ -22,12 +22,15 @@ On a busy machine the CPU figures are the steadier comparison (the write's CPU /
 wall time on an idle one).  The numba cache must be warm (``python -m crackbake.precompile``).
 
 ``--writers crackbake bindings`` runs each repeat with crackbake's EXR encoder and with the
-OpenEXR bindings (what wrote ZIP EXRs before it) in turn, so both see the same load.
+OpenEXR bindings (what wrote ZIP EXRs before it) in turn, so both see the same load;
+``--writers crackbake nostats`` prices the ``crackbake:stats`` record (each plane's statistics
+for ``crackbake inspect``, taken on the encoder's threads).
 
 Usage::
 
     python benchmarks/bench_write.py [--maps readme|random] [--res 4096] [--repeat 5]
-                                     [--writers crackbake bindings] [--exr-compression zip]
+                                     [--writers crackbake nostats bindings]
+                                     [--exr-compression zip]
                                      [--keep DIR] [--per-file-repeat 3] [--levels]
                                      [--save-set FILE | --load-set FILE]
 
@@ -189,8 +192,10 @@ def _traced_main(module, name: str, label):
 
 
 def use_writer(name: str) -> None:
-    """``crackbake``: ZIP/ZIPS EXRs by crackbake's encoder (the default); ``bindings``: by the
-    OpenEXR bindings, as before it (the same pixels and header), for an A/B in one process."""
+    """``crackbake``: ZIP/ZIPS EXRs by crackbake's encoder (the default); ``nostats``: the same
+    without the ``crackbake:stats`` record (what the record costs the write); ``bindings``: by
+    the OpenEXR bindings, as before it (the same pixels and header), for an A/B in one
+    process."""
     import OpenEXR
 
     import crackbake.exchange.exrzip as ez
@@ -203,7 +208,11 @@ def use_writer(name: str) -> None:
         header = {"compression": code, "type": OpenEXR.scanlineimage, **attributes}
         OpenEXR.File(header, dict(planes)).write(str(path))
 
-    ez.write_scanline = ez._own_write_scanline if name == "crackbake" else bindings
+    def nostats(*args, **kwargs):
+        return ez._own_write_scanline(*args, **kwargs, stats=False)
+
+    ez.write_scanline = {"crackbake": ez._own_write_scanline, "nostats": nostats}.get(
+        name, bindings)
 
 
 def per_file(s: dict, ctx, out: Path, compression: str,
@@ -410,8 +419,9 @@ def main() -> None:
                     help="override the run's EXR compression (both EXRs)")  # fmt: skip
     ap.add_argument("--no-per-file", action="store_true", help="only the concurrent write")
     ap.add_argument("--writers", nargs="+", default=["crackbake"],
-                    choices=("crackbake", "bindings"),
-                    help="EXR ZIP encoders to compare, run by run in turn (bindings: the "
+                    choices=("crackbake", "nostats", "bindings"),
+                    help="EXR ZIP encoders to compare, run by run in turn (nostats: "
+                         "crackbake's without the crackbake:stats record; bindings: the "
                          "OpenEXR bindings, as before crackbake's encoder)")  # fmt: skip
     ap.add_argument("--keep", type=Path, help="commit the last write into KEEP")
     ap.add_argument("--per-file-repeat", type=int, default=3,
