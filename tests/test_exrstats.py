@@ -235,3 +235,18 @@ def test_a_record_of_another_version_is_ignored(tmp_path):
     assert recorded_stats(tmp_path / "v.exr") is not None
     assert recorded_stats(tmp_path / "v2.exr") is None
     assert recorded_stats(tmp_path / "missing.exr") is None
+
+
+def test_a_udim_set_from_the_records(tmp_path):
+    """A UDIM set's rows (over every tile) from the tiles' records: the pixels' rows."""
+    from crackbake.exchange.inspect import inspect_udim
+
+    rng = np.random.default_rng(3)
+    for n in (1001, 1002, 1011):
+        write_exr(tmp_path / f"t.{n}.exr", {
+            "crack.mask.V": rng.random((H, W)).astype(np.float16),
+            "crack.id.V": rng.integers(-1, 9, (H, W)).astype(np.float32)})  # fmt: skip
+    fast, tiles = inspect_udim(tmp_path / "t.<UDIM>.exr", pixels=False)
+    slow, planes = inspect_udim(tmp_path / "t.<UDIM>.exr", pixels=True)
+    assert set(tiles.values()) == {None} and all(isinstance(p, dict) for p in planes.values())
+    assert fast.to_json() == slow.to_json()
