@@ -292,3 +292,24 @@ def test_normals_cross_and_areas_match_numpy():
     area2 = np.linalg.norm(cross, axis=1)
     assert area_counts(cross) == (int((area2 > 0).sum()), int((area2 <= 0).sum()))
     assert area_counts(cross)[1] >= len(faces[::13])
+
+
+def test_mutated_files_load_alike(tmp_path, monkeypatch):
+    """The fuzzer's damaged OBJ files (tests/test_fuzz.py): the numba path loads, warns and
+    refuses each exactly as the numpy path does."""
+    from hypothesis import HealthCheck, given, settings
+
+    from tests.test_fuzz import mutated_obj
+
+    seen = []
+
+    @settings(max_examples=50, deadline=None, derandomize=True, database=None,
+              suppress_health_check=list(HealthCheck))  # fmt: skip
+    @given(mutated_obj())
+    def one(data: bytes) -> None:
+        path = tmp_path / "fuzz.obj"
+        path.write_bytes(data)
+        seen.append(isinstance(_same_both_ways(path, monkeypatch), CrackbakeError))
+
+    one()
+    assert len(seen) >= 50 and 0 < sum(seen) < len(seen)  # some load, some are refused

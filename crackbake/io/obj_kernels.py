@@ -250,6 +250,21 @@ def parse_faces(a: np.ndarray, starts: np.ndarray, ends: np.ndarray, lines: np.n
 
 
 @njit(cache=True, nogil=True)
+def corner_indices(ints: np.ndarray, column: int, count: int, zero_ok: bool):
+    """Column ``column`` of the face integers ``ints`` (C, per corner) as
+    :func:`crackbake.io.obj_reader._indices` gives it (0-based, negative ones kept), in one
+    pass; ``ok`` False where it would decline (an index beyond ``count``, or 0 unless
+    ``zero_ok``)."""
+    out = np.empty(len(ints), np.int64)
+    for i in range(len(ints)):
+        raw = ints[i, column]
+        if raw > count or raw < -count or (raw == 0 and not zero_ok):
+            return out, False
+        out[i] = raw - 1 if raw > 0 else raw
+    return out, True
+
+
+@njit(cache=True, nogil=True)
 def distinct_keys(key: np.ndarray, shift: int, n_top: int):
     """One index of each distinct value of ``key`` (N,) uint64, in increasing order of the
     values, and each index's rank among them: ``np.unique``'s order without its sort.
@@ -318,6 +333,7 @@ def warm() -> None:
     ints = parse_faces(a, starts, ends, np.flatnonzero(kinds == _F), 6)[0]
     key = ints.view(np.uint64)
     distinct_keys(key, 2, int(key.max() >> 2) + 1)
+    corner_indices(ints.reshape(-1, 2), 1, 3, False)
     f = (ints[::2] - 1).reshape(1, 3)
     cross = face_cross_kernel(v, f)
     area_counts(cross)

@@ -157,9 +157,9 @@ def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool,
     ints = _face_ints(data, a, starts, ends, f_lines, slashes * corners.sum(),
                       corners.sum() * per_ref, jit)  # fmt: skip
     ints = ints.reshape(-1, per_ref)
-    cv = _indices(ints[:, 0], len(v), zero_ok=True)
-    ct = _indices(ints[:, 1], 0 if vt is None else len(vt)) if has_vt else None
-    cn = _indices(ints[:, per_ref - 1], 0 if vn is None else len(vn)) if has_vn else None
+    cv = _indices(ints, 0, len(v), jit, zero_ok=True)
+    ct = _indices(ints, 1, 0 if vt is None else len(vt), jit) if has_vt else None
+    cn = _indices(ints, per_ref - 1, 0 if vn is None else len(vn), jit) if has_vn else None
 
     groups = _material_groups(data, starts, ends, f_lines, lines[_USEMTL])
     first_corner = np.concatenate(([0], np.cumsum(corners)))
@@ -328,9 +328,16 @@ def _corner_layout(data, starts, ends, f_lines) -> tuple[int, tuple[int, bool, b
     raise _Unsupported
 
 
-def _indices(raw: np.ndarray, count: int, zero_ok: bool = False) -> np.ndarray:
-    """OBJ indices to the 0-based ones trimesh uses (negative ones kept: they index from the
-    end); :class:`_Unsupported` when one is out of range."""
+def _indices(ints: np.ndarray, column: int, count: int, jit: bool,
+             zero_ok: bool = False) -> np.ndarray:
+    """OBJ indices (``ints[:, column]``) to the 0-based ones trimesh uses (negative ones kept:
+    they index from the end); :class:`_Unsupported` when one is out of range."""
+    if jit:
+        out, ok = _jit().corner_indices(ints, column, count, zero_ok)
+        if not ok:
+            raise _Unsupported
+        return out
+    raw = ints[:, column]
     if len(raw) and (raw.max() > count or raw.min() < -count):
         raise _Unsupported
     if not zero_ok and (raw == 0).any():
