@@ -280,13 +280,17 @@ def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
     offset = 0
     for g, u in zip(geoms, uvs, strict=True):
         vertices.append(g.vertices)
-        faces.append(g.faces + offset)
+        faces.append(g.faces + offset if offset else g.faces)
         offset += len(g.vertices)
         if keep_uv:
             uv_parts.append(u)
         normal_parts.append(g.normals)
-    vertices = np.concatenate(vertices)
-    faces = np.concatenate(faces)
+    if len(geoms) == 1 and geoms[0].source is not None:
+        # the OBJ reader's own arrays, made for this mesh: no copies (100 MB at 1.5M faces)
+        vertices, faces = vertices[0], faces[0]
+    else:
+        vertices = np.concatenate(vertices)
+        faces = np.concatenate(faces)
 
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices).all(axis=1)).sum())
@@ -382,7 +386,10 @@ def load_mesh(
 
     vertices, faces, uv_parts, normal_parts = _stack(geoms, uvs, keep_uv, path)
 
-    uv = np.concatenate(uv_parts) if keep_uv else None
+    if keep_uv and len(geoms) == 1 and geoms[0].source is not None:
+        uv = uv_parts[0]  # the OBJ reader's own array, as the vertices
+    else:
+        uv = np.concatenate(uv_parts) if keep_uv else None
     if uv is not None and not np.isfinite(uv).all():
         bad = ~np.isfinite(uv)
         what = " and ".join(w for w, hit in (("NaN", np.isnan(uv).any()),

@@ -265,31 +265,41 @@ def corner_indices(ints: np.ndarray, column: int, count: int, zero_ok: bool):
 
 
 @njit(cache=True, nogil=True)
-def distinct_keys(key: np.ndarray, shift: int, n_top: int):
-    """One index of each distinct value of ``key`` (N,) uint64, in increasing order of the
-    values, and each index's rank among them: ``np.unique``'s order without its sort.
+def distinct_tuples(columns: np.ndarray, low: np.ndarray, shifts: np.ndarray, n_top: int):
+    """One corner of each distinct index tuple, by increasing packed key, and each corner's
+    rank among them: ``np.unique``'s order of the keys without a sort of every corner.
 
-    The keys are bucketed by their top bits (``key >> shift``, below ``n_top``: the last index
-    column of a corner's tuple) in one counting pass, and each bucket (a handful of corners:
-    the corners of one ``vt``) is sorted on its own.
+    Each corner's key packs its indices ``columns`` (K, N) int64 as
+    ``sum((columns[j] - low[j]) << shifts[j])`` (the last column highest, ``n_top`` values);
+    the corners are bucketed by that last column in one counting pass and each bucket (a
+    handful of corners: those of one ``vt``) is sorted on its own.
 
     Returns
     -------
     rows : (M,) int64
-        An index of each distinct key, by increasing key.
+        A corner of each distinct tuple, by increasing key.
     inverse : (N,) int64
-        ``key[rows[inverse]] == key``.
+        Each corner's tuple: ``key[rows[inverse]] == key``.
     """
-    n = len(key)
+    k, n = columns.shape
+    key = np.zeros(n, np.uint64)
+    for j in range(k):
+        lo = low[j]
+        s = np.uint64(shifts[j])
+        for i in range(n):
+            key[i] |= np.uint64(columns[j, i] - lo) << s
+    shift = np.uint64(shifts[k - 1])
     start = np.zeros(n_top + 1, np.int64)
+    top = np.empty(n, np.int64)
     for i in range(n):
-        start[(key[i] >> shift) + 1] += 1
+        top[i] = np.int64(key[i] >> shift)
+        start[top[i] + 1] += 1
     for b in range(n_top):
         start[b + 1] += start[b]
     fill = start[:-1].copy()
     order = np.empty(n, np.int64)
     for i in range(n):
-        b = key[i] >> shift
+        b = top[i]
         order[fill[b]] = i
         fill[b] += 1
     rows = np.empty(n, np.int64)
@@ -304,11 +314,11 @@ def distinct_keys(key: np.ndarray, shift: int, n_top: int):
         else:
             for j in range(lo + 1, hi):  # insertion sort of a small bucket
                 i = order[j]
-                k = j
-                while k > lo and key[order[k - 1]] > key[i]:
-                    order[k] = order[k - 1]
-                    k -= 1
-                order[k] = i
+                m = j
+                while m > lo and key[order[m - 1]] > key[i]:
+                    order[m] = order[m - 1]
+                    m -= 1
+                order[m] = i
         for j in range(lo, hi):
             i = order[j]
             if j == lo or key[i] != key[order[j - 1]]:
@@ -331,8 +341,8 @@ def warm() -> None:
     starts = np.concatenate(([0], ends[:-1] + 1))
     v = parse_floats(a, starts, ends, np.flatnonzero(kinds == _V), 1, 9)[0].reshape(3, 3)
     ints = parse_faces(a, starts, ends, np.flatnonzero(kinds == _F), 6)[0]
-    key = ints.view(np.uint64)
-    distinct_keys(key, 2, int(key.max() >> 2) + 1)
+    columns = (ints.reshape(-1, 2) - 1).T.copy()
+    distinct_tuples(columns, columns.min(axis=1), np.array([0, 2]), 3)
     corner_indices(ints.reshape(-1, 2), 1, 3, False)
     f = (ints[::2] - 1).reshape(1, 3)
     cross = face_cross_kernel(v, f)

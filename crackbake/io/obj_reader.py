@@ -440,14 +440,13 @@ def _distinct_tuples(columns: list[np.ndarray], jit: bool = False) -> tuple[np.n
         # most), without the corner numbers
         bucket = jit and high[-1] - low[-1] < 4 * len(columns[0]) + 1024
         if bucket:
-            shift = 0
+            shifts = np.cumsum([0] + widths[:-1])
+            return _jit().distinct_tuples(np.stack(columns), np.array(low), shifts,
+                                          high[-1] - low[-1] + 1)  # fmt: skip
         key = np.zeros(len(columns[0]), dtype=np.uint64)
         for c, lo, w in zip(columns, low, widths, strict=True):
             key |= (c - lo).astype(np.uint64) << np.uint64(shift)
             shift += w
-        if bucket:
-            top = shift - widths[-1]
-            return _jit().distinct_keys(key, top, (high[-1] - low[-1]) + 1)
         if n_bits <= spare:
             key |= np.arange(len(key), dtype=np.uint64)
             key.sort()
