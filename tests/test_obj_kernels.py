@@ -261,19 +261,6 @@ def test_scan_matches_the_chunked_numpy_scan(monkeypatch):
                           obj_reader._first_kinds(a, starts, numpy_scan.line_tokens))
 
 
-@pytest.mark.parametrize("columns", [2, 3])
-def test_distinct_tuples_in_the_sorted_order(columns):
-    rng = np.random.default_rng(columns)
-    n = 30000
-    cols = [rng.integers(-20, 2000, n) for _ in range(columns)]
-    cols[-1][::7] = 5  # one big bucket: sorted with numba's argsort
-    rows_np, inverse_np = obj_reader._distinct_tuples(cols, jit=False)
-    rows, inverse = obj_reader._distinct_tuples(cols, jit=True)
-    assert np.array_equal(inverse, inverse_np)
-    for c in cols:  # a corner of the same tuple (any one of them)
-        assert np.array_equal(c[rows], c[rows_np])
-
-
 def test_normals_cross_and_areas_match_numpy():
     rng = np.random.default_rng(4)
     v, f, _ = _sheet(20, rng)

@@ -264,70 +264,6 @@ def corner_indices(ints: np.ndarray, column: int, count: int, zero_ok: bool):
     return out, True
 
 
-@njit(cache=True, nogil=True)
-def distinct_tuples(columns: np.ndarray, low: np.ndarray, shifts: np.ndarray, n_top: int):
-    """One corner of each distinct index tuple, by increasing packed key, and each corner's
-    rank among them: ``np.unique``'s order of the keys without a sort of every corner.
-
-    Each corner's key packs its indices ``columns`` (K, N) int64 as
-    ``sum((columns[j] - low[j]) << shifts[j])`` (the last column highest, ``n_top`` values);
-    the corners are bucketed by that last column in one counting pass and each bucket (a
-    handful of corners: those of one ``vt``) is sorted on its own.
-
-    Returns
-    -------
-    rows : (M,) int64
-        A corner of each distinct tuple, by increasing key.
-    inverse : (N,) int64
-        Each corner's tuple: ``key[rows[inverse]] == key``.
-    """
-    k, n = columns.shape
-    key = np.zeros(n, np.uint64)
-    for j in range(k):
-        lo = low[j]
-        s = np.uint64(shifts[j])
-        for i in range(n):
-            key[i] |= np.uint64(columns[j, i] - lo) << s
-    shift = np.uint64(shifts[k - 1])
-    start = np.zeros(n_top + 1, np.int64)
-    top = np.empty(n, np.int64)
-    for i in range(n):
-        top[i] = np.int64(key[i] >> shift)
-        start[top[i] + 1] += 1
-    for b in range(n_top):
-        start[b + 1] += start[b]
-    fill = start[:-1].copy()
-    order = np.empty(n, np.int64)
-    for i in range(n):
-        b = top[i]
-        order[fill[b]] = i
-        fill[b] += 1
-    rows = np.empty(n, np.int64)
-    inverse = np.empty(n, np.int64)
-    rank = -1
-    for b in range(n_top):
-        lo = start[b]
-        hi = start[b + 1]
-        if hi - lo > 32:
-            part = order[lo:hi]
-            order[lo:hi] = part[np.argsort(key[part])]
-        else:
-            for j in range(lo + 1, hi):  # insertion sort of a small bucket
-                i = order[j]
-                m = j
-                while m > lo and key[order[m - 1]] > key[i]:
-                    order[m] = order[m - 1]
-                    m -= 1
-                order[m] = i
-        for j in range(lo, hi):
-            i = order[j]
-            if j == lo or key[i] != key[order[j - 1]]:
-                rank += 1
-                rows[rank] = i
-            inverse[i] = rank
-    return rows[: rank + 1], inverse
-
-
 def warm() -> None:
     """Compile (or load from numba's cache) the kernels, which only files above
     :data:`crackbake.io.obj_checks.JIT_BYTES` reach, with the argument types the readers pass."""
@@ -341,8 +277,6 @@ def warm() -> None:
     starts = np.concatenate(([0], ends[:-1] + 1))
     v = parse_floats(a, starts, ends, np.flatnonzero(kinds == _V), 1, 9)[0].reshape(3, 3)
     ints = parse_faces(a, starts, ends, np.flatnonzero(kinds == _F), 6)[0]
-    columns = (ints.reshape(-1, 2) - 1).T.copy()
-    distinct_tuples(columns, columns.min(axis=1), np.array([0, 2]), 3)
     corner_indices(ints.reshape(-1, 2), 1, 3, False)
     f = (ints[::2] - 1).reshape(1, 3)
     cross = face_cross_kernel(v, f)

@@ -102,7 +102,7 @@ def read_obj(
     allow_outside : bool
         Let the material library lie outside the file's folder.
     jit : bool, optional
-        Classify the lines, parse the numbers and find the distinct corners with the numba
+        Classify the lines, parse the numbers and convert the indices with the numba
         kernels of :mod:`crackbake.io.obj_kernels` (the same arrays); by default for text of
         :data:`crackbake.io.obj_checks.JIT_BYTES` or more.
 
@@ -179,7 +179,7 @@ def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool,
         tri = _triangles(sizes, same)  # (T, 3) into ``corner``, None: in order
         source, uv, normals, index = _unmerge(
             len(v), vt, vn, cv[corner], None if ct is None else ct[corner],
-            None if cn is None else cn[corner], jit,
+            None if cn is None else cn[corner],
         )  # fmt: skip
         parts.append([material, source, index.reshape(-1, 3) if tri is None else index[tri],
                       uv, normals])  # fmt: skip
@@ -392,7 +392,7 @@ def _triangles(sizes: np.ndarray, same: bool) -> np.ndarray | None:
     return tri
 
 
-def _unmerge(n_v: int, vt, vn, cv, ct, cn, jit: bool = False):
+def _unmerge(n_v: int, vt, vn, cv, ct, cn):
     """The ``v`` line (0-based) of each distinct index tuple the corners use, in trimesh's
     order, their UVs and normals, and each corner's new vertex index."""
     columns = [c for c in (cv, ct, cn) if c is not None]
@@ -402,7 +402,7 @@ def _unmerge(n_v: int, vt, vn, cv, ct, cn, jit: bool = False):
         new = np.zeros(n_v, dtype=np.int64)
         new[used] = np.arange(int(used.sum()))
         return np.flatnonzero(used), None, None, new[cv]
-    rows, inverse = _distinct_tuples(columns, jit)
+    rows, inverse = _distinct_tuples(columns)
     tuples = [c[rows] for c in columns]
     order = tuples[0].argsort()  # numpy's default sort, as trimesh's: ties as it has them
     rank = np.empty(len(order), dtype=np.int64)
@@ -414,15 +414,13 @@ def _unmerge(n_v: int, vt, vn, cv, ct, cn, jit: bool = False):
     return source, uv, normals, rank[inverse]
 
 
-def _distinct_tuples(columns: list[np.ndarray], jit: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _distinct_tuples(columns: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """One corner of each distinct index tuple, in trimesh's order of the tuples, and each
     corner's tuple.
 
     trimesh sorts the tuples by one integer packing the columns (the first in the low bits)
     when they fit in 64 // k bits each, else by the bytes of the rows.  Which corner of a tuple is
-    taken does not matter (they hold the same indices), so numpy's quicksort does.  ``jit``:
-    bucket the corners by their last column in numba and sort each (small) bucket on its
-    own, the same order without a sort of every corner."""
+    taken does not matter (they hold the same indices), so numpy's quicksort does."""
     k = len(columns)
     bits = 64 // k
     limit = 2 ** (bits - 1) - 1
@@ -436,13 +434,6 @@ def _distinct_tuples(columns: list[np.ndarray], jit: bool = False) -> tuple[np.n
         spare = 64 - sum(widths)
         n_bits = max(len(columns[0]) - 1, 1).bit_length()
         shift = n_bits if n_bits <= spare else 0
-        # numba: the tuples bucketed by their last column (as many buckets as corners at
-        # most), without the corner numbers
-        bucket = jit and high[-1] - low[-1] < 4 * len(columns[0]) + 1024
-        if bucket:
-            shifts = np.cumsum([0] + widths[:-1])
-            return _jit().distinct_tuples(np.stack(columns), np.array(low), shifts,
-                                          high[-1] - low[-1] + 1)  # fmt: skip
         key = np.zeros(len(columns[0]), dtype=np.uint64)
         for c, lo, w in zip(columns, low, widths, strict=True):
             key |= (c - lo).astype(np.uint64) << np.uint64(shift)
