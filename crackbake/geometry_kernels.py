@@ -163,3 +163,37 @@ def eye_view_kernel(v: np.ndarray, f: np.ndarray, eye: np.ndarray) -> tuple:
                    np.sqrt((ax - cx) ** 2 + (ay - cy) ** 2 + (az - cz) ** 2))
         near = min(near, min(la, lb, lc) - edge)
     return volume, angle / (4.0 * np.pi), near
+
+
+@njit(cache=True, nogil=True)
+def summed_normals(n: int, groups: np.ndarray, faces: np.ndarray,
+                   cross: np.ndarray) -> np.ndarray:
+    """(n, 3) sums of ``cross`` (F, 3) over the corners of ``faces`` (F, 3) by the group
+    ``groups[faces]`` of each corner, in corner order: the sums of
+    :func:`crackbake.geometry._summed_normals`'s ``bincount`` bit for bit."""
+    acc = np.zeros((n, 3))
+    for f in range(len(faces)):
+        for c in range(3):
+            g = groups[faces[f, c]]
+            acc[g, 0] += cross[f, 0]
+            acc[g, 1] += cross[f, 1]
+            acc[g, 2] += cross[f, 2]
+    return acc
+
+
+@njit(cache=True, nogil=True)
+def area_counts(cross: np.ndarray) -> tuple[int, int]:
+    """Faces of ``cross`` (F, 3) whose length (``numpy.linalg.norm``'s root of the summed
+    squares) is positive, and those where it is zero or less: the counts of the mesh load's
+    ``area2 > 0`` and ``area2 <= 0`` (whether a sum of squares is positive does not depend
+    on the order numpy adds them in)."""
+    positive = 0
+    zero = 0
+    for f in range(len(cross)):
+        s = cross[f, 0] * cross[f, 0] + cross[f, 1] * cross[f, 1] + cross[f, 2] * cross[f, 2]
+        r = np.sqrt(s)
+        if r > 0:
+            positive += 1
+        elif r <= 0:
+            zero += 1
+    return positive, zero

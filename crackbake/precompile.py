@@ -46,9 +46,11 @@ CASES: dict[str, list[str]] = {
 #: 21 s, and the warm-ups of kernels the small plates never reach: ``halving`` (above 2048²,
 #: about 6 s), ``collapse`` (the proxy's decimation above 200k faces, about 15 s) and
 #: ``preview`` (the up axis of a mesh with volume, about 2 s), ``stress`` (the proxy's stress
-#: bake) and ``grid`` (the crack bake's face pass above 100k faces), a few seconds each; so the
-#: lanes take about 100 s and 110 s.
-LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage", "halving", "preview", "stress"),
+#: bake), ``grid`` (the crack bake's face pass above 100k faces) and ``objload`` (the OBJ
+#: reader's kernels, for files of 16 MiB or more), a few seconds each; so the lanes take about
+#: 100 s and 110 s.
+LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage", "halving", "preview", "stress",
+                                       "objload"),
                                       ("thesis", "decal", "tile", "collapse", "grid"))
 
 #: The warm-ups: kernels no small run reaches, compiled by calling their module's ``warm``.
@@ -56,7 +58,8 @@ WARM_UPS = {"halving": "crackbake.exchange.halving",
             "collapse": "crackbake.simulate.simmesh.collapse",
             "preview": "crackbake.bake.preview",
             "stress": "crackbake.bake.stress",
-            "grid": "crackbake.bake.grid"}
+            "grid": "crackbake.bake.grid",
+            "objload": "crackbake.io.obj_kernels"}
 
 
 def textured_plate_obj(path: Path) -> Path:

@@ -32,6 +32,9 @@ VERTEX_COLOURS = "(vertex colours)"
 # Largest vertex coordinate: the bake uploads positions as 32-bit floats (max 3.4e38), and
 # squared lengths of bigger ones overflow even in float64 sums.
 COORDINATE_MAX = 1e38
+#: Meshes with this many faces or more get their face cross products and vertex normals from
+#: numba kernels (the same arrays): at 1.5M faces numpy's passes cost more than numba's import.
+JIT_FACES = 200_000
 # PLY vertex properties that are geometry, not painted attributes.
 _PLY_GEOMETRY = {"x", "y", "z", "nx", "ny", "nz"}
 
@@ -277,13 +280,17 @@ def _stack(geoms: list, uvs: list, keep_uv: bool, path: Path):
     offset = 0
     for g, u in zip(geoms, uvs, strict=True):
         vertices.append(g.vertices)
-        faces.append(g.faces + offset)
+        faces.append(g.faces + offset if offset else g.faces)
         offset += len(g.vertices)
         if keep_uv:
             uv_parts.append(u)
         normal_parts.append(g.normals)
-    vertices = np.concatenate(vertices)
-    faces = np.concatenate(faces)
+    if len(geoms) == 1 and geoms[0].source is not None:
+        # the OBJ reader's own arrays, made for this mesh: no copies (100 MB at 1.5M faces)
+        vertices, faces = vertices[0], faces[0]
+    else:
+        vertices = np.concatenate(vertices)
+        faces = np.concatenate(faces)
 
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices).all(axis=1)).sum())
@@ -379,7 +386,10 @@ def load_mesh(
 
     vertices, faces, uv_parts, normal_parts = _stack(geoms, uvs, keep_uv, path)
 
-    uv = np.concatenate(uv_parts) if keep_uv else None
+    if keep_uv and len(geoms) == 1 and geoms[0].source is not None:
+        uv = uv_parts[0]  # the OBJ reader's own array, as the vertices
+    else:
+        uv = np.concatenate(uv_parts) if keep_uv else None
     if uv is not None and not np.isfinite(uv).all():
         bad = ~np.isfinite(uv)
         what = " and ".join(w for w, hit in (("NaN", np.isnan(uv).any()),
@@ -402,20 +412,33 @@ def load_mesh(
                 stacklevel=2,
             )
 
-    # numpy's cross, not numba's kernel: the first numba call costs more than the load
-    cross = face_cross_numpy(vertices, faces)
+    # numpy's cross below JIT_FACES: numba's import and first call cost more than it saves
+    jit = len(faces) >= JIT_FACES
+    if jit:
+        from crackbake.geometry_kernels import face_cross_kernel
+        from crackbake.jit import light_cache_loads
+
+        light_cache_loads()  # numba's cache loads without its compiler's set-up
+        cross = face_cross_kernel(vertices, faces)
+    else:
+        cross = face_cross_numpy(vertices, faces)
     if all(n is not None for n in normal_parts):
         normals = np.concatenate(normal_parts)
     else:
         source = None
         if all(g.source is not None for g in geoms):  # one file's v lines: weld those
             source = (geoms[0].source[0], np.concatenate([g.source[1] for g in geoms]))
-        normals = welded_vertex_normals(vertices, faces, cross, source)
+        normals = welded_vertex_normals(vertices, faces, cross, source, jit)
 
-    area2 = np.linalg.norm(cross, axis=1)
-    if not (area2 > 0).any():
+    if jit:
+        from crackbake.geometry_kernels import area_counts
+
+        n_positive, n_degenerate = area_counts(cross)
+    else:
+        area2 = np.linalg.norm(cross, axis=1)
+        n_positive, n_degenerate = int((area2 > 0).sum()), int((area2 <= 0).sum())
+    if not n_positive:
         raise CrackbakeError(f"{path}: every face has zero area; crackbake needs a surface")
-    n_degenerate = int((area2 <= 0).sum())
     if n_degenerate:
         warnings.warn(
             f"{path.name}: {n_degenerate} zero-area faces (they get no texels)",

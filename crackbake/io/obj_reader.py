@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from crackbake.errors import CrackbakeError
+from crackbake.io import obj_checks
 from crackbake.io.obj_checks import ObjScan
 from crackbake.io.safe_open import read_bytes
 
@@ -86,7 +87,7 @@ class _Unsupported(Exception):
 
 
 def read_obj(
-    data: bytes, scan: ObjScan, path: Path, allow_outside: bool = False
+    data: bytes, scan: ObjScan, path: Path, allow_outside: bool = False, jit: bool | None = None
 ) -> list[ObjPart] | None:
     """The geometries of an OBJ file, as trimesh's loader would give them, or None.
 
@@ -100,6 +101,10 @@ def read_obj(
         The file (names, and the folder its material library is looked up in).
     allow_outside : bool
         Let the material library lie outside the file's folder.
+    jit : bool, optional
+        Classify the lines, parse the numbers and convert the indices with the numba
+        kernels of :mod:`crackbake.io.obj_kernels` (the same arrays); by default for text of
+        :data:`crackbake.io.obj_checks.JIT_BYTES` or more.
 
     Returns
     -------
@@ -107,13 +112,16 @@ def read_obj(
         One part for a single geometry, else the scene's geometries in trimesh's order; None
         when the file needs trimesh's reader (see the module docstring).
     """
+    if jit is None:
+        jit = len(data) >= obj_checks.JIT_BYTES
     try:
-        return _read(data, scan, path, allow_outside)
+        return _read(data, scan, path, allow_outside, jit)
     except _Unsupported:
         return None
 
 
-def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool) -> list[ObjPart]:
+def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool,
+          jit: bool) -> list[ObjPart]:
     if b"\\" in data and (b"\\\n" in data or b"\\\r\n" in data):
         raise _Unsupported  # line continuations
     if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):
@@ -133,31 +141,25 @@ def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool) -> list[O
     starts = np.empty_like(ends)
     starts[0] = 0
     starts[1:] = ends[:-1] + 1
-    kinds = _kinds(data, a, starts, ends, tokens)
+    kinds = _kinds(data, a, starts, ends, tokens, jit)
 
     lines = {k: np.flatnonzero(kinds == k) for k in (_V, _VT, _VN, _F, _USEMTL)}
     if not len(lines[_F]) or not len(lines[_V]):
         raise _Unsupported  # no faces: a point cloud or nothing, trimesh says which
-    v = _floats(data, a, starts, ends, tokens, lines[_V], b"v", (3, 4, 5))[:, :3]
-    vt = _floats(data, a, starts, ends, tokens, lines[_VT], b"vt", (2, 3))
-    vn = _floats(data, a, starts, ends, tokens, lines[_VN], b"vn", (3,))
+    v = _floats(data, a, starts, ends, tokens, lines[_V], b"v", (3, 4, 5), jit)[:, :3]
+    vt = _floats(data, a, starts, ends, tokens, lines[_VT], b"vt", (2, 3), jit)
+    vn = _floats(data, a, starts, ends, tokens, lines[_VN], b"vn", (3,), jit)
     vt = vt[:, :2] if vt is not None else None
 
     f_lines = lines[_F]
     corners = tokens[f_lines].astype(np.int64) - 1
     slashes, (per_ref, has_vt, has_vn) = _corner_layout(data, starts, ends, f_lines)
-    block = _gather(data, a, starts, ends, f_lines)
-    # every corner as the first: its slashes, then (after the parse) its integers
-    if block.count(b"/") != slashes * corners.sum():
-        raise _Unsupported
-    block = block.translate(_FACE_BLANKS)  # the keyword and the slashes to spaces, one pass
-    ints = _parse(block, np.int64)
-    if len(ints) != corners.sum() * per_ref:
-        raise _Unsupported
+    ints = _face_ints(data, a, starts, ends, f_lines, slashes * corners.sum(),
+                      corners.sum() * per_ref, jit)  # fmt: skip
     ints = ints.reshape(-1, per_ref)
-    cv = _indices(ints[:, 0], len(v), zero_ok=True)
-    ct = _indices(ints[:, 1], 0 if vt is None else len(vt)) if has_vt else None
-    cn = _indices(ints[:, per_ref - 1], 0 if vn is None else len(vn)) if has_vn else None
+    cv = _indices(ints, 0, len(v), jit, zero_ok=True)
+    ct = _indices(ints, 1, 0 if vt is None else len(vt), jit) if has_vt else None
+    cn = _indices(ints, per_ref - 1, 0 if vn is None else len(vn), jit) if has_vn else None
 
     groups = _material_groups(data, starts, ends, f_lines, lines[_USEMTL])
     first_corner = np.concatenate(([0], np.cumsum(corners)))
@@ -189,23 +191,9 @@ def _read(data: bytes, scan: ObjScan, path: Path, allow_outside: bool) -> list[O
             for n, p in zip(names, parts, strict=True)]  # fmt: skip
 
 
-def _kinds(data: bytes, a: np.ndarray, starts, ends, tokens) -> np.ndarray:
+def _kinds(data: bytes, a: np.ndarray, starts, ends, tokens, jit: bool) -> np.ndarray:
     """Each line's kind; raises :class:`_Unsupported` on a line this reader does not take."""
-    n = len(a)
-    b0 = a[starts]
-    b1 = a[np.minimum(starts + 1, n - 1)]
-    b2 = a[np.minimum(starts + 2, n - 1)]
-    kinds = np.full(len(starts), _OTHER, dtype=np.int8)
-    kinds[(b0 == _LF) | (tokens == 0)] = _BLANK
-    space1 = b1 == _SPACE
-    kinds[(b0 == ord("v")) & space1] = _V
-    kinds[(b0 == ord("v")) & (b1 == ord("t")) & (b2 == _SPACE)] = _VT
-    kinds[(b0 == ord("v")) & (b1 == ord("n")) & (b2 == _SPACE)] = _VN
-    kinds[(b0 == ord("f")) & space1] = _F
-    kinds[(b0 == ord("o")) & space1] = _O
-    kinds[(b0 == ord("g")) & space1] = _G
-    kinds[(b0 == ord("s")) & space1] = _S
-    kinds[b0 == _HASH] = _COMMENT
+    kinds = _jit().line_kinds(a, ends, tokens) if jit else _first_kinds(a, starts, tokens)
     for i in np.flatnonzero(kinds == _OTHER):
         head = data[starts[i] : starts[i] + 7]
         if head == b"usemtl ":
@@ -228,6 +216,33 @@ def _kinds(data: bytes, a: np.ndarray, starts, ends, tokens) -> np.ndarray:
     if len(hashes) and (kinds[np.searchsorted(ends, hashes)] != _COMMENT).any():
         raise _Unsupported
     return kinds
+
+
+def _first_kinds(a: np.ndarray, starts, tokens) -> np.ndarray:
+    """Each line's kind from its first three bytes (``_OTHER``: to be looked at)."""
+    n = len(a)
+    b0 = a[starts]
+    b1 = a[np.minimum(starts + 1, n - 1)]
+    b2 = a[np.minimum(starts + 2, n - 1)]
+    kinds = np.full(len(starts), _OTHER, dtype=np.int8)
+    kinds[(b0 == _LF) | (tokens == 0)] = _BLANK
+    space1 = b1 == _SPACE
+    kinds[(b0 == ord("v")) & space1] = _V
+    kinds[(b0 == ord("v")) & (b1 == ord("t")) & (b2 == _SPACE)] = _VT
+    kinds[(b0 == ord("v")) & (b1 == ord("n")) & (b2 == _SPACE)] = _VN
+    kinds[(b0 == ord("f")) & space1] = _F
+    kinds[(b0 == ord("o")) & space1] = _O
+    kinds[(b0 == ord("g")) & space1] = _G
+    kinds[(b0 == ord("s")) & space1] = _S
+    kinds[b0 == _HASH] = _COMMENT
+    return kinds
+
+
+def _jit():
+    """:mod:`crackbake.io.obj_kernels` (imports numba: large files only)."""
+    from crackbake.io import obj_kernels
+
+    return obj_kernels
 
 
 def _gather(data: bytes, a: np.ndarray, starts, ends, which: np.ndarray) -> bytes:
@@ -256,13 +271,18 @@ def _parse(text: bytes, dtype) -> np.ndarray:
             raise _Unsupported from None
 
 
-def _floats(data, a, starts, ends, tokens, which, word: bytes, widths) -> np.ndarray | None:
+def _floats(data, a, starts, ends, tokens, which, word: bytes, widths,
+            jit: bool = False) -> np.ndarray | None:
     """The numbers of the ``word`` lines ``which``, (N, width of the first line), or None."""
     if not len(which):
         return None
     width = int(tokens[which[0]]) - 1
     if width not in widths:
         raise _Unsupported
+    if jit:  # the numbers numpy parses alike; anything else goes on to numpy's parse
+        values, ok = _jit().parse_floats(a, starts, ends, which, len(word), width * len(which))
+        if ok:
+            return values.reshape(-1, width)
     block = _gather(data, a, starts, ends, which)
     # blank the keyword: "v" by a table (no number holds a "v"), the others where they are
     block = block.translate(_V_BLANK) if word == b"v" else block.replace(b"\n" + word, b"\n ")
@@ -272,6 +292,26 @@ def _floats(data, a, starts, ends, tokens, which, word: bytes, widths) -> np.nda
     if len(values) != width * len(which):
         raise _Unsupported
     return values.reshape(-1, width)
+
+
+def _face_ints(data, a, starts, ends, f_lines, slashes: int, count: int, jit: bool) -> np.ndarray:
+    """The integers of the face lines ``f_lines`` (``count`` of them, with ``slashes``
+    slashes in all, else :class:`_Unsupported`), in order."""
+    if jit:  # plain integers only; anything else goes on to numpy's parse
+        ints, found, ok = _jit().parse_faces(a, starts, ends, f_lines, count)
+        if ok:
+            if found != slashes:
+                raise _Unsupported
+            return ints
+    block = _gather(data, a, starts, ends, f_lines)
+    # every corner as the first: its slashes, then (after the parse) its integers
+    if block.count(b"/") != slashes:
+        raise _Unsupported
+    block = block.translate(_FACE_BLANKS)  # the keyword and the slashes to spaces, one pass
+    ints = _parse(block, np.int64)
+    if len(ints) != count:
+        raise _Unsupported
+    return ints
 
 
 def _corner_layout(data, starts, ends, f_lines) -> tuple[int, tuple[int, bool, bool]]:
@@ -288,9 +328,16 @@ def _corner_layout(data, starts, ends, f_lines) -> tuple[int, tuple[int, bool, b
     raise _Unsupported
 
 
-def _indices(raw: np.ndarray, count: int, zero_ok: bool = False) -> np.ndarray:
-    """OBJ indices to the 0-based ones trimesh uses (negative ones kept: they index from the
-    end); :class:`_Unsupported` when one is out of range."""
+def _indices(ints: np.ndarray, column: int, count: int, jit: bool,
+             zero_ok: bool = False) -> np.ndarray:
+    """OBJ indices (``ints[:, column]``) to the 0-based ones trimesh uses (negative ones kept:
+    they index from the end); :class:`_Unsupported` when one is out of range."""
+    if jit:
+        out, ok = _jit().corner_indices(ints, column, count, zero_ok)
+        if not ok:
+            raise _Unsupported
+        return out
+    raw = ints[:, column]
     if len(raw) and (raw.max() > count or raw.min() < -count):
         raise _Unsupported
     if not zero_ok and (raw == 0).any():
