@@ -112,9 +112,13 @@ def test_trim_keeps_the_most_recently_used_under_the_bound(cache):
     other = cache / "0123.npz"  # an unwrap: not the mesh cache's to remove
     other.write_bytes(b"y" * 1000)
     os.utime(other, (now - 1000, now - 1000))
+    killed, writing = cache / ".tmp-killed.npys", cache / ".tmp-writing.npys"
+    for p in (killed, writing):
+        p.write_bytes(b"z")
+    os.utime(killed, (now - 2 * mc.STALE_TMP_S, now - 2 * mc.STALE_TMP_S))
     mc.trim(cache, keep=paths[0], max_bytes=250)
     left = {p.name for p in cache.iterdir()}
-    assert left == {paths[0].name, paths[4].name, other.name}
+    assert left == {paths[0].name, paths[4].name, other.name, writing.name}
 
 
 def test_tangent_frames_cached_equal_the_computed_and_follow_the_uvs(cache):

@@ -129,9 +129,23 @@ def _store(kind: str, key: str, arrays: list[np.ndarray]) -> None:
                 pass
 
 
+#: Seconds after which a ``.tmp-*`` file of this cache is a killed writer's, removed by
+#: :func:`trim` (a live write takes well under a second).
+STALE_TMP_S = 3600.0
+
+
 def trim(folder: Path, keep: Path | None = None, max_bytes: int = MAX_BYTES) -> None:
     """Remove the least recently used plans and frames in ``folder`` until they total at most
-    ``max_bytes`` (``keep``, the one just written, stays)."""
+    ``max_bytes`` (``keep``, the one just written, stays), and temporary files that a killed
+    run left (older than :data:`STALE_TMP_S`)."""
+    import time
+
+    for p in folder.glob(f".tmp-*{_SUFFIX}"):
+        try:
+            if time.time() - p.stat().st_mtime > STALE_TMP_S:
+                p.unlink()
+        except OSError:
+            pass
     entries = []
     for kind in _KINDS:
         for p in folder.glob(f"{kind}-*{_SUFFIX}"):
