@@ -262,7 +262,7 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
     timings["unwrap"] = time.perf_counter() - t
     t = time.perf_counter()
     # Before the bake: the normal map is encoded in exactly the frames the GLB carries.
-    uvmesh = with_tangents(uvmesh)
+    uvmesh = with_tangents(uvmesh, cache=params.cache)
     timings["tangents"] = time.perf_counter() - t
     return uvmesh
 
@@ -296,7 +296,7 @@ def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float
     arrays = bake_arrays(uvmesh)
     with_normals = arrays["tangents"] is not None
     inside = coverage(ctx, arrays["uv"], arrays["faces"], params.res, params.tile, with_normals)
-    gutter = PlanAhead(inside, params.dilate)
+    gutter = PlanAhead(inside, params.dilate, cache=params.cache)
     timings["coverage"] = time.perf_counter() - t
     return gutter
 

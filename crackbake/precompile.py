@@ -105,8 +105,12 @@ def _run_case(name: str, folder: Path) -> float:
         args = [a.format(**names) for a in CASES[name]]
         cmd = [sys.executable, "-m", "crackbake", *args, "--res", "256", "-q", "-o",
                str(folder / name)]
+    # A cache folder of the case's own, empty: every case runs as the first run on its asset
+    # (an unwrap, tangent frames or a gutter plan read from the user's cache would leave their
+    # kernels uncompiled), and the user's cache is left alone.
+    env = dict(os.environ, CRACKBAKE_CACHE_DIR=str(folder / f"cache-{name}"))
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if proc.returncode != 0:
         raise RuntimeError(f"precompile run '{name}' failed: {proc.stderr.strip()[-500:]}")
     return time.perf_counter() - t0

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import shutil
 import struct
@@ -474,7 +475,11 @@ def test_bad_input_is_one_clear_line(results, name, args, message):
     assert line.startswith("error: ") and message in line, line
     assert "Traceback" not in line and "np." not in line and "internal error" not in line
     assert r["stdout"] == ""
-    assert r["new"] == [], f"left behind: {r['new']}"
+    # Nothing but complete entries of the mesh cache (crackbake.bake.mesh_cache: what the run
+    # measured of the asset before the error, kept for the corrected run), in its cache folder.
+    left = [p for p in r["new"] if p != ".cache" and not re.fullmatch(
+        r"\.cache/(gutter|tangents|uvcheck)-[0-9a-f]{64}\.npys", p)]  # fmt: skip
+    assert left == [], f"left behind: {r['new']}"
 
 
 @pytest.mark.parametrize(("name", "args", "message"), WARN_CASES, ids=[c[0] for c in WARN_CASES])

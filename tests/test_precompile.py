@@ -78,3 +78,19 @@ def test_first_run_after_precompile_compiles_nothing(tmp_path):
         result = json.loads(run.stdout.strip().splitlines()[-1])
         assert result["code"] in (0, None), run.stderr
         assert result["compiled"] == [], f"compiled at first run: {result['compiled']}"
+
+
+def test_each_case_runs_with_an_empty_cache_of_its_own(tmp_path, monkeypatch):
+    """A precompile case never reads the user's cache (an unwrap, tangent frames or a gutter
+    plan found there would leave their kernels uncompiled) nor writes it."""
+    from crackbake import precompile as pc
+
+    user = tmp_path / "user-cache"
+    monkeypatch.setenv("CRACKBAKE_CACHE_DIR", str(user))
+    monkeypatch.setitem(pc.CASES, "probe", ["{plate}", "--preset", "mud", "--method", "thesis",
+                                            "--sim-faces", "300"])  # fmt: skip
+    plate_obj(tmp_path / "plate.obj", n=4)
+    pc._run_case("probe", tmp_path)
+    assert not user.exists()
+    own = {p.name.split("-")[0] for p in (tmp_path / "cache-probe").iterdir()}
+    assert own == {"gutter", "tangents", "uvcheck"}

@@ -13,7 +13,9 @@ filled by the same kernel without conversion.
 The fill plan (which texel copies which) depends only on the islands, not on the channels: a run
 knows its islands (the faces' coverage at their UVs) before its crack network, and
 :class:`PlanAhead` works the plan out on a thread of its own while the solver runs, with serial,
-GIL-free copies of the kernels (the same integer results: rows and columns are independent).
+GIL-free copies of the kernels (the same integer results: rows and columns are independent),
+or reads it from the mesh cache (:mod:`crackbake.bake.mesh_cache`) where an earlier bake of the
+same islands stored it: a re-bake has no solver to hide the plan behind.
 """
 
 from __future__ import annotations
@@ -207,12 +209,19 @@ class PlanAhead:
         The islands the bake is expected to find.
     limit : int, optional
         Fill limit in texels (None: every texel).
+    cache : bool
+        Read the plan from the gutter cache (:mod:`crackbake.bake.mesh_cache`, keyed by the
+        content of ``inside`` and ``limit``) when it holds it, else store it there once planned.
     """
 
-    def __init__(self, inside: np.ndarray, limit: int | None = None) -> None:
+    def __init__(self, inside: np.ndarray, limit: int | None = None, cache: bool = False) -> None:
         self.inside = np.ascontiguousarray(inside, dtype=np.bool_)
         self.limit = limit
+        self.cache = cache
+        #: Whether the plan came from the cache (known once :meth:`plan_for` returned).
+        self.cached = False
         self._plan: FillPlan | None = None
+        self._ready = threading.Event()
         self._thread = threading.Thread(target=self._work, name="crackbake-gutter", daemon=True)
         self._thread.start()
 
@@ -220,22 +229,38 @@ class PlanAhead:
         from crackbake.bake.prefetch import background
 
         background()
-        near = _nearest_row_per_column_serial(self.inside)
-        src, dist2 = _nearest_source_serial(near)
-        del near
-        flat = self.inside.reshape(-1)
-        self._plan = FillPlan(*_fill_plan_nogil(flat, src, dist2, _limit2(self.limit)))
+        key = None
+        try:
+            if self.cache:
+                from crackbake.bake.mesh_cache import plan_key, read_plan
+
+                key = plan_key(self.inside, self.limit)
+                self._plan = read_plan(key, self.inside, self.limit)
+                self.cached = self._plan is not None
+            if self._plan is None:
+                near = _nearest_row_per_column_serial(self.inside)
+                src, dist2 = _nearest_source_serial(near)
+                del near
+                flat = self.inside.reshape(-1)
+                self._plan = FillPlan(*_fill_plan_nogil(flat, src, dist2, _limit2(self.limit)))
+        finally:
+            self._ready.set()  # the bake waits for the plan, not for the cache's write
+        if key is not None and not self.cached:
+            from crackbake.bake.mesh_cache import write_plan
+
+            write_plan(key, self.inside, self._plan)
 
     def plan_for(self, inside: np.ndarray, limit: int | None) -> FillPlan | None:
         """The plan, when ``inside`` and ``limit`` are those it was worked out for (else None:
         the bake plans its own fill)."""
-        self._thread.join()
+        self._ready.wait()
         if limit != self.limit or not np.array_equal(inside, self.inside):
             return None
         return self._plan
 
     def close(self) -> None:
-        """Wait for the thread (a run ends with no thread left running)."""
+        """Wait for the thread, the cache's write included (a run ends with no thread left
+        running)."""
         self._thread.join()
 
 

@@ -32,7 +32,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.sparse import coo_matrix
 
 from crackbake.bake import tangent_kernels as kern
 from crackbake.bake.uv.uvmesh import UVMesh
@@ -80,7 +79,7 @@ def corner_tangents(
     return out.reshape(-1, 3, 4)
 
 
-def with_tangents(uvmesh: UVMesh) -> UVMesh:
+def with_tangents(uvmesh: UVMesh, cache: bool = False) -> UVMesh:
     """The same mesh with MikkTSpace tangents per vertex, vertices split where needed.
 
     A vertex whose corners get different tangents (a UV seam's or a mirror seam's sides, or
@@ -93,6 +92,9 @@ def with_tangents(uvmesh: UVMesh) -> UVMesh:
     ----------
     uvmesh : UVMesh
         The output mesh (its ``tangents``, if any, are recomputed).
+    cache : bool
+        Read the frames from the mesh cache (:mod:`crackbake.bake.mesh_cache`, keyed by the
+        content of the mesh's arrays) when it holds them, else store them there.
 
     Returns
     -------
@@ -101,18 +103,34 @@ def with_tangents(uvmesh: UVMesh) -> UVMesh:
         normal with w = -1.
     """
     faces = np.asarray(uvmesh.faces, dtype=np.int64)
-    tan = corner_tangents(uvmesh.vertices, faces, uvmesh.uv, uvmesh.normals).reshape(-1, 4)
-    new_vertex, source, first = kern.split_vertices(faces.reshape(-1), tan, len(uvmesh.vertices))
-    normals = np.asarray(uvmesh.normals, dtype=np.float64)[source]
-    tangents = np.empty((len(source), 4))
-    unused = first < 0
-    tangents[unused, :3] = kern.fallback_rows(np.ascontiguousarray(normals[unused]))
-    tangents[unused, 3] = -1.0
-    tangents[~unused] = tan[first[~unused]]
+    key = hit = None
+    if cache:
+        from crackbake.bake.mesh_cache import read_tangents, tangents_key
+
+        key = tangents_key(uvmesh.vertices, faces, uvmesh.uv, uvmesh.normals)
+        hit = read_tangents(key, len(uvmesh.vertices), faces.shape)
+    if hit is not None:
+        new_faces, source, tangents = hit
+        normals = np.asarray(uvmesh.normals, dtype=np.float64)[source]
+    else:
+        tan = corner_tangents(uvmesh.vertices, faces, uvmesh.uv, uvmesh.normals).reshape(-1, 4)
+        new_vertex, source, first = kern.split_vertices(faces.reshape(-1), tan,
+                                                        len(uvmesh.vertices))  # fmt: skip
+        normals = np.asarray(uvmesh.normals, dtype=np.float64)[source]
+        tangents = np.empty((len(source), 4))
+        unused = first < 0
+        tangents[unused, :3] = kern.fallback_rows(np.ascontiguousarray(normals[unused]))
+        tangents[unused, 3] = -1.0
+        tangents[~unused] = tan[first[~unused]]
+        new_faces = new_vertex.reshape(-1, 3)
+        if key is not None:
+            from crackbake.bake.mesh_cache import write_tangents
+
+            write_tangents(key, new_faces, source, tangents)
     return dataclasses.replace(
         uvmesh,
         vertices=np.asarray(uvmesh.vertices, dtype=np.float64)[source],
-        faces=new_vertex.reshape(-1, 3),
+        faces=new_faces,
         uv=np.asarray(uvmesh.uv, dtype=np.float64)[source],
         normals=normals,
         vertex_map=np.asarray(uvmesh.vertex_map, dtype=np.int64)[source],
@@ -201,6 +219,8 @@ def _join_group_with_any(a, b, n_comp, start, comp_orient, gwa_c, label) -> np.n
     replayed here, one step per component touching such a corner (a Python loop, but only over
     those few components and corners).
     """
+    from scipy.sparse import coo_matrix  # here: a cached frame (mesh_cache) needs no scipy
+
     graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n_comp, n_comp))
     graph = (graph + graph.T).tocsr()
     indptr, indices = graph.indptr.tolist(), graph.indices.tolist()

@@ -391,7 +391,7 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
     help="Memory the run may use, GiB, in place of the detected limit (cgroup, ulimit -v or "
     "physical memory) its estimated peak is checked against before the heavy stages.",
 )
-@click.option("--no-cache", is_flag=True, help="Do not read or write the unwrap cache.")
+@click.option("--no-cache", is_flag=True, help="Do not read or write the unwrap and mesh caches.")
 @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
 @click.option("-v", "--verbose", is_flag=True, help="Print stage timings and details.")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")

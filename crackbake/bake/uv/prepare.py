@@ -131,7 +131,7 @@ def prepare_uvs(
         return unwrap(mesh, res, padding=padding, timeout=timeout, cache=cache, ctx=ctx)
 
     label = mesh_label(mesh)
-    check = check_uvs(mesh, ctx=ctx)
+    check = _checked_uvs(mesh, ctx, cache)
     if check.usable:
         return kept_uvmesh(mesh, check, res)
     if mode == "keep":
@@ -149,3 +149,23 @@ def prepare_uvs(
             stacklevel=2,
         )
     return unwrap(mesh, res, padding=padding, timeout=timeout, cache=cache, ctx=ctx)
+
+
+def _checked_uvs(mesh: Mesh, ctx, cache: bool) -> UVCheck:
+    """:func:`check_uvs`, read from the mesh cache (:mod:`crackbake.bake.mesh_cache`) when an
+    earlier run of the same UVs on the same renderer stored it (a re-bake's UV stage: the
+    overlap and wrap measures are GL draws), else measured and stored."""
+    if not cache or ctx is None or mesh.uv is None:
+        return check_uvs(mesh, ctx=ctx)
+    from crackbake.bake.context import renderer_info
+    from crackbake.bake.mesh_cache import read_uvcheck, uvcheck_key, write_uvcheck
+
+    uv = np.asarray(mesh.uv)
+    if uv.ndim != 2 or len(uv) != len(mesh.vertices):
+        return check_uvs(mesh, ctx=ctx)
+    key = uvcheck_key(uv, mesh.faces, len(mesh.vertices), renderer_info(ctx))
+    check = read_uvcheck(key, len(mesh.faces))
+    if check is None:
+        check = check_uvs(mesh, ctx=ctx)
+        write_uvcheck(key, check)
+    return check

@@ -1,0 +1,224 @@
+"""The bake's mesh cache: gutter plans, tangent frames and UV checks stored by content."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import time
+
+import numpy as np
+import pytest
+from conftest import plate_mesh
+
+from crackbake.bake import mesh_cache as mc
+from crackbake.bake.dilation import PlanAhead, fill_plan
+
+
+@pytest.fixture(autouse=True)
+def cache(tmp_path, monkeypatch):
+    # Never touch the user's ~/.cache from tests.
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("CRACKBAKE_CACHE_DIR", str(folder))
+    return folder
+
+
+def _islands(seed: int = 11) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    inside = rng.random((97, 300)) < 0.02
+    inside[30:50, 100:180] = True
+    return inside
+
+
+def _same_plan(a, b) -> bool:
+    return all(np.array_equal(getattr(a, n), getattr(b, n)) for n in ("targets", "sources", "far"))
+
+
+def _planned(inside, limit, cache=True):
+    ahead = PlanAhead(inside, limit, cache=cache)
+    plan = ahead.plan_for(inside, limit)
+    ahead.close()  # the cache's write done
+    return ahead, plan
+
+
+@pytest.mark.parametrize("limit", [None, 3])
+def test_plan_is_stored_then_read_and_equals_the_plan_in_place(cache, limit):
+    inside = _islands()
+    first, plan = _planned(inside, limit)
+    assert not first.cached and _same_plan(plan, fill_plan(inside, limit))
+    files = list(cache.glob("gutter-*.npys"))
+    assert len(files) == 1 and not list(cache.glob(".tmp-*"))
+    assert files[0].stat().st_mode & 0o044  # readable like any cache file
+    second, again = _planned(inside.copy(), limit)
+    assert second.cached and _same_plan(again, plan)
+    assert len(list(cache.glob("gutter-*.npys"))) == 1
+
+
+def test_changed_islands_or_limit_get_a_fresh_plan(cache):
+    inside = _islands()
+    _planned(inside, None)
+    moved = inside.copy()
+    moved[60, 10] = True  # one texel more island: another plan
+    ahead, plan = _planned(moved, None)
+    assert not ahead.cached and _same_plan(plan, fill_plan(moved, None))
+    ahead, plan = _planned(inside, 2)
+    assert not ahead.cached and _same_plan(plan, fill_plan(inside, 2))
+    assert len(list(cache.glob("gutter-*.npys"))) == 3
+
+
+def test_no_cache_touches_no_files(cache):
+    ahead, plan = _planned(_islands(), None, cache=False)
+    assert not ahead.cached and plan is not None
+    assert not cache.exists()
+
+
+def test_a_corrupt_or_foreign_plan_is_planned_again(cache):
+    inside = _islands()
+    _, plan = _planned(inside, None)
+    (path,) = cache.glob("gutter-*.npys")
+    path.write_bytes(path.read_bytes()[:1000])  # truncated
+    ahead, again = _planned(inside, None)
+    assert not ahead.cached and _same_plan(again, plan)
+    # A file under the right key whose indices point outside the image: refused (the fill
+    # kernels index without checks), not used.
+    key = mc.plan_key(inside, None)
+    bad = fill_plan(inside, None)
+    bad.sources[0] = inside.size + 5
+    mc.write_plan(key, inside, bad)
+    assert mc.read_plan(key, inside, None) is None
+    # Another islands' file under this key (the stored islands differ): refused.
+    other = _islands(seed=3)
+    mc.write_plan(key, other, fill_plan(other, None))
+    assert mc.read_plan(key, inside, None) is None
+
+
+def test_key_hashes_the_planning_code(monkeypatch):
+    inside = _islands()
+    key = mc.plan_key(inside, None)
+    mc._sources.cache_clear()
+    real = mc._sources.__wrapped__
+    monkeypatch.setattr(mc, "_sources", lambda *m: hashlib.sha256(real(*m) + b"edit").digest())
+    assert mc.plan_key(inside, None) != key
+
+
+def test_trim_keeps_the_most_recently_used_under_the_bound(cache):
+    cache.mkdir()
+    now = time.time()
+    paths = []
+    for k, kind in enumerate(["gutter", "tangents", "uvcheck", "gutter", "gutter"]):
+        p = cache / f"{kind}-{k:064x}.npys"
+        p.write_bytes(b"x" * 100)
+        os.utime(p, (now - 100 + k, now - 100 + k))  # k = 0 is the oldest
+        paths.append(p)
+    other = cache / "0123.npz"  # an unwrap: not the mesh cache's to remove
+    other.write_bytes(b"y" * 1000)
+    os.utime(other, (now - 1000, now - 1000))
+    killed, writing = cache / ".tmp-killed.npys", cache / ".tmp-writing.npys"
+    for p in (killed, writing):
+        p.write_bytes(b"z")
+    os.utime(killed, (now - 2 * mc.STALE_TMP_S, now - 2 * mc.STALE_TMP_S))
+    mc.trim(cache, keep=paths[0], max_bytes=250)
+    left = {p.name for p in cache.iterdir()}
+    assert left == {paths[0].name, paths[4].name, other.name, writing.name}
+
+
+def test_tangent_frames_cached_equal_the_computed_and_follow_the_uvs(cache):
+    from crackbake.bake.tangents import with_tangents
+    from crackbake.bake.uv.uvmesh import UVMesh
+
+    mesh = plate_mesh(6, wobble=0.2, seed=1)
+    uv = mesh.uv.copy()
+    uv[: len(uv) // 2, 0] = 1 - uv[: len(uv) // 2, 0]  # mirrored half: split vertices
+    base = UVMesh(vertices=mesh.vertices, faces=mesh.faces, uv=uv, normals=mesh.normals,
+                  vertex_map=np.arange(len(mesh.vertices)), method="kept", overlap_fraction=0.0,
+                  padding_px=0)  # fmt: skip
+    computed = with_tangents(base)
+    assert not cache.exists()
+    first = with_tangents(base, cache=True)
+    assert len(list(cache.glob("tangents-*.npys"))) == 1
+    second = with_tangents(base, cache=True)
+    for got in (first, second):
+        for name in ("vertices", "faces", "uv", "normals", "vertex_map", "tangents"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(computed, name), name)
+    moved = UVMesh(vertices=base.vertices, faces=base.faces, uv=mesh.uv, normals=base.normals,
+                   vertex_map=base.vertex_map, method="kept", overlap_fraction=0.0,
+                   padding_px=0)  # fmt: skip
+    fresh = with_tangents(moved, cache=True)
+    assert len(list(cache.glob("tangents-*.npys"))) == 2
+    np.testing.assert_array_equal(fresh.tangents, with_tangents(moved).tangents)
+    assert not np.array_equal(fresh.tangents, first.tangents)  # not the other UVs' frames
+
+
+def test_uv_check_cached_equals_the_measured_and_follows_the_uvs(cache, gl_ctx):
+    from crackbake.bake.uv.check import check_uvs
+    from crackbake.bake.uv.prepare import _checked_uvs
+
+    mesh = plate_mesh(8, wobble=0.2, seed=2)
+    mesh.uv[:] = 0.1 + 0.8 * mesh.uv
+    mesh.uv[0] -= 0.15  # a corner strays past the page: wrapped copies where the page is free
+    measured = check_uvs(mesh, ctx=gl_ctx)
+    assert measured.usable and len(measured.wraps)
+    first = _checked_uvs(mesh, gl_ctx, True)
+    assert len(list(cache.glob("uvcheck-*.npys"))) == 1
+    second = _checked_uvs(mesh, gl_ctx, True)
+    for got in (first, second):
+        for name in ("usable", "reason", "udim", "overlap_fraction", "outside_fraction",
+                     "lost_fraction", "lost_faces", "tiles"):  # fmt: skip
+            assert getattr(got, name) == getattr(measured, name), name
+        np.testing.assert_array_equal(got.wraps, measured.wraps)
+    mesh.uv[:] = 0.5 * mesh.uv + 0.25  # folded into the page's middle: no strays
+    fresh = _checked_uvs(mesh, gl_ctx, True)
+    assert len(list(cache.glob("uvcheck-*.npys"))) == 2
+    assert fresh.outside_fraction == 0 and not len(fresh.wraps)
+    assert fresh.overlap_fraction == check_uvs(mesh, ctx=gl_ctx).overlap_fraction
+
+
+def _obj(path, u0: float) -> None:
+    """A 2x1 plate whose UV island starts at u = ``u0``."""
+    path.write_text("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\n"
+                    f"vt {u0} 0.2\nvt {u0 + 0.8} 0.2\nvt {u0 + 0.8} 0.8\nvt {u0} 0.8\n"
+                    "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")  # fmt: skip
+
+
+def _files(folder) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.name != "manifest.json"}
+
+
+def test_rebakes_from_the_cache_write_the_same_files(cache, tmp_path):
+    """A re-bake (``--cracks``) through the pipeline: the second reads the plan, the frames and
+    the UV check from the cache and writes the same bytes as one without the cache; moved UVs
+    bake with fresh ones, again as without the cache."""
+    from crackbake.io.mesh import load_mesh
+    from crackbake.io.sidecar import write_sidecar
+    from crackbake.network import Crack, CrackNetwork, mesh_info
+    from crackbake.params import RunParams
+    from crackbake.pipeline import run
+
+    obj = tmp_path / "plate.obj"
+    _obj(obj, 0.1)
+    crack = Crack(id=0, points=np.array([[1.2, 0.75, 0.0], [1.8, 0.7, 0.0]]),
+                  faces=np.array([1, 1]), time=np.array([0.0, 1.0]),
+                  width=np.array([0.02, 0.02]), depth=np.array([0.01, 0.01]))  # fmt: skip
+    side = tmp_path / "cracks.json"
+    write_sidecar(CrackNetwork(cracks=[crack], mesh=mesh_info(load_mesh(obj))), side)
+
+    def bake(name, folder=cache):
+        os.environ["CRACKBAKE_CACHE_DIR"] = str(folder)  # the fixture restores it
+        run(RunParams(mesh=obj, cracks=side, res=128, out=tmp_path / name))
+        return _files(tmp_path / name)
+
+    # The cache is a run parameter the files record: the references use one of their own.
+    plain = bake("plain", tmp_path / "empty1")
+    assert bake("first") == plain
+    kinds = ("gutter", "tangents", "uvcheck")
+    def stored():  # a hit reads the file, a miss replaces it (another inode)
+        return {k: {p.name: p.stat().st_ino for p in cache.glob(f"{k}-*.npys")} for k in kinds}
+
+    first = stored()
+    assert all(len(v) == 1 for v in first.values()), first
+    assert bake("second") == plain
+    assert stored() == first
+    _obj(obj, 0.15)  # the island moved: every cached result is another one's
+    moved = bake("moved_plain", tmp_path / "empty2")
+    assert moved != plain
+    assert bake("moved") == moved
+    assert all(len(list(cache.glob(f"{k}-*.npys"))) == 2 for k in kinds)
