@@ -102,3 +102,36 @@ def test_numpy_after_quiet_blas_starts_no_blas_threads():
 
     assert threads("quiet") == 1
     assert threads() > 1
+
+
+def _starts(args: list[str], env: dict | None = None) -> tuple[subprocess.CompletedProcess, int]:
+    """``python -m crackbake ARGS`` and how many interpreters it started (``-X importtime``
+    lists ``encodings`` once per interpreter start)."""
+    base = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
+    env = {**base, "PYTHONPATH": str(ROOT), **(env or {})}
+    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "crackbake", *args],
+                       capture_output=True, text=True, env=env, timeout=120)
+    return r, r.stderr.count("| encodings\n")
+
+
+@pytest.mark.skipif(not os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc"),
+                    reason="the huge-page tunable is glibc's")
+def test_a_job_restarts_once_on_huge_pages_and_keeps_its_status_and_output(tmp_path):
+    """A run restarts itself once with glibc's huge-page tunable (the exit frees the GL
+    driver's render targets in 2 MiB pages); its one-line error and exit status are the same
+    as without, and help, the version, a caller's own tunable and an importing program never
+    restart."""
+    missing = str(tmp_path / "missing.exr")
+    r, starts = _starts(["inspect", missing])
+    assert starts == 2 and r.returncode == 2, r.stderr[-500:]
+    assert "does not exist" in r.stderr and "Traceback" not in r.stderr
+    r, starts = _starts(["inspect", missing], {"GLIBC_TUNABLES": "glibc.malloc.hugetlb=0"})
+    assert starts == 1 and r.returncode == 2 and "does not exist" in r.stderr
+    for args in (["--help"], ["--version"]):
+        r, starts = _starts(args)
+        assert starts == 1 and r.returncode == 0 and "crackbake" in r.stdout
+    r = _run(f"import sys; sys.argv = ['crackbake', 'inspect', {missing!r}]\n"
+             "import os; os.environ.pop('GLIBC_TUNABLES', None)\n"
+             "print('once', flush=True)\n"
+             "from crackbake.entry import main; main()")
+    assert r.returncode == 2 and r.stdout.count("once") == 1, r.stdout
