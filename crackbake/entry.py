@@ -57,16 +57,18 @@ def huge_pages() -> None:
 
     glibc reads its tunables only when a process starts.  Without them the GL driver's
     render targets (llvmpipe keeps textures in malloc'd memory, 256 MB per 4096² float target)
-    are mapped in 4 KiB pages, and the kernel then faults them in and, at the exit, frees them
-    page by page: the exit after the README bake took 0.54-0.74 s on a loaded 2-core machine
-    against 0.13-0.17 s with the tunable (a 4096² float framebuffer alone: 0.12-0.30 s against
-    0.02-0.08 s), for about 20 ms of a second interpreter start.  Left alone: a help or version
+    are mapped in 4 KiB pages, which the kernel frees one by one at the exit: after the README
+    bake the last event to the process's end took 0.13-0.35 s on a loaded 2-core machine
+    against 0.07-0.12 s with the tunable (a 4096² float framebuffer alone: 0.12-0.30 s against
+    0.02-0.08 s), for a bare interpreter's start before the first stage (about 20-30 ms of
+    CPU; docs/benchmarks.md, "The gap after total").  The process keeps its pid, arguments and
+    descriptors; nothing has been read or written yet.  Left alone: a help or version
     call, a caller that set ``glibc.malloc.hugetlb`` itself, an interpreter not on glibc, and
     ``main`` called from another program (only ``crackbake`` and ``python -m crackbake``
     restart, with their own command line).
     """
     tunables = os.environ.get("GLIBC_TUNABLES", "")
-    if ("glibc.malloc.hugetlb" in tunables or len(sys.argv) < 2
+    if ("glibc.malloc.hugetlb" in tunables or len(sys.argv) < 2 or not sys.executable
             or not _NO_RUN.isdisjoint(sys.argv[1:]) or not _is_command()):
         return
     try:
