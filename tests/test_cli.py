@@ -195,3 +195,18 @@ def test_a_command_name_wins_over_a_file_of_that_name(plate, tmp_path):
     r = run_on_pipes(["inspect"], tmp_path)
     assert (r.returncode, r.stderr.strip()) == (
         2, "error: missing argument 'EXR'; run crackbake --help"), r.stderr
+
+
+def test_spacing_help_reads_the_presets_only_when_shown():
+    """``--spacing``'s help lists the presets' own spacings (read from their TOML files) when
+    the help is shown or read, not when the command module is imported for a run."""
+    code = ("from crackbake.params.presets import load_preset, preset_names\n"
+            "import crackbake.cli.bake as cb\n"
+            "before = load_preset.cache_info().currsize\n"
+            "spacing = next(p for p in cb.bake.params if p.name == 'spacing')\n"
+            "own = [f\"{n} {load_preset(n)['spacing']}\" for n in preset_names()\n"
+            "       if 'spacing' in load_preset(n)]\n"
+            "print(before, all(o in spacing.help for o in own), bool(own))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=60, env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1])})
+    assert r.stdout.split() == ["0", "True", "True"], r.stdout + r.stderr

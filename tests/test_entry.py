@@ -102,3 +102,51 @@ def test_numpy_after_quiet_blas_starts_no_blas_threads():
 
     assert threads("quiet") == 1
     assert threads() > 1
+
+
+def _starts(args: list[str], env: dict | None = None) -> tuple[subprocess.CompletedProcess, int]:
+    """``python -m crackbake ARGS`` and how many interpreters it started (``-X importtime``
+    lists ``encodings`` once per interpreter start)."""
+    base = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
+    env = {**base, "PYTHONPATH": str(ROOT), **(env or {})}
+    r = subprocess.run([sys.executable, "-X", "importtime", "-m", "crackbake", *args],
+                       capture_output=True, text=True, env=env, timeout=120)
+    return r, r.stderr.count("| encodings\n")
+
+
+@pytest.mark.skipif(not os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc"),
+                    reason="the huge-page tunable is glibc's")
+def test_a_large_bake_restarts_once_on_huge_pages_and_keeps_its_status_and_output(tmp_path):
+    """A bake of --res 2048 or more restarts itself once with glibc's huge-page tunable (the
+    exit frees the GL driver's render targets in 2 MiB pages); its one-line error and exit
+    status are the same as without.  A smaller bake, a named command, help, the version, a
+    caller's own tunable and an importing program never restart."""
+    missing = str(tmp_path / "missing.obj")
+    for args in ([missing], [missing, "--res", "4096"], [missing, "--res=2048"]):
+        r, starts = _starts(args)
+        assert starts == 2 and r.returncode == 2, (args, r.stderr[-500:])
+        assert "missing.obj" in r.stderr and "Traceback" not in r.stderr
+    r, starts = _starts([missing], {"GLIBC_TUNABLES": "glibc.malloc.hugetlb=0"})
+    assert starts == 1 and r.returncode == 2 and "missing.obj" in r.stderr
+    for args in ([missing, "--res", "1024"], ["inspect", str(tmp_path / "missing.exr")]):
+        r, starts = _starts(args)
+        assert starts == 1 and r.returncode == 2, (args, r.stderr[-500:])
+    for args in (["--help"], ["--version"]):
+        r, starts = _starts(args)
+        assert starts == 1 and r.returncode == 0 and "crackbake" in r.stdout
+    r = _run(f"import sys; sys.argv = ['crackbake', {missing!r}]\n"
+             "import os; os.environ.pop('GLIBC_TUNABLES', None)\n"
+             "print('once', flush=True)\n"
+             "from crackbake.entry import main; main()")
+    assert r.returncode == 2 and r.stdout.count("once") == 1, r.stdout
+
+
+def test_the_restart_knows_the_groups_commands_and_the_default_res():
+    from crackbake.cli.group import COMMANDS
+    from crackbake.entry import HUGE_PAGES_RES, SUBCOMMANDS, _res
+    from crackbake.params import RES_DEFAULT
+
+    assert set(SUBCOMMANDS) == set(COMMANDS)
+    assert _res(["mesh.obj"]) == RES_DEFAULT >= HUGE_PAGES_RES
+    assert _res(["m.obj", "--res", "512", "--res=4096"]) == 4096
+    assert _res(["m.obj", "--res", "big"]) == 0

@@ -241,3 +241,42 @@ def test_the_first_stage_starts_before_the_later_stages_are_imported(tmp_path):
     code, count, loaded = r.stdout.strip().split("|")
     assert code == "2" and count == "1", r.stdout  # the load stage really was logged
     assert loaded == "", loaded
+
+
+# Runs the bake of spot up to the start of its UV stage (a handler stops it there) and prints
+# whether scipy's sparse matrices and spatial trees were loaded by then.
+_UV_STAGE = """
+import logging
+import sys
+from crackbake.cli import main
+
+seen = []
+
+class AtUVs(logging.Handler):
+    def emit(self, record):
+        if getattr(record, "stage", None) == "unwrap":
+            seen.append(" ".join(sorted(m for m in ("scipy.sparse", "scipy.spatial")
+                                        if m in sys.modules)))
+            raise SystemExit(0)
+
+logging.getLogger("crackbake.pipeline").addHandler(AtUVs())
+try:
+    main(sys.argv[1:], prog_name="crackbake")
+except SystemExit:
+    pass
+print(len(seen), *seen, sep="|")
+"""
+
+
+def test_the_uv_stage_starts_without_scipy(tmp_path):
+    """The sources are checked before the UV stage without the stress fields' scipy imports
+    (0.3-0.5 s of CPU), and the tangents import scipy.sparse only for zero-UV-area faces:
+    the UV stage, and a ``--cracks`` re-bake, never wait for them (issue 25)."""
+    spot = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
+    r = subprocess.run([sys.executable, "-c", _UV_STAGE, str(spot),
+                        "--preset", "glass", "--impact", "0.334,0.044,0.287", "--res", "64",
+                        "-q", "-o", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    count, loaded = r.stdout.strip().split("|")
+    assert count == "1", r.stdout + r.stderr  # the UV stage began
+    assert loaded == "", loaded

@@ -219,7 +219,9 @@ def _join_group_with_any(a, b, n_comp, start, comp_orient, gwa_c, label) -> np.n
     replayed here, one step per component touching such a corner (a Python loop, but only over
     those few components and corners).
     """
-    from scipy.sparse import coo_matrix  # here: a cached frame (mesh_cache) needs no scipy
+    # Imported here, not with the module: only meshes with zero-UV-area faces get this far, and
+    # scipy.sparse is 0.1-0.3 s of imports the UV stage (and a --cracks re-bake) need not pay.
+    from scipy.sparse import coo_matrix
 
     graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n_comp, n_comp))
     graph = (graph + graph.T).tocsr()

@@ -111,6 +111,26 @@ def _spacing_defaults() -> str:
     return "; ".join([f"{SPACING_DEFAULT}", *own])
 
 
+class _LateHelp(click.Option):
+    """An option whose help is ``late_help()``, made when first read (the help page, the
+    add-on's tooltips): ``--spacing``'s reads every preset's TOML, a third of this module's
+    import time, which a run does not need (issue 25)."""
+
+    def __init__(self, *args, late_help, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._late = late_help
+
+    @property
+    def help(self) -> str | None:
+        if callable(self._late):
+            self._late = self._late()
+        return self._late
+
+    @help.setter
+    def help(self, value: str | None) -> None:
+        self._late = value
+
+
 def _parse_curvature(text: str | None) -> tuple[float | None, float | None]:
     if text is None:
         return None, None
@@ -216,8 +236,9 @@ def _split_formats(_ctx, _param, value: str) -> tuple[str, ...]:
 @click.option(
     "--spacing",
     type=float,
-    help="Crack spacing: each crack's stress-shadow radius as a fraction of the bounding-box "
-    f"diagonal; smaller gives smaller cells [{_spacing_defaults()}].",
+    cls=_LateHelp,
+    late_help=lambda: "Crack spacing: each crack's stress-shadow radius as a fraction of the "
+    f"bounding-box diagonal; smaller gives smaller cells [{_spacing_defaults()}].",
 )
 @click.option(
     "--cycles",

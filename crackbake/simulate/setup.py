@@ -44,15 +44,15 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
     CrackbakeError
         When nothing would load the surface, or a preset needs an impact that is missing.
     """
-    from crackbake.simulate.stress import (
+    # The sources' module alone: the fields' and geodesics' scipy imports are the simulation
+    # branch's, after the UV stage (crackbake.simulate.stress imports them on first use).
+    from crackbake.simulate.stress.sources import (
         CurvatureSource,
         DirectionalSource,
         ImpactSource,
         NoiseSource,
         ShrinkSource,
         WeightSource,
-        load_weight_map,
-        vertex_weights,
     )
 
     if relative.get("needs_impact") and not params.impacts:
@@ -89,6 +89,9 @@ def stress_sources(params: RunParams, mesh: Mesh, relative: dict) -> list:
             f"or a --preset ({', '.join(preset_names())}), or bake a network with --cracks"
         )
     if params.weight_map is not None or params.weight_attribute is not None:
+        from crackbake.io.images import load_weight_map
+        from crackbake.simulate.stress.weights import vertex_weights
+
         per_vertex = (
             vertex_weights(mesh, params.weight_attribute)
             if params.weight_attribute is not None

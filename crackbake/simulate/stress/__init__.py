@@ -6,48 +6,51 @@
   distance from it (fast marching, edge-Dijkstra fallback).
 * :mod:`~crackbake.simulate.stress.fields`: per-source tensor fields and :func:`stress_field`.
 * :mod:`~crackbake.simulate.stress.weights`: painted weights (vertex attributes, weight maps).
+
+The names below are imported from their modules on first use (PEP 562): a run checks its
+sources (:func:`crackbake.simulate.setup.stress_sources`) before the UV stage without loading
+the fields' and geodesics' scipy.sparse and scipy.spatial, which the simulation branch imports.
 """
 
-from crackbake.io.images import LUMA, load_weight_map
-from crackbake.simulate.stress.fields import (
-    CURVATURE_CLIP,
-    NOISE_SCALE_DIAGONAL,
-    NOISE_WAVES,
-    StressField,
-    impact_detail,
-    impact_refinement,
-    noise_origin,
-    stress_field,
-)
-from crackbake.simulate.stress.geodesic import impact_distance, iso_length
-from crackbake.simulate.stress.sources import (
-    CurvatureSource,
-    DirectionalSource,
-    ImpactSource,
-    NoiseSource,
-    ShrinkSource,
-    WeightSource,
-)
-from crackbake.simulate.stress.weights import vertex_weights
+from __future__ import annotations
 
-__all__ = [
-    "CURVATURE_CLIP",
-    "LUMA",
-    "NOISE_SCALE_DIAGONAL",
-    "NOISE_WAVES",
-    "CurvatureSource",
-    "DirectionalSource",
-    "ImpactSource",
-    "NoiseSource",
-    "ShrinkSource",
-    "StressField",
-    "WeightSource",
-    "impact_detail",
-    "impact_distance",
-    "impact_refinement",
-    "noise_origin",
-    "iso_length",
-    "load_weight_map",
-    "stress_field",
-    "vertex_weights",
-]
+import importlib
+
+# name -> the module that defines it (the package's own unless dotted)
+_SOURCES = {
+    "LUMA": "crackbake.io.images",
+    "load_weight_map": "crackbake.io.images",
+    "CURVATURE_CLIP": "fields",
+    "NOISE_SCALE_DIAGONAL": "fields",
+    "NOISE_WAVES": "fields",
+    "StressField": "fields",
+    "impact_detail": "fields",
+    "impact_refinement": "fields",
+    "noise_origin": "fields",
+    "stress_field": "fields",
+    "impact_distance": "geodesic",
+    "iso_length": "geodesic",
+    "CurvatureSource": "sources",
+    "DirectionalSource": "sources",
+    "ImpactSource": "sources",
+    "NoiseSource": "sources",
+    "ShrinkSource": "sources",
+    "WeightSource": "sources",
+    "vertex_weights": "weights",
+}
+
+__all__ = sorted(_SOURCES)
+
+
+def __getattr__(name: str):
+    module = _SOURCES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    path = module if "." in module else f"{__name__}.{module}"
+    value = getattr(importlib.import_module(path), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
