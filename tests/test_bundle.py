@@ -4,6 +4,8 @@ after the stress bake, every job joined before the stage is committed or discard
 from __future__ import annotations
 
 import hashlib
+import os
+import sys
 import threading
 
 import pytest
@@ -80,3 +82,28 @@ def test_a_failed_job_is_raised_by_finish(tmp_path, monkeypatch):
         with pytest.raises(OSError, match="disk full"):
             with Writer(stage, "rock", params, mesh, uvm, tiny_network(), synthetic_maps()) as w:
                 w.finish()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread nice is Linux's")
+def test_encoders_run_below_the_main_thread_and_their_chunk_threads_too(tmp_path):
+    """The stress bake's GL draws keep the main thread's priority while the encoders run."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from crackbake.exchange.bundle import ENCODER_NICE
+
+    def nice() -> int:
+        return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+    def chunk_thread() -> int:  # as exrzip's chunk pool starts its threads from an encoder
+        with ThreadPoolExecutor(1) as inner:
+            return inner.submit(nice).result()
+
+    mesh, uvm = plate_uvmesh()
+    params = RunParams(mesh=mesh.source, formats=("exr",))
+    before = nice()
+    with OutputStage(tmp_path / "out") as stage:
+        with Writer(stage, "rock", params, mesh, uvm, tiny_network(), synthetic_maps()) as w:
+            assert w.pool.submit(nice).result() == min(19, before + ENCODER_NICE)
+            assert w.pool.submit(chunk_thread).result() == min(19, before + ENCODER_NICE)
+            w.finish()
+    assert nice() == before
