@@ -273,7 +273,7 @@ class Writer:
         self.pages = None
         if "preview" in formats:  # the picture is drawn by finish(); its pages are ready by then
             with_normal = getattr(self.uvmesh, "tangents", None) is not None
-            self.pages = pool.submit(_preview_pages, maps, texture, with_normal)
+            self.pages = pool.submit(_preview_levels, maps, texture, with_normal)
             jobs.append(self.pages)
         enc = _Encoder(pool, maps, texture)
         if "png" in formats:
@@ -308,8 +308,9 @@ class Writer:
             path = stage.path(f"{stem}_stress.exr")
             self.jobs.append(self.pool.submit(_write_stress_exr, path, stress, **self.exr))
         if self.pages is not None:
-            _draw_preview(stage, mesh, uvmesh, self.network, *self.pages.result(), self.ctx,
-                          params.up)  # fmt: skip
+            colour, normal, levels = self.pages.result()
+            _draw_preview(stage, mesh, uvmesh, self.network, colour, normal, self.ctx,
+                          params.up, levels)  # fmt: skip
         if self.glb_keys:
             _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, self.encoded,
                        self.glb_keys)  # fmt: skip
@@ -460,7 +461,17 @@ def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx, up=None) ->
     _draw_preview(stage, mesh, uvmesh, network, *pages, ctx, up)
 
 
-def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None) -> None:
+def _preview_levels(maps: CrackMaps, texture, with_normal: bool):
+    """:func:`_preview_pages` and their mip levels (:func:`~crackbake.bake.preview.mip_levels`):
+    (colour, normal, (colour's levels, normal's levels))."""
+    from crackbake.bake.preview import mip_levels
+
+    colour, normal = _preview_pages(maps, texture, with_normal)
+    return colour, normal, (mip_levels(colour), None if normal is None else mip_levels(normal))
+
+
+def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None,
+                  levels=None) -> None:  # fmt: skip
     """Render ``preview.png`` from its pages (:func:`_preview_pages`) with ``ctx``."""
     tangents = getattr(uvmesh, "tangents", None)
     view_dir, up, target, distance = preview_camera(mesh, network, up)
@@ -477,6 +488,7 @@ def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None) ->
         normal_map=normal,
         tangents=tangents,
         ctx=ctx,
+        levels=levels,
     )
     write_bytes(stage.path("preview.png"), png_bytes(picture, level=6, srgb=True))
 
