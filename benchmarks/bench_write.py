@@ -125,24 +125,44 @@ def readme_set(res: int) -> dict:
     """write_outputs' arguments of the README run at ``res``, captured from the pipeline."""
     import crackbake.exchange.bundle as bundle
     captured: dict = {}
-    real = bundle.write_outputs
+    real = getattr(bundle, "Writer", None)
+    if real is None:  # a tree before the early write: the pipeline calls write_outputs
+        real_write = bundle.write_outputs
 
-    def capture(stage, stem, params, mesh, uvmesh, network, maps, ctx=None, stress=None,
-                effective=None):  # fmt: skip
-        captured.update(stem=stem, params=params, mesh=mesh, uvmesh=uvmesh, network=network,
-                        maps=maps, stress=stress, effective=effective)  # fmt: skip
-        real(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
+        def capture(stage, stem, params, mesh, uvmesh, network, maps, ctx=None, stress=None,
+                    effective=None):  # fmt: skip
+            captured.update(stem=stem, params=params, mesh=mesh, uvmesh=uvmesh,
+                            network=network, maps=maps, stress=stress,
+                            effective=effective)  # fmt: skip
+            real_write(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
+
+        patch, restore = ("write_outputs", capture), ("write_outputs", real_write)
+    else:  # the pipeline starts a Writer before the stress bake and finishes it after
+
+        class Capture(real):
+            def __init__(self, stage, stem, params, mesh, uvmesh, network, maps, ctx=None,
+                         effective=None):  # fmt: skip
+                captured.update(stem=stem, params=params, mesh=mesh, uvmesh=uvmesh,
+                                network=network, maps=maps, effective=effective)  # fmt: skip
+                super().__init__(stage, stem, params, mesh, uvmesh, network, maps, ctx,
+                                 effective)  # fmt: skip
+
+            def finish(self, stress=None):
+                captured["stress"] = stress
+                super().finish(stress)
+
+        patch, restore = ("Writer", Capture), ("Writer", real)
 
     out = Path(tempfile.mkdtemp(prefix="bench-write-")) / "run"
     argv = [str(ROOT / "examples" / "spot.obj"), "--preset", "glass", "--impact", IMPACT,
             "--res", str(res), "-o", str(out), "--quiet"]  # fmt: skip
     from crackbake.cli import main as command
 
-    bundle.write_outputs = capture
+    setattr(bundle, *patch)
     try:
         command(argv, standalone_mode=False)
     finally:
-        bundle.write_outputs = real
+        setattr(bundle, *restore)
     manifest = json.loads((out / "manifest.json").read_text())
     captured["pipeline_write"] = manifest["timings_s"]["write"]
     return captured

@@ -188,19 +188,20 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
         maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
-        stress = _bake_stress(ctx, uvmesh, solved, params, timings)
         # The writers are imported here, not before the UV stage: each stage imports its own
         # modules (the bake's GL and numba kernels, the stress bake's scipy.spatial) where it runs.
-        from crackbake.exchange.bundle import write_outputs
+        from crackbake.exchange.bundle import Writer
         from crackbake.exchange.manifest import build_manifest, effective_params, write_manifest
 
-        logger.info("writing %s", params.out_dir, extra={"stage": "write"})
-        t = time.perf_counter()
         effective = effective_params(params, solver_stats, maps, uvmesh)
-        write_outputs(
-            stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx, stress,
-            effective,
-        )
+        # The crack maps' files encode on threads while the stress bake draws (issue 25);
+        # leaving the block waits for every file, whatever happened inside it.
+        with Writer(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx,
+                    effective) as writer:  # fmt: skip
+            stress = _bake_stress(ctx, uvmesh, solved, params, timings)
+            logger.info("writing %s", params.out_dir, extra={"stage": "write"})
+            t = time.perf_counter()
+            writer.finish(stress)
         _decals(ctx, uvmesh, network, maps, params, stage, timings)
         files = stage.records()
         timings["write"] = time.perf_counter() - t

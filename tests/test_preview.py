@@ -95,3 +95,46 @@ def test_culled_preview_equals_the_full_draw_on_a_closed_surface(gl_ctx, monkeyp
     monkeypatch.setattr(preview, "CULL_FACES", 0)
     assert (render_preview(*turned, size=256, ctx=gl_ctx) != full).any(axis=2).sum() \
         <= 0.001 * 256 * 256
+
+
+def _llvmpipe(ctx) -> bool:
+    return "llvmpipe" in ctx.info.get("GL_RENDERER", "")
+
+
+def test_mip_levels_are_llvmpipes_own(gl_ctx):
+    """Levels made on the CPU equal glGenerateMipmap's on llvmpipe, every level, every byte
+    (other drivers round their own way: the preview there may differ by a level's rounding)."""
+    import pytest
+
+    if not _llvmpipe(gl_ctx):
+        pytest.skip("the levels are llvmpipe's rounding")
+    img = np.random.default_rng(3).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    tex = gl_ctx.texture((64, 64), 3, img.tobytes())
+    tex.build_mipmaps()
+    levels = preview.mip_levels(img)
+    assert [lv.shape[0] for lv in levels] == [32, 16, 8, 4, 2, 1]
+    for k, level in enumerate(levels, 1):
+        size = 64 >> k
+        gl = np.frombuffer(tex.read(level=k), np.uint8).reshape(size, size, 3)
+        np.testing.assert_array_equal(level, gl)
+    tex.release()
+    assert preview.mip_levels(img[:48, :48]) is None  # not a power of two: GL mip-maps it
+
+
+def test_preview_with_levels_made_beforehand_is_the_same_picture(gl_ctx):
+    import pytest
+
+    if not _llvmpipe(gl_ctx):
+        pytest.skip("the levels are llvmpipe's rounding")
+    m = plate_mesh(4)
+    rng = np.random.default_rng(4)
+    color = rng.integers(0, 256, (256, 256, 3), dtype=np.uint8)
+    normal = rng.integers(100, 156, (256, 256, 3), dtype=np.uint8)
+    normal[..., 2] = 255
+    tangents = np.tile([1.0, 0.0, 0.0, 1.0], (len(m.vertices), 1))
+    args = (m.vertices, m.faces, m.uv, m.normals, color)
+    kw = dict(size=128, view_dir=(0.3, 0.2, 1.0), normal_map=normal, tangents=tangents,
+              ctx=gl_ctx)  # fmt: skip
+    by_gl = render_preview(*args, **kw)
+    levels = (preview.mip_levels(color), preview.mip_levels(normal))
+    np.testing.assert_array_equal(render_preview(*args, levels=levels, **kw), by_gl)

@@ -54,6 +54,7 @@ def render_preview(
     normal_map: np.ndarray | None = None,
     tangents: np.ndarray | None = None,
     ctx=None,
+    levels: tuple | None = None,
 ) -> np.ndarray:
     """Render the mesh textured with ``color`` from a three-quarter view.
 
@@ -83,6 +84,9 @@ def render_preview(
     tangents : (V, 4) float, optional
         MikkTSpace tangents (xyz, w = bitangent sign); needed with ``normal_map``.
     ctx : moderngl.Context, optional
+    levels : (list, list or None), optional
+        ``color``'s and ``normal_map``'s (uint8) mip levels below their own
+        (:func:`mip_levels`), made beforehand on another thread; None: GL makes them.
 
     Returns
     -------
@@ -112,7 +116,7 @@ def render_preview(
     with GLScope(ctx) as gl:
         pixels = _draw(
             gl, (vertices, faces, uv, normals, tangents), color, normal_map, size, mvp, key, fill,
-            cull,
+            cull, levels,
         )
     return np.ascontiguousarray(np.flipud(pixels))
 
@@ -147,21 +151,68 @@ def hidden_side(vertices: np.ndarray, faces: np.ndarray, eye: np.ndarray,
     return "back" if volume > 0 else "front"
 
 
-def _texture(gl: GLScope, image: np.ndarray, unit: int, dtype: str = "f1"):
-    """Upload an (H, W, 3) image, bottom row first (GL's first row is v = 0), mip-mapped."""
+def mip_levels(image: np.ndarray) -> list[np.ndarray] | None:
+    """The mip levels below an (N, N, 3) uint8 image, N a power of two, down to 1 x 1: what
+    llvmpipe's ``glGenerateMipmap`` makes, byte for byte (each level's 2 x 2 blocks averaged
+    by pairs, rounding halves up: ``((a + b + 1) >> 1 + (c + d + 1) >> 1 + 1) >> 1``); None
+    for other shapes, which GL mip-maps itself.
+
+    Why: llvmpipe makes the levels with a blit whose shader it compiles on the main thread at
+    the preview's first use (py-spy of the README run: ``build_mipmaps`` was the largest item
+    of the write stage's main thread); these levels are made on an encoder thread instead.
+    """
+    n = image.shape[0]
+    if image.dtype != np.uint8 or image.shape[1:] != (n, 3) or n < 2 or n & (n - 1):
+        return None
+    from crackbake.exchange.halving import mip_half
+
+    out, a = [], image
+    while a.shape[0] > 1:
+        a = mip_half(a)
+        out.append(a)
+    return out
+
+
+def _texture(gl: GLScope, image: np.ndarray, unit: int, dtype: str = "f1", levels=None):
+    """Upload an (H, W, 3) image, bottom row first (GL's first row is v = 0), mip-mapped:
+    ``levels`` (:func:`mip_levels`, row 0 the top) when given, else by GL."""
     import moderngl
 
     img = np.ascontiguousarray(np.flipud(image[..., :3]))
     tex = gl.keep(gl.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype=dtype))
-    tex.build_mipmaps()
+    if levels is None or not _upload_levels(gl.ctx, tex, levels, unit):
+        tex.build_mipmaps()
     tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
     tex.anisotropy = 8.0
     tex.use(unit)
     return tex
 
 
+def _upload_levels(ctx, tex, levels: list[np.ndarray], unit: int) -> bool:
+    """Define ``tex``'s mip levels 1.. from ``levels`` (row 0 the top) with
+    ``glTexImage2D`` (moderngl allocates level 0 only); False when GL's entry points are not
+    reachable (another moderngl backend), and nothing was changed."""
+    import ctypes
+
+    load = getattr(getattr(ctx.mglo, "_context", None), "load", None)
+    address = load("glTexImage2D") if load is not None else 0
+    store = load("glPixelStorei") if load is not None else 0
+    if not address or not store:
+        return False
+    uint, sint, ptr = ctypes.c_uint, ctypes.c_int, ctypes.c_void_p
+    image_2d = ctypes.CFUNCTYPE(None, uint, sint, sint, sint, sint, sint, uint, uint, ptr)(address)
+    pixel_store = ctypes.CFUNCTYPE(None, uint, sint)(store)
+    tex.use(unit)  # bound to the active unit while its levels are defined
+    pixel_store(0x0CF5, 1)  # GL_UNPACK_ALIGNMENT: rows of 3-byte texels
+    for k, level in enumerate(levels, 1):
+        img = np.ascontiguousarray(np.flipud(level))
+        image_2d(0x0DE1, k, 0x8051, img.shape[1], img.shape[0], 0, 0x1907, 0x1401,
+                 img.ctypes.data)  # GL_TEXTURE_2D, GL_RGB8, GL_RGB, GL_UNSIGNED_BYTE  # fmt: skip
+    return True
+
+
 def _draw(gl: GLScope, mesh, color, normal_map, size, mvp, key, fill,
-          cull: str | None = None) -> np.ndarray:
+          cull: str | None = None, levels: tuple | None = None) -> np.ndarray:
     """Draw the textured mesh with 4x MSAA; the (size, size, 3) uint8 picture, row 0 = bottom.
     ``cull``: the side of the faces not drawn (:func:`hidden_side`), None to draw both."""
     import moderngl
@@ -191,14 +242,15 @@ def _draw(gl: GLScope, mesh, color, normal_map, size, mvp, key, fill,
             index_buffer=ibo,
         )
     )
-    _texture(gl, np.asarray(color, np.uint8), 0)
+    color_levels, normal_levels = levels if levels is not None else (None, None)
+    _texture(gl, np.asarray(color, np.uint8), 0, levels=color_levels)
     prog["u_color"].value = 0
     prog["u_use_normal_map"].value = int(use_map)
     if use_map:
         nm = np.asarray(normal_map)
         if nm.dtype != np.uint8:
             nm = np.clip(nm * 127.5 + 128.0, 0, 255).astype(np.uint8)
-        _texture(gl, nm, 1)
+        _texture(gl, nm, 1, levels=normal_levels if nm is normal_map else None)
         prog["u_normal_map"].value = 1
     prog["u_mvp"].write(mvp.T.tobytes())  # GLSL matrices are column-major
     prog["u_key"].value = tuple(key.astype(np.float32))

@@ -9,8 +9,11 @@ bytes the glTF/Godot profile writes as files.
 from __future__ import annotations
 
 import os
+import sys
+import threading
 import warnings
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +71,34 @@ WRITE_THREADS = max(3, min(6, os.cpu_count() or 1))
 #: the texture jobs leave when they finish instead of ending alone on one (warm write at 4096²
 #: on 2 cores: best 1.6 s against 2.0 s, the same CPU seconds, with the bindings' encoder).
 EXR_THREADS = max(2, min(4, os.cpu_count() or 1))
+#: Nice levels the encoder threads take below the thread that starts them (Linux, where each
+#: thread has its own; the EXR's chunk threads inherit it).  The pool starts before the stress
+#: bake, whose GL draws run on the main thread (about one core: 0.40-0.57 of its 0.49-0.68
+#: CPU s): at equal priority five encoder threads took most of both cores from it and its wall
+#: tripled; below it they take the core it leaves, and after it they leave the preview's draw
+#: (the main thread again) its core.
+ENCODER_NICE = 5
+
+
+def _below_caller(nice: int | None) -> None:
+    """Pool initializer: this thread ``ENCODER_NICE`` levels below ``nice`` (Linux only)."""
+    if nice is None:
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice + ENCODER_NICE)
+    except OSError:  # a sandbox that refuses it: equal priority, as before
+        pass
+
+
+def _caller_nice() -> int | None:
+    """The calling thread's nice value on Linux (None elsewhere: there PRIO_PROCESS takes a
+    process id, not a thread's)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    except OSError:
+        return None
 
 
 @dataclass(eq=False)
@@ -170,68 +201,135 @@ def write_outputs(
         The run's effective parameters (the manifest's ``params``), summarised in the EXR
         headers' ``comments`` (:func:`~crackbake.exchange.layers.run_attributes`).
     """
-    with exr_threads(EXR_THREADS if {"exr", "stress"} & set(params.formats) else None):
-        _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
+    with Writer(stage, stem, params, mesh, uvmesh, network, maps, ctx, effective) as writer:
+        writer.finish(stress)
 
 
-def _write_all(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective) -> None:
-    if getattr(uvmesh, "udim", None) is not None:
-        _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, effective)
-        return
-    formats = params.formats
-    texture = None
-    exr = {"compression": params.exr_compression, "run": run_attributes(__version__, effective)}
-    if mesh.source and {"png", "glb", "preview", "usd", "usdz"} & set(formats):
-        texture = base_color_texture(mesh.source, maps.res, params.allow_outside_textures)
-    with ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write") as pool:
-        jobs: list[Future] = []
+class Writer:
+    """The write stage begun as soon as the crack maps exist: a context manager.
+
+    Entering it starts encoding every file that only needs the crack maps (the crack EXR, the
+    target's PNGs, the GLB's textures, the preview's pages, ``cracks.json`` and ``cracks.obj``)
+    on the encoder pool, so the caller's next stage (the stress bake: the main thread and GL,
+    about one core) runs beside them; :meth:`finish` then adds the stress EXR, draws the preview
+    with ``ctx`` on the calling thread, assembles the GLB and USD and waits for every file.
+    Leaving it, normally or by an exception (the stress bake's, a failed encoder's), waits for
+    every job, so nothing is still writing into the stage when the caller commits or discards
+    it.  Arguments as :func:`write_outputs`'s.
+    """
+
+    def __init__(self, stage: OutputStage, stem: str, params: RunParams, mesh: Mesh,
+                 uvmesh: UVMesh, network: CrackNetwork, maps: CrackMaps, ctx=None,
+                 effective: dict | None = None):  # fmt: skip
+        self.stage, self.stem, self.params, self.ctx = stage, stem, params, ctx
+        self.mesh, self.uvmesh, self.network, self.maps = mesh, uvmesh, network, maps
+        self.effective = effective
+        self.udim = getattr(uvmesh, "udim", None) is not None
+        self.jobs: list[Future] = []
+        self._exit = ExitStack()
+        self.pool: ThreadPoolExecutor | None = None
+
+    def __enter__(self) -> Writer:
+        if self.udim:  # the tiles' set is written whole by finish()
+            return self
+        formats = set(self.params.formats)
+        self._exit.enter_context(exr_threads(EXR_THREADS if {"exr", "stress"} & formats
+                                             else None))  # fmt: skip
+        try:
+            self.pool = self._exit.enter_context(
+                ThreadPoolExecutor(WRITE_THREADS, thread_name_prefix="crackbake-write",
+                                   initializer=_below_caller, initargs=(_caller_nice(),))
+            )  # fmt: skip
+            self._start()
+        except BaseException:
+            self._join()
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._join()
+
+    def _join(self) -> None:
+        try:
+            for job in self.jobs:  # every job ends before the stage can be committed or discarded
+                job.exception()
+        finally:
+            self._exit.close()
+
+    def _start(self) -> None:
+        stage, stem, params, maps = self.stage, self.stem, self.params, self.maps
+        formats, pool, jobs = params.formats, self.pool, self.jobs
+        self.exr = {"compression": params.exr_compression,
+                    "run": run_attributes(__version__, self.effective)}  # fmt: skip
+        texture = None
+        if self.mesh.source and {"png", "glb", "preview", "usd", "usdz"} & set(formats):
+            texture = base_color_texture(self.mesh.source, maps.res, params.allow_outside_textures)
         if "exr" in formats:
             # The longest job, so it starts first.  Its planes (the normal's float16 split) are
             # converted in the job: numpy casts release the GIL, and the texture packs are
             # nogil kernels, so the conversion no longer waits behind them.
             path = stage.path(f"{stem}_cracks.exr")
-            jobs.append(pool.submit(_write_exr, path, maps, params.float32, **exr))
-        if stress is not None and "stress" in formats:
-            jobs.append(
-                pool.submit(_write_stress_exr, stage.path(f"{stem}_stress.exr"), stress, **exr)
-            )
+            jobs.append(pool.submit(_write_exr, path, maps, params.float32, **self.exr))
+        self.pages = None
+        if "preview" in formats:  # the picture is drawn by finish(); its pages are ready by then
+            with_normal = getattr(self.uvmesh, "tangents", None) is not None
+            self.pages = pool.submit(_preview_levels, maps, texture, with_normal)
+            jobs.append(self.pages)
         enc = _Encoder(pool, maps, texture)
         if "png" in formats:
             normal_y = normal_convention(params.target, params.normal_y)
             for f in TARGETS[params.target].files:
                 ny = normal_y if f.content == "normal" else "gl"
                 enc.want((f.content, f.bits, ny, maps.res), stage.path(f.name.format(stem=stem)))
-        glb_keys = {}
+        self.glb_keys = {}
         if "glb" in formats:
             size = min(maps.res, GLB_TEXTURE_MAX)
-            glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal", "orm")}
-        usd_textures = None
+            self.glb_keys = {s: enc.want((s, 8, "gl", size)) for s in ("base_color", "normal",
+                                                                        "orm")}  # fmt: skip
+        self.usd_textures = None
         if {"usd", "usdz"} & set(formats):
-            usd_textures = _usd_textures(enc, stage, stem, params, maps)
-        encoded = enc.start(set(glb_keys.values()))
-        jobs.extend(encoded.values())
+            self.usd_textures = _usd_textures(enc, stage, stem, params, maps)
+        self.encoded = enc.start(set(self.glb_keys.values()))
+        jobs.extend(self.encoded.values())
         jobs.extend(submit_frames(pool, stage.path, stem, maps, params.frames))
-        try:
-            if "preview" in formats:
-                _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx, params.up)
-            write_sidecar(network, stage.path("cracks.json"))
-            write_obj(network, stage.path("cracks.obj"))
-            if glb_keys:
-                _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, encoded, glb_keys)
-            if usd_textures is not None:
-                usd_args = (stem, uvmesh, usd_textures, up_vector(params.up, mesh))
-                doc = f"crackbake {__version__}: {stem}"
-                if "usd" in formats:
-                    write_usd(stage.path(f"{stem}.usda"), *usd_args, doc=doc)
-                if "usdz" in formats:
-                    for future in encoded.values():  # the package copies the textures in
-                        future.result()
-                    write_usdz(stage.path(f"{stem}.usdz"), *usd_args, doc=doc)
-        finally:
-            for job in jobs:  # every job ends before the stage can be committed or discarded
-                job.exception()
-        for job in jobs:
+        jobs.append(pool.submit(_write_network, self.network, stage))
+
+    def finish(self, stress: StressMaps | None = None) -> None:
+        """Write the stress EXR, the preview, the GLB and the USD, and wait for every file;
+        raises the first failed job's error (in submission order)."""
+        stage, stem, params = self.stage, self.stem, self.params
+        mesh, uvmesh, maps, formats = self.mesh, self.uvmesh, self.maps, params.formats
+        if self.udim:
+            with exr_threads(EXR_THREADS if {"exr", "stress"} & set(formats) else None):
+                _write_udim(stage, stem, params, mesh, uvmesh, self.network, maps, self.ctx,
+                            stress, self.effective)  # fmt: skip
+            return
+        if stress is not None and "stress" in formats:
+            path = stage.path(f"{stem}_stress.exr")
+            self.jobs.append(self.pool.submit(_write_stress_exr, path, stress, **self.exr))
+        if self.pages is not None:
+            colour, normal, levels = self.pages.result()
+            _draw_preview(stage, mesh, uvmesh, self.network, colour, normal, self.ctx,
+                          params.up, levels)  # fmt: skip
+        if self.glb_keys:
+            _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, self.encoded,
+                       self.glb_keys)  # fmt: skip
+        if self.usd_textures is not None:
+            usd_args = (stem, uvmesh, self.usd_textures, up_vector(params.up, mesh))
+            doc = f"crackbake {__version__}: {stem}"
+            if "usd" in formats:
+                write_usd(stage.path(f"{stem}.usda"), *usd_args, doc=doc)
+            if "usdz" in formats:
+                for future in self.encoded.values():  # the package copies the textures in
+                    future.result()
+                write_usdz(stage.path(f"{stem}.usdz"), *usd_args, doc=doc)
+        for job in self.jobs:
             job.result()  # the first failure, in submission order
+
+
+def _write_network(network: CrackNetwork, stage) -> None:
+    write_sidecar(network, stage.path("cracks.json"))
+    write_obj(network, stage.path("cracks.obj"))
 
 
 def _write_exr(path, maps: CrackMaps, float32: bool, compression: str, run: dict) -> None:
@@ -359,8 +457,23 @@ def _preview_pages(maps: CrackMaps, texture, with_normal: bool, size: int = PREV
 
 
 def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx, up=None) -> None:
+    pages = _preview_pages(maps, texture, getattr(uvmesh, "tangents", None) is not None)
+    _draw_preview(stage, mesh, uvmesh, network, *pages, ctx, up)
+
+
+def _preview_levels(maps: CrackMaps, texture, with_normal: bool):
+    """:func:`_preview_pages` and their mip levels (:func:`~crackbake.bake.preview.mip_levels`):
+    (colour, normal, (colour's levels, normal's levels))."""
+    from crackbake.bake.preview import mip_levels
+
+    colour, normal = _preview_pages(maps, texture, with_normal)
+    return colour, normal, (mip_levels(colour), None if normal is None else mip_levels(normal))
+
+
+def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None,
+                  levels=None) -> None:  # fmt: skip
+    """Render ``preview.png`` from its pages (:func:`_preview_pages`) with ``ctx``."""
     tangents = getattr(uvmesh, "tangents", None)
-    colour, normal = _preview_pages(maps, texture, tangents is not None)
     view_dir, up, target, distance = preview_camera(mesh, network, up)
     picture = render_preview(
         uvmesh.vertices,
@@ -375,6 +488,7 @@ def _write_preview(stage, mesh, uvmesh, network, maps, texture, ctx, up=None) ->
         normal_map=normal,
         tangents=tangents,
         ctx=ctx,
+        levels=levels,
     )
     write_bytes(stage.path("preview.png"), png_bytes(picture, level=6, srgb=True))
 

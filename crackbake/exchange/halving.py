@@ -138,6 +138,26 @@ def normal_half(normal: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True, nogil=True)
+def _mip_half(a, out):  # pragma: no cover - compiled
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            for k in range(a.shape[2]):
+                top = (np.uint16(a[2 * i, 2 * j, k]) + np.uint16(a[2 * i, 2 * j + 1, k]) + 1) >> 1
+                low = (np.uint16(a[2 * i + 1, 2 * j, k]) + np.uint16(a[2 * i + 1, 2 * j + 1, k])
+                       + 1) >> 1  # fmt: skip
+                out[i, j, k] = np.uint8((top + low + 1) >> 1)
+
+
+def mip_half(image: np.ndarray) -> np.ndarray:
+    """The next mip level of an (H, W, C) uint8 image, H and W even: each 2 x 2 block's rows
+    averaged by pairs, halves rounded up, then the two rows' (what llvmpipe's
+    ``glGenerateMipmap`` writes; :func:`crackbake.bake.preview.mip_levels`), GIL released."""
+    out = np.empty((image.shape[0] // 2, image.shape[1] // 2, image.shape[2]), np.uint8)
+    _mip_half(np.ascontiguousarray(image), out)
+    return out
+
+
 def warm() -> None:
     """Compile (or load from numba's cache) the kernels a run at more than 2048² uses that
     :mod:`crackbake.precompile`'s small runs never reach: these halving kernels and the
@@ -153,3 +173,4 @@ def warm() -> None:
         base_color_half(mask, None, table, tex if textured else None)
     base_color8(mask, mask, np.zeros(65536, np.uint8), base_color_table(True), tex)
     normal_half(np.moveaxis(np.zeros((3, 4, 4), np.float32), 0, -1))
+    mip_half(np.zeros((4, 4, 3), np.uint8))
