@@ -47,11 +47,12 @@ CASES: dict[str, list[str]] = {
 #: about 6 s), ``collapse`` (the proxy's decimation above 200k faces, about 15 s) and
 #: ``preview`` (the up axis of a mesh with volume, about 2 s), ``stress`` (the proxy's stress
 #: bake), ``grid`` (the crack bake's face pass above 100k faces) and ``objload`` (the OBJ
-#: reader's kernels, for files of 16 MiB or more), a few seconds each; so the lanes take about
-#: 100 s and 110 s.
+#: reader's kernels, for files of 16 MiB or more) and ``stats`` (the statistics of every EXR
+#: plane type: the runs write half and float planes only), a few seconds each; so the lanes
+#: take about 100 s and 110 s.
 LANES: tuple[tuple[str, ...], ...] = (("iben", "shrinkage", "halving", "preview", "stress",
                                        "objload"),
-                                      ("thesis", "decal", "tile", "collapse", "grid"))
+                                      ("thesis", "decal", "tile", "collapse", "grid", "stats"))
 
 #: The warm-ups: kernels no small run reaches, compiled by calling their module's ``warm``.
 WARM_UPS = {"halving": "crackbake.exchange.halving",
@@ -59,7 +60,8 @@ WARM_UPS = {"halving": "crackbake.exchange.halving",
             "preview": "crackbake.bake.preview",
             "stress": "crackbake.bake.stress",
             "grid": "crackbake.bake.grid",
-            "objload": "crackbake.io.obj_kernels"}
+            "objload": "crackbake.io.obj_kernels",
+            "stats": "crackbake.exchange.stats_kernels"}
 
 
 def textured_plate_obj(path: Path) -> Path:

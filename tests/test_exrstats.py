@@ -22,6 +22,7 @@ import pytest
 from crackbake.exchange.exr import read_exr, write_exr
 from crackbake.exchange.exrstats import (
     STATS_ATTRIBUTE,
+    STATS_VERSION,
     parse_header,
     plane_stats,
     recorded_stats,
@@ -230,8 +231,9 @@ def test_threads_give_the_same_record(tmp_path):
 def test_a_record_of_another_version_is_ignored(tmp_path):
     write_exr(tmp_path / "v.exr", {"a.V": np.ones((H, W), np.float32)})
     blob = (tmp_path / "v.exr").read_bytes()
-    assert b'"version":1' in blob
-    (tmp_path / "v2.exr").write_bytes(blob.replace(b'"version":1', b'"version":9', 1))
+    mark = f'"version":{STATS_VERSION}'.encode()
+    assert mark in blob
+    (tmp_path / "v2.exr").write_bytes(blob.replace(mark, b'"version":9', 1))
     assert recorded_stats(tmp_path / "v.exr") is not None
     assert recorded_stats(tmp_path / "v2.exr") is None
     assert recorded_stats(tmp_path / "missing.exr") is None

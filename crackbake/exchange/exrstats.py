@@ -14,7 +14,9 @@ under the same channel list are the same pixels, and the record is the statistic
 would take of them.  Any other file (re-saved by another tool, edited, truncated, written by
 an older crackbake, or with another :data:`STATS_VERSION`) gives None and is read in full.
 
-Imports numpy alone (no numba, no OpenEXR): ``crackbake inspect`` loads it at start-up.
+Imports numpy alone (no numba, no OpenEXR): ``crackbake inspect`` loads it at start-up;
+:func:`plane_stats` imports its numba kernels (:mod:`crackbake.exchange.stats_kernels`) when
+first called, by the writer or by ``inspect`` reading the pixels of a file without a record.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import numpy as np
 #: The header attribute holding the record.
 STATS_ATTRIBUTE = "crackbake:stats"
 #: Bumped whenever :func:`plane_stats` changes what it gives: older records are then ignored.
-STATS_VERSION = 1
+STATS_VERSION = 2
 #: The attributes besides the chunks that decide the pixels a reader gets.
 PIXEL_ATTRIBUTES = ("channels", "compression", "dataWindow", "lineOrder")
 #: Bytes read to find the header (its attributes, then a null byte): crackbake's are a few KB.
@@ -42,87 +44,65 @@ _MAGIC = b"\x76\x2f\x31\x01"
 #: Version flags of layouts crackbake does not write: tiled, deep, multi-part.
 _OTHER_LAYOUTS = 0x200 | 0x800 | 0x1000
 _TYPES = {np.dtype(np.float16): "half", np.dtype(np.float32): "float", np.dtype(np.uint32): "uint"}
-#: The bit patterns of +inf and -inf: a pattern at or above one of them (of its sign) is an
-#: inf or a NaN.
-_HALF_INF, _HALF_NEG_INF = 0x7C00, 0xFC00
-
-
-def _half_range(arr: np.ndarray) -> tuple[float, float, bool] | None:
-    """min and max of a float16 plane and whether it holds a negative (-0 included), or
-    None when it holds a NaN or an inf.
-
-    Works on the bit patterns, as integer reductions of two views of the plane, no copy:
-    the non-negative halves are the non-negative int16 patterns, in float order; the negative
-    ones the uint16 patterns from 0x8000 (-0) up, in order of magnitude.  So the max is the
-    largest int16 pattern (the smallest uint16 one when every texel is negative), the min the
-    largest uint16 pattern (the smallest int16 one when none is), -0 just below +0; the
-    patterns from +inf and -inf up are the infinities and NaNs.  (numpy's half reductions
-    run an element at a time, about 85 ms a 4096² plane; these four take a few.)
-    """
-    signed, unsigned = arr.view(np.int16), arr.view(np.uint16)
-    top, utop = int(signed.max()), int(unsigned.max())
-    if top >= _HALF_INF or utop >= _HALF_NEG_INF:
-        return None
-    negative = utop >= 0x8000
-    hi = top if top >= 0 else int(unsigned.min())
-    lo = utop if negative else int(signed.min())
-    both = np.array([lo, hi], np.uint16).view(np.float16)
-    return float(both[0]), float(both[1]), negative
-
-
-def _half_nonzero(arr: np.ndarray, negative: bool) -> int:
-    """Texels of a float16 plane other than +0 and -0 (-0 looked for only where the plane
-    holds a negative)."""
-    signed = arr.view(np.int16)
-    count = np.count_nonzero(signed)
-    return count - int(np.count_nonzero(signed == -0x8000)) if negative else count
 
 
 def plane_stats(arr: np.ndarray) -> dict:
     """The statistics of one (H, W) plane that ``crackbake inspect`` shows.
 
+    One pass of a :mod:`crackbake.exchange.stats_kernels` kernel (numba, imported here: the
+    record's check never needs it), the same for the writer's record and ``inspect``'s read
+    of the pixels.  The mean is exact, then rounded once, for half and uint planes; for float
+    planes a float64 sum in a fixed order (each column's from the top, then the columns from
+    the left): the same bits on any machine and thread count.
+
     Returns
     -------
     dict
         ``type`` ("half", "float", "uint"), ``min``, ``max``, ``mean`` (floats, None when no
-        texel is finite), ``nonzero`` (share of texels other than ±0, 0..1) and ``nonfinite``
-        (count of NaN and ±inf, which the others skip).
+        texel is finite), ``nonzero`` (share of texels other than ±0, NaN and ±inf included,
+        0..1) and ``nonfinite`` (count of NaN and ±inf, which the others skip).
     """
-    # The common case, every texel finite, costs no copy of the plane: min and max (of the
-    # half bits' two integer views, or of the floats, whose NaN would show as a NaN extreme
-    # and inf as an infinite one), the mean summed in float64 as numpy casts it (the same
-    # buffered sum whatever the source type, so a half plane gives the same bits as its
-    # float32 copy would), the non-zero count of the bits without the sign (-0 is zero).  A
-    # plane with a NaN or an inf is widened and masked.
+    from crackbake.exchange import stats_kernels as k
+
+    kind = _TYPES.get(arr.dtype, str(arr.dtype))
+    plane = np.asarray(arr)
+    plane = plane if plane.ndim == 2 else plane.reshape(1, -1)
+    plane = np.ascontiguousarray(plane, plane.dtype.newbyteorder("="))
+    if plane.dtype not in _TYPES:  # no EXR holds these: widened, as float64
+        plane = plane.astype(np.float64)
     lo = hi = mean = None
-    good = None
-    if arr.size and arr.dtype == np.float16:
-        extremes = _half_range(arr)
-        if extremes is not None:
-            good, (lo, hi, negative) = arr, extremes
-            nonzero = _half_nonzero(arr, negative)
-        else:
-            nonzero = np.count_nonzero(arr.view(np.uint16) & np.uint16(0x7FFF))
+    if plane.dtype == np.float16:
+        klo, khi, nonzero, nonfinite, high, low = k.half_stats(
+            plane.view(np.uint16).ravel(), k.HALF_VALUES)
+        finite = plane.size - nonfinite
+        if finite:
+            # a key is the magnitude's pattern, complemented for a negative value
+            keys = np.array([klo, khi], np.int32)
+            both = np.where(keys < 0, ~keys | 0x8000, keys).astype(np.uint16).view(np.float16)
+            lo, hi = float(both[0]), float(both[1])
+            mean = ((high << 32) + low) / (finite << 24)
+    elif plane.dtype == np.float32:
+        klo, khi, nonzero, nonfinite, total = k.float_stats(plane, plane.view(np.int32))
+        finite = plane.size - nonfinite
+        if finite:
+            # a key is the bits, the magnitude's flipped for a negative value
+            keys = np.array([klo, khi], np.int32)
+            both = np.where(keys < 0, keys ^ 0x7FFFFFFF, keys).view(np.float32)
+            lo, hi, mean = float(both[0]), float(both[1]), float(total) / finite
+    elif plane.dtype == np.uint32:
+        klo, khi, nonzero, high, low = k.uint_stats(plane.ravel())
+        nonfinite = 0
+        if plane.size:
+            lo, hi, mean = float(klo), float(khi), ((high << 32) + low) / plane.size
     else:
-        if arr.size and arr.dtype.kind == "f":
-            lo, hi = float(arr.min()), float(arr.max())
-            if np.isfinite(lo) and np.isfinite(hi):
-                good = arr
-        elif arr.size:
-            good, lo, hi = arr, float(arr.min()), float(arr.max())
-        nonzero = np.count_nonzero(arr)
-    if good is None:  # NaN or inf present (or an empty plane): skip them
-        wide = arr.astype(np.float32) if arr.dtype == np.float16 else arr
-        good = wide[np.isfinite(wide)] if wide.dtype.kind == "f" else wide
-        lo = hi = None
-        if good.size:
-            lo, hi = float(good.min()), float(good.max())
-    if good.size:
-        mean = float(good.mean(dtype=np.float64))
+        flo, fhi, nonzero, nonfinite, total = k.wide_stats(plane)
+        finite = plane.size - nonfinite
+        if finite:
+            lo, hi, mean = float(flo), float(fhi), float(total) / finite
     return {
-        "type": _TYPES.get(arr.dtype, str(arr.dtype)), "min": lo, "max": hi, "mean": mean,
-        "nonzero": float(nonzero) / arr.size if arr.size else 0.0,
-        "nonfinite": int(arr.size - good.size),
+        "type": kind, "min": lo, "max": hi, "mean": mean,
+        "nonzero": float(nonzero) / plane.size if plane.size else 0.0,
+        "nonfinite": int(nonfinite),
     }  # fmt: skip
 
 

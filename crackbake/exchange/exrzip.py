@@ -268,7 +268,7 @@ def write_scanline(path: str | os.PathLike, planes: dict[str, np.ndarray], attri
     else:
         with ThreadPoolExecutor(groups - 1, thread_name_prefix="crackbake-exr") as pool:
             later = [pool.submit(_chunks, rows, p, *args) for p in parts[1:]]
-            # Each plane's statistics (numpy's reductions release the GIL) queue behind the
+            # Each plane's statistics (a numba kernel without the GIL) queue behind the
             # chunks; the calling thread, done with its own chunks, takes those no worker
             # has started yet, from the last.
             jobs = [pool.submit(plane_stats, a) for a in arrays] if stats else []

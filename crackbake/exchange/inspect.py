@@ -69,8 +69,9 @@ def _stats(name: str, arr: np.ndarray, meta: dict) -> ChannelStats:
 
 
 def _all_stats(channels: dict[str, np.ndarray], table: dict) -> list[ChannelStats]:
-    """One row per channel, sorted by name; the planes on a few threads (numpy's reductions
-    release the GIL: each plane's statistics are its own, the rows the same as one by one).
+    """One row per channel, sorted by name; the planes on a few threads (the statistics'
+    numba kernels release the GIL: each plane's statistics are its own, the rows the same as
+    one by one).
     Plain threads: ``concurrent.futures`` would import ``logging`` too (about 15 ms of a
     command whose floor is 0.5 s)."""
     import threading
