@@ -72,8 +72,10 @@ def plane_stats(arr: np.ndarray) -> dict:
         plane = plane.astype(np.float64)
     lo = hi = mean = None
     if plane.dtype == np.float16:
-        klo, khi, nonzero, nonfinite, high, low = k.half_stats(
-            plane.view(np.uint16).ravel(), k.HALF_VALUES)
+        bits = plane.view(np.uint16).ravel()
+        klo, khi, nonzero, nonfinite, high, low = k.half_stats(bits, True)
+        if khi >= k.HALF_INF_KEY or klo <= ~k.HALF_INF_KEY:  # an inf or a NaN: skip them
+            klo, khi, nonzero, nonfinite, high, low = k.half_stats(bits, False)
         finite = plane.size - nonfinite
         if finite:
             # a key is the magnitude's pattern, complemented for a negative value
@@ -82,7 +84,10 @@ def plane_stats(arr: np.ndarray) -> dict:
             lo, hi = float(both[0]), float(both[1])
             mean = ((high << 32) + low) / (finite << 24)
     elif plane.dtype == np.float32:
-        klo, khi, nonzero, nonfinite, total = k.float_stats(plane, plane.view(np.int32))
+        bits = plane.view(np.int32)
+        klo, khi, nonzero, nonfinite, total = k.float_stats(plane, bits, True)
+        if khi >= k.FLOAT_INF_KEY or klo <= ~k.FLOAT_INF_KEY:  # an inf or a NaN: skip them
+            klo, khi, nonzero, nonfinite, total = k.float_stats(plane, bits, False)
         finite = plane.size - nonfinite
         if finite:
             # a key is the bits, the magnitude's flipped for a negative value

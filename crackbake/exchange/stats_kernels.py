@@ -11,7 +11,9 @@ once, in runs of :data:`SEGMENT` texels (a few KB, so a run's second loop reads 
   order (the magnitude for a positive pattern, its complement for a negative one, so -0 sits
   just below +0).  The sum is exact: every half is a multiple of 2^-24 below 2^16, so a float64
   sum of a run of 8192 (below 2^29) is exact in any order (the loop may run in vector lanes),
-  and each run's sum times 2^24 is an integer, added exactly.
+  and each run's sum times 2^24 is an integer, added exactly.  The caller first runs the
+  kernel without the finite test (``finite_only``): a plane with an inf or a NaN shows it in
+  its extreme keys and is run again with the test.
 - float32: the range as integer keys of the bit patterns (sign-magnitude flipped into two's
   complement order, -0 below +0), the finite test on the bits.  The sum is float64 in a fixed
   order: each column's running sum from the top row down (an element-wise add, so the loop
@@ -41,43 +43,44 @@ light_cache_loads()
 #: Texels per run: a half run's float64 sum stays exact (8192 * 65504 < 2^29).
 SEGMENT = 8192
 _LOW = (1 << 32) - 1
+#: The key (magnitude pattern) of a half +inf, and of a float32 +inf: at or above it (or at
+#: or below its complement) an inf or a NaN.
+HALF_INF_KEY = 0x7C00
+FLOAT_INF_KEY = 0x7F800000
 
 
-def _half_values() -> np.ndarray:
-    """(65536,) float64: each half pattern's value, 0 for the infinities and NaNs."""
-    table = np.arange(1 << 16, dtype=np.uint32).astype(np.uint16).view(np.float16)
-    table = table.astype(np.float64)
-    table[~np.isfinite(table)] = 0.0
-    return table
-
-
-#: The half kernel's value table (512 KB; mostly a few cache lines of it are read).
-HALF_VALUES = _half_values()
-
-
-# reassoc: the runs' sums are exact (see the module), so their order cannot change them.
+# The sums run in vector lanes (reassoc): each run's float64 sum is exact (see the module),
+# so its order cannot change it.
 @njit(cache=True, nogil=True, fastmath={"reassoc"})
-def half_stats(bits: np.ndarray, values: np.ndarray):
+def half_stats(bits: np.ndarray, finite_only: bool):
     """One pass over a float16 plane's bit patterns.
 
     Parameters
     ----------
     bits : (N,) uint16 ndarray
         The plane's texels viewed as uint16.
-    values : (65536,) float64 ndarray
-        :data:`HALF_VALUES`.
+    finite_only : bool
+        Take every texel as finite (no test per texel; the non-finite count is then 0): the
+        caller looks at the keys and, when one is an inf's or a NaN's, runs it again with
+        False.
 
     Returns
     -------
     lo, hi : int
-        The smallest and largest finite pattern as order keys (see the module; lo > hi when
-        no texel is finite).
+        The smallest and largest (finite) pattern as order keys (see the module; lo > hi
+        when no texel is finite).  With ``finite_only``, an inf or a NaN gives ``hi >=
+        HALF_INF_KEY`` or ``lo <= ~HALF_INF_KEY``.
     nonzero, nonfinite : int
         Texels other than ±0 (infs and NaNs included), texels that are an inf or a NaN.
     sum_high, sum_low : int
         The finite texels' sum times 2^24 is ``sum_high * 2^32 + sum_low``.
     """
     n = bits.size
+    # each run's texels as float32 bit patterns: the half's sign, exponent and fraction moved
+    # to float32's places, which is the half's value times 2^-112 (a subnormal half a
+    # subnormal float32): exact in float64, summed there
+    run = np.empty(SEGMENT, np.int32)
+    scaled = run.view(np.float32)
     lo = np.int32(0x7FFF)
     hi = np.int32(-0x8000)
     nonzero = np.int64(0)
@@ -86,26 +89,38 @@ def half_stats(bits: np.ndarray, values: np.ndarray):
     low = np.int64(0)
     for start in range(0, n, SEGMENT):
         stop = min(n, start + SEGMENT)
-        for j in range(start, stop):
-            u = np.int32(bits[j])
-            m = np.int32(u & np.int32(0x7FFF))
-            fin = m < np.int32(0x7C00)
-            nonzero += np.int64(m != 0)
-            nonfinite += np.int64(m >= np.int32(0x7C00))
-            key = np.int32(~m) if u >= np.int32(0x8000) else m
-            lo = min(lo, key if fin else np.int32(0x7FFF))
-            hi = max(hi, key if fin else np.int32(-0x8000))
+        if finite_only:
+            for j in range(start, stop):
+                u = np.int32(bits[j])
+                m = np.int32(u & np.int32(0x7FFF))
+                nonzero += np.int64(m != 0)
+                key = np.int32(~m) if u >= np.int32(0x8000) else m
+                lo = min(lo, key)
+                hi = max(hi, key)
+                run[j - start] = ((u & np.int32(0x8000)) << np.int32(16)) | (m << np.int32(13))
+        else:
+            for j in range(start, stop):
+                u = np.int32(bits[j])
+                m = np.int32(u & np.int32(0x7FFF))
+                fin = m < np.int32(HALF_INF_KEY)
+                nonzero += np.int64(m != 0)
+                nonfinite += np.int64(m >= np.int32(HALF_INF_KEY))
+                key = np.int32(~m) if u >= np.int32(0x8000) else m
+                lo = min(lo, key if fin else np.int32(0x7FFF))
+                hi = max(hi, key if fin else np.int32(-0x8000))
+                run[j - start] = np.int32(((u & np.int32(0x8000)) << np.int32(16))
+                                          | (m << np.int32(13))) if fin else np.int32(0)
         acc = 0.0
-        for j in range(start, stop):
-            acc += values[bits[j]]
-        run = np.int64(acc * 16777216.0)  # exact: an integer below 2^53
-        high += run >> np.int64(32)
-        low += run & np.int64(_LOW)
+        for j in range(stop - start):
+            acc += np.float64(scaled[j])
+        whole = np.int64(acc * 2.0**136)  # exact: the sum times 2^24, an integer below 2^53
+        high += whole >> np.int64(32)
+        low += whole & np.int64(_LOW)
     return lo, hi, nonzero, nonfinite, high, low
 
 
 @njit(cache=True, nogil=True)
-def float_stats(vals: np.ndarray, bits: np.ndarray):
+def float_stats(vals: np.ndarray, bits: np.ndarray, finite_only: bool):
     """One pass over a float32 plane.
 
     Parameters
@@ -113,6 +128,8 @@ def float_stats(vals: np.ndarray, bits: np.ndarray):
     vals : (H, W) float32 ndarray, C-contiguous
     bits : (H, W) int32 ndarray
         ``vals`` viewed as int32.
+    finite_only : bool
+        As :func:`half_stats`' (with :data:`FLOAT_INF_KEY`).
 
     Returns
     -------
@@ -129,13 +146,22 @@ def float_stats(vals: np.ndarray, bits: np.ndarray):
     fb = bits.ravel()
     col = np.zeros(w)
     mag = np.int32(0x7FFFFFFF)
-    inf = np.int32(0x7F800000)
+    inf = np.int32(FLOAT_INF_KEY)
     lo = np.int32(0x7FFFFFFF)
     hi = np.int32(-0x80000000)
     nonzero = np.int64(0)
     nonfinite = np.int64(0)
     for i in range(h):
         base = i * w
+        if finite_only:
+            for j in range(w):
+                b = fb[base + j]
+                nonzero += np.int64((b & mag) != 0)
+                key = np.int32(b ^ mag) if b < 0 else b
+                lo = min(lo, key)
+                hi = max(hi, key)
+                col[j] += np.float64(fv[base + j])
+            continue
         for j in range(w):
             b = fb[base + j]
             m = np.int32(b & mag)
@@ -218,8 +244,9 @@ def uint_stats(a: np.ndarray):
 def warm() -> None:
     """Compile (or load from numba's cache) the kernels for every plane type a run writes or
     ``inspect`` reads (:mod:`crackbake.precompile`)."""
-    half_stats(np.zeros(6, np.uint16), HALF_VALUES)
-    f = np.zeros((2, 3), np.float32)
-    float_stats(f, f.view(np.int32))
+    for finite_only in (True, False):
+        half_stats(np.zeros(6, np.uint16), finite_only)
+        f = np.zeros((2, 3), np.float32)
+        float_stats(f, f.view(np.int32), finite_only)
     wide_stats(np.zeros((2, 3), np.float64))
     uint_stats(np.zeros(6, np.uint32))
