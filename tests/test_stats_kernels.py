@@ -133,3 +133,25 @@ def test_other_layouts_give_the_same_figures():
     assert swapped == {k: v for k, v in want.items() if k != "type"}
     flat = a.ravel()
     assert plane_stats(flat) == plane_stats(flat.reshape(1, -1))
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32])
+@pytest.mark.parametrize("special", ["+inf", "-inf", "+nan", "-nan"])
+def test_a_single_inf_or_nan_of_either_sign_is_found_and_skipped(dtype, special):
+    """The first pass takes every texel as finite and looks for an inf or a NaN in its
+    extreme keys: one texel of each kind and sign, anywhere, must send the plane through the
+    finite test."""
+    rng = np.random.default_rng(21)
+    a = rng.uniform(-2, 3, (13, 17)).astype(dtype)
+    value = {"+inf": np.inf, "-inf": -np.inf, "+nan": np.nan, "-nan": -np.nan}[special]
+    for at in [(0, 0), (6, 9), (12, 16)]:
+        b = a.copy()
+        b[at] = value
+        if special == "-nan":  # numpy's -nan keeps its sign bit; make sure of it
+            b.view(np.uint16 if dtype == np.float16 else np.uint32)[at] |= (
+                0x8000 if dtype == np.float16 else 0x80000000)  # fmt: skip
+        got, want = plane_stats(b), _reference(b)
+        assert got["nonfinite"] == 1
+        for key in ("min", "max", "nonzero"):
+            assert got[key] == want[key], (key, got, want)
+        assert got["mean"] == pytest.approx(want["mean"], rel=1e-12)
