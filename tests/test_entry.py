@@ -116,6 +116,8 @@ def _starts(args: list[str], env: dict | None = None) -> tuple[subprocess.Comple
 
 @pytest.mark.skipif(not os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc"),
                     reason="the huge-page tunable is glibc's")
+@pytest.mark.skipif(__import__("crackbake.entry").entry.gpu_present(),
+                    reason="a machine with a GPU never restarts (test_a_gpu_machine_...)")
 def test_a_large_bake_restarts_once_on_huge_pages_and_keeps_its_status_and_output(tmp_path):
     """A bake of --res 2048 or more restarts itself once with glibc's huge-page tunable (the
     exit frees the GL driver's render targets in 2 MiB pages); its one-line error and exit
@@ -150,3 +152,19 @@ def test_the_restart_knows_the_groups_commands_and_the_default_res():
     assert _res(["mesh.obj"]) == RES_DEFAULT >= HUGE_PAGES_RES
     assert _res(["m.obj", "--res", "512", "--res=4096"]) == 4096
     assert _res(["m.obj", "--res", "big"]) == 0
+
+
+def test_a_gpu_machine_does_not_restart(tmp_path):
+    """A GPU's device node (NVIDIA's or a DRM render node) means the driver keeps its targets
+    in the GPU's memory: no huge-page restart there; llvmpipe's machines have neither."""
+    from crackbake.entry import gpu_present
+
+    assert not gpu_present(str(tmp_path))
+    (tmp_path / "dri").mkdir()
+    (tmp_path / "dri" / "card0").touch()  # a display node alone: no render node
+    assert not gpu_present(str(tmp_path))
+    (tmp_path / "dri" / "renderD128").touch()
+    assert gpu_present(str(tmp_path))
+    (tmp_path / "dri" / "renderD128").unlink()
+    (tmp_path / "nvidia0").touch()
+    assert gpu_present(str(tmp_path))
