@@ -167,7 +167,7 @@ def leave(code: object) -> None:
     profiler or a tracer (``python -m cProfile``, coverage) the exit is Python's own, so that
     they can write their results.
     """
-    if sys.getprofile() is not None or sys.gettrace() is not None:
+    if _observed():
         raise SystemExit(code)
     import atexit
     import threading
@@ -189,6 +189,19 @@ def leave(code: object) -> None:
         except (OSError, ValueError):  # a closed pipe: nothing more can be said there
             pass
     os._exit(status & 0xFF)
+
+
+def _observed() -> bool:
+    """True under a profiler, a tracer or a debugger: the old hooks (``sys.setprofile``,
+    ``sys.settrace``) or, from Python 3.12, a tool of ``sys.monitoring`` (cProfile itself uses
+    it there, and coverage.py can)."""
+    if sys.getprofile() is not None or sys.gettrace() is not None:
+        return True
+    monitoring = getattr(sys, "monitoring", None)
+    if monitoring is None:
+        return False
+    tools = (monitoring.DEBUGGER_ID, monitoring.COVERAGE_ID, monitoring.PROFILER_ID)
+    return any(monitoring.get_tool(tool) is not None for tool in tools)
 
 
 if __name__ == "__main__":
