@@ -647,3 +647,47 @@ def test_stars_on_spot_and_a_finger_are_not_called_webs(tmp_path, case):
         path, point = SPOT_OBJ, _spot_points()[case]
     said = _all_warned(path, [(point, None)], None)
     assert not [s for s in said if "grew a web of cells" in s]
+
+
+def _knob() -> tuple[np.ndarray, np.ndarray, int]:
+    """A ball of radius 0.3 on a stem of radius 0.1 and height 0.3 on a round plate of radius 2,
+    one connected surface of revolution (a lid's knob), and the index of the ball's top."""
+    prof = [(r, 0.0) for r in np.linspace(2.0, 0.1, 60)[:-1]]
+    prof += [(0.1, z) for z in np.linspace(0.0, 0.3, 8)[:-1]]
+    c = 0.3 + np.sqrt(0.3**2 - 0.1**2)
+    for t in np.linspace(np.arctan2(0.3 - c, 0.1), np.pi / 2, 40)[:-1]:
+        prof.append((0.3 * np.cos(t), c + 0.3 * np.sin(t)))
+    seg, m = 96, len(prof)
+    ang = np.linspace(0.0, 2 * np.pi, seg, endpoint=False)
+    v = np.array([(r * np.cos(a), r * np.sin(a), z) for r, z in prof for a in ang])
+    v = np.vstack([v, [0.0, 0.0, c + 0.3]])
+    f = []
+    for i in range(m - 1):
+        for j in range(seg):
+            a, b = i * seg + j, i * seg + (j + 1) % seg
+            f += [(a, b, b + seg), (a, b + seg, a + seg)]
+    f += [((m - 1) * seg + j, (m - 1) * seg + (j + 1) % seg, len(v) - 1) for j in range(seg)]
+    return v, np.array(f), len(v) - 1
+
+
+def test_a_star_that_fits_nowhere_takes_the_radius_that_wraps_least():
+    # A knob's top: a small star lies on the ball, whose sides and underside face away, while a
+    # large one reaches the flat plate round it.  None fits here, and the smallest radius tried
+    # wraps most (the teapot's lid knob grew parallel cuts over the knob instead of a star).
+    import potpourri3d as pp3d
+
+    from crackbake.simulate.stress.fields import BACK_SHARE_MAX, FIT_MIN, FIT_STEP, fitted_radius
+
+    v, f, top = _knob()
+    dist = pp3d.MeshHeatMethodDistanceSolver(v, f).compute_distance(top)
+    face = int(np.flatnonzero((f == top).any(axis=1))[0])
+    radius = 1.5
+    tried = [radius * FIT_STEP**k for k in range(5) if FIT_STEP**k >= FIT_MIN * (1 - 1e-9)]
+    # Each radius measured alone (least = the radius itself: one try each).
+    shares = [fitted_radius(v, f, dist, face, r, r)[2] for r in tried]
+    assert min(shares) >= BACK_SHARE_MAX  # none fits
+    assert shares[-1] > min(shares)  # the smallest tried is not the least wrapped
+    r, share, share0 = fitted_radius(v, f, dist, face, radius)
+    best = int(np.argmin(shares))
+    assert r == pytest.approx(tried[best]) and share == pytest.approx(shares[best])
+    assert share0 == pytest.approx(shares[0])

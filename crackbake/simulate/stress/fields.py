@@ -425,8 +425,8 @@ def _fit_radius(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.ndarray
     if share < BACK_SHARE_MAX:
         said = f"radius {r:.3g} used instead of {radius:.3g} (it fits: {share:.0%})"
     else:
-        said = (f"radius {r:.3g} used, the smallest tried, still wraps ({share:.0%}): a broader "
-                "point gives a star")
+        said = (f"radius {r:.3g} used, the one of those tried that wraps least, still wraps "
+                f"({share:.0%}): a broader point gives a star")
     warnings.warn(
         f"the impact at ({at}) lies on a thin feature ({wraps}): {said}; --impact "
         f"{xyz}:RADIUS chooses",
@@ -869,9 +869,10 @@ def fitted_radius(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray,
 
     Tries ``radius`` times :data:`FIT_STEP` powers down to :data:`FIT_MIN` (and not below
     ``least``) until the :func:`back_share` falls below :data:`BACK_SHARE_MAX`; where none does
-    (an impact on a sheet's rim), the smallest tried.  ``distance`` (N,) is the impact's
-    surface distance, right up to :data:`BACK_BALL_REACH` of ``radius``'s reach; ``face`` the
-    face holding it; ``normal_min`` as :func:`back_share`'s.
+    (an impact on a sheet's rim, a knob), the one that wraps least (the larger on a tie): a
+    smaller star is not always a flatter one (on a knob's top its sides face away).
+    ``distance`` (N,) is the impact's surface distance, right up to :data:`BACK_BALL_REACH` of
+    ``radius``'s reach; ``face`` the face holding it; ``normal_min`` as :func:`back_share`'s.
 
     Returns
     -------
@@ -888,12 +889,16 @@ def fitted_radius(vertices: np.ndarray, faces: np.ndarray, distance: np.ndarray,
     keep[face] = True
     sub, at = faces[keep], int(np.count_nonzero(keep[:face]))
     share0 = None
+    best = None
     scale = 1.0
     while True:
         r = radius * scale
         share = back_share(vertices, sub, distance, at, 0.5 * np.pi * r, normal_min=normal_min)
         share0 = share if share0 is None else share0
-        scale *= FIT_STEP
-        if (share < BACK_SHARE_MAX or scale < FIT_MIN * (1 - 1e-9)
-                or radius * scale < least):
+        if share < BACK_SHARE_MAX:
             return r, share, share0
+        if best is None or share < best[1]:  # the larger radius on a tie
+            best = (r, share)
+        scale *= FIT_STEP
+        if scale < FIT_MIN * (1 - 1e-9) or radius * scale < least:
+            return best[0], best[1], share0
