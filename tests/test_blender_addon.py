@@ -250,10 +250,12 @@ def test_install_bake_and_rebake_in_blender(addon_zip, tmp_path):
     assert run["status_bar"] and all(p["shown"] for p in run["status_bar"])
     for p in run["status_bar"]:
         assert p["line"][0] == f"Crackbake: {p['message']} {int(100 * p['fraction'])} %", p
-    # crackbake said it was done, and the extension read it (the last drawn bar may be the
-    # write stage's: the process ends right after its "done" line, and the bar is taken down)
+    # crackbake said it was done, and the extension read it. Which stages a 0.1 s timer sees is
+    # timing: at 256² the bake and the write may both pass between two calls (CI once drew 0.66
+    # last), so the bar is held to following the job forward, through more than one stage
     assert run["final_fraction"] == 1.0 and run["summary_read"]
-    assert run["status_bar"][-1]["fraction"] >= 0.9
+    drawn = [p["fraction"] for p in run["status_bar"]]
+    assert drawn == sorted(drawn) and len(set(drawn)) >= 2, drawn
     assert run["status_bar_after"] == {"line": None, "shown": False, "in_header": False}
     assert out["rebake_status"].endswith("cracks") and not run["workdir_left"]
     # re-bake of the same network at 128: the same images, reloaded; no duplicates
