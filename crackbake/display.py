@@ -22,7 +22,6 @@ Records of the ``crackbake.pipeline`` logger start a stage, except those startin
 from __future__ import annotations
 
 import logging
-import shutil
 import threading
 import time
 from typing import TextIO
@@ -144,6 +143,8 @@ class Display(logging.Handler):
         detail = f": {self._detail}" if self._detail else ""
         line = f"{self._stage}{detail} ({secs:.1f} s)"
         # One row only: a wrapped line would leave its first rows behind on every redraw.
+        import shutil  # only for a terminal's live line: 4 ms of start-up otherwise
+
         width = shutil.get_terminal_size((100, 24)).columns - 1
         if len(line) > width:
             line = line[: max(width - 3, 0)] + "..."

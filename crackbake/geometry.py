@@ -7,7 +7,6 @@ the front.
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
@@ -295,6 +294,8 @@ def content_key(*arrays: np.ndarray) -> bytes:
     """A digest of the arrays' dtypes, shapes and bytes (SHA-256: with the CPU's SHA
     instructions about 1 GB/s, 3x BLAKE2b here): equal keys, equal contents.  About 2.5 ms for
     a 100k-face mesh's faces."""
+    import hashlib  # where used: 5 ms of every run's start-up
+
     h = hashlib.sha256()
     for a in arrays:
         a = np.ascontiguousarray(a)

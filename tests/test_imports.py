@@ -280,3 +280,36 @@ def test_the_uv_stage_starts_without_scipy(tmp_path):
     count, loaded = r.stdout.strip().split("|")
     assert count == "1", r.stdout + r.stderr  # the UV stage began
     assert loaded == "", loaded
+
+
+_RUN = """
+import sys
+import crackbake.cli
+try:
+    crackbake.cli.main(sys.argv[1:], prog_name="crackbake")
+except SystemExit as exc:
+    assert not exc.code, exc.code
+print(" ".join(sorted(m for m in sys.modules if m.startswith("scipy"))), file=sys.stderr)
+"""
+
+
+def test_a_rebake_from_a_warm_cache_imports_no_scipy_spatial(tmp_path):
+    """A ``--cracks`` re-bake has no solver and no stress bake: scipy.spatial (0.3 s of imports)
+    came only with the preview's guessed up axis, a convex hull, now read from the mesh cache."""
+    import os
+
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, CRACKBAKE_CACHE_DIR=str(tmp_path / "cache"))
+    spot = str(root / "examples" / "spot.obj")
+
+    def scipy_loaded(*args: str) -> set[str]:
+        r = subprocess.run([sys.executable, "-c", _RUN, spot, "--res", "64", *args],
+                           capture_output=True, text=True, timeout=300, env=env)  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        return set(r.stderr.splitlines()[-1].split())
+
+    solved = scipy_loaded("--impact", "0.334,0.044,0.287", "-o", str(tmp_path / "a"))
+    assert "scipy.spatial" in solved  # the solver's: the check can see it
+    rebaked = scipy_loaded("--cracks", str(tmp_path / "a" / "cracks.json"), "-o",
+                           str(tmp_path / "b"))  # fmt: skip
+    assert "scipy.spatial" not in rebaked, sorted(rebaked)

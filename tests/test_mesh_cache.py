@@ -172,6 +172,42 @@ def test_uv_check_cached_equals_the_measured_and_follows_the_uvs(cache, gl_ctx):
     assert fresh.overlap_fraction == check_uvs(mesh, ctx=gl_ctx).overlap_fraction
 
 
+def test_up_axis_cached_equals_the_guess_and_follows_the_positions(cache):
+    """The preview's guessed up axis: stored on the first call, read on the next (no hull, so
+    no scipy.spatial import for a re-bake), another key once the positions move; a file that
+    holds no axis is guessed again."""
+    from crackbake.bake.preview import up_axis, up_vector
+    from crackbake.io.mesh import Mesh
+
+    # a square pyramid on its base in the z = 0 plane: it stands on -Z, no facet faces -Y
+    corners = np.array([[0, 0, 0], [3, 0, 0], [3, 3, 0], [0, 3, 0], [1.5, 1.5, 1]], float)
+    faces = np.array([[0, 2, 1], [0, 3, 2], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+
+    def mesh(vertices, source):
+        return Mesh(vertices=vertices, faces=faces, uv=None, normals=np.zeros_like(vertices),
+                    source=source)  # fmt: skip
+
+    box = mesh(corners, "box.obj")
+    guess = up_axis(box)
+    assert tuple(guess) == (0, 0, 1)
+    assert tuple(up_vector(None, box)) == (0, 0, 1) and not cache.exists()  # cache off
+    assert tuple(up_vector(None, box, cache=True)) == (0, 0, 1)
+    (path,) = cache.glob("up-*.npys")
+    assert tuple(up_vector(None, box, cache=True)) == (0, 0, 1)
+    assert list(cache.glob("up-*.npys")) == [path]
+    assert tuple(up_vector("y", box, cache=True)) == (0, 1, 0)  # --up is never guessed
+    tall = mesh(corners[:, [0, 2, 1]], "box.obj")  # the same pyramid on the y = 0 plane
+    assert tuple(up_vector(None, tall, cache=True)) == tuple(up_axis(tall)) == (0, 1, 0)
+    assert len(list(cache.glob("up-*.npys"))) == 2
+    gltf = mesh(corners, "box.glb")  # glTF is +Y by definition
+    assert tuple(up_vector(None, gltf, cache=True)) == (0, 1, 0)
+    # a file whose array is not an axis is not believed
+    with open(path, "wb") as fh:
+        np.save(fh, np.array(path.stem.removeprefix("up-")))
+        np.save(fh, np.array([0.0, -1.0, 0.0]))
+    assert tuple(up_vector(None, box, cache=True)) == (0, 0, 1)
+
+
 def _obj(path, u0: float) -> None:
     """A 2x1 plate whose UV island starts at u = ``u0``."""
     path.write_text("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\n"
@@ -209,7 +245,7 @@ def test_rebakes_from_the_cache_write_the_same_files(cache, tmp_path):
     # The cache is a run parameter the files record: the references use one of their own.
     plain = bake("plain", tmp_path / "empty1")
     assert bake("first") == plain
-    kinds = ("gutter", "tangents", "uvcheck")
+    kinds = ("gutter", "tangents", "uvcheck", "up")
     def stored():  # a hit reads the file, a miss replaces it (another inode)
         return {k: {p.name: p.stat().st_ino for p in cache.glob(f"{k}-*.npys")} for k in kinds}
 
@@ -221,4 +257,6 @@ def test_rebakes_from_the_cache_write_the_same_files(cache, tmp_path):
     moved = bake("moved_plain", tmp_path / "empty2")
     assert moved != plain
     assert bake("moved") == moved
-    assert all(len(list(cache.glob(f"{k}-*.npys"))) == 2 for k in kinds)
+    # the positions did not move: the up axis is the one guessed before
+    assert all(len(list(cache.glob(f"{k}-*.npys"))) == 2 for k in kinds[:3])
+    assert len(list(cache.glob("up-*.npys"))) == 1

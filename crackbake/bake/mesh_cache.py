@@ -11,16 +11,20 @@ Two results are kept, each a pure function of inputs the key hashes in full:
   (serial), read in 0.05 (a 70 MB file).
 - the MikkTSpace tangent frames (:func:`crackbake.bake.tangents.with_tangents`): keyed by the
   output mesh's positions, faces, UVs and normals (bytes as float64/int64).
+- the preview's and the USD's guessed up axis (:func:`crackbake.bake.preview.up_axis`: a
+  convex hull, whose scipy.spatial import is 0.3 s a re-bake has no other use for): keyed by
+  the vertices, the faces and whether the source is glTF.
 - the check of an asset's own UVs (:func:`crackbake.bake.uv.check.check_uvs`: range, strays,
   their wrapped copies, overlap measured with GL): keyed by the UVs, the faces, the vertex count
   and the renderer (vendor, renderer and version strings), whose rasterisation it counts.
 
 Each key also hashes the source of the modules that compute the result, so an edited kernel
 never meets an old answer.  The files live beside the cached unwraps
-(:func:`crackbake.bake.uv.cache.cache_dir`) as ``gutter-<key>.npys`` and ``tangents-<key>.npys``
-(.npy records in a row: read straight into the arrays, without a zip's CRC and copies), and
-together take at most :data:`MAX_BYTES`, the least recently used removed first (a hit refreshes
-a file's time).  A failure to write is logged, never raised: the cache is an optimisation.
+(:func:`crackbake.bake.uv.cache.cache_dir`) as ``<kind>-<key>.npys`` (``gutter``,
+``tangents``, ``up``, ``uvcheck``; .npy records in a row: read straight into the arrays,
+without a zip's CRC and copies), and together take at most :data:`MAX_BYTES`, the least
+recently used removed first (a hit refreshes a file's time).  A failure to write is logged,
+never raised: the cache is an optimisation.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ MESH_CACHE_VERSION = 1
 MAX_BYTES = 1 << 30
 
 _SUFFIX = ".npys"
-_KINDS = ("gutter", "tangents", "uvcheck")
+_KINDS = ("gutter", "tangents", "uvcheck", "up")
 
 
 @cache
@@ -310,3 +314,38 @@ def write_uvcheck(key: str, check) -> None:
     tiles = np.zeros((0, 2), np.int64) if check.tiles is None else check.tiles
     _store("uvcheck", key, [np.array(text), np.asarray(check.wraps, np.int64),
                             np.asarray(tiles, np.int64)])  # fmt: skip
+
+
+# --- the guessed up axis --------------------------------------------------------------------
+
+_UP_MODULES = ("crackbake.bake.preview", "crackbake.geometry_kernels")
+
+
+def up_key(vertices, faces, gltf: bool) -> str:
+    """Hex SHA-256 of what :func:`~crackbake.bake.preview.up_axis` depends on: the vertices,
+    the faces, whether the source is glTF (always +Y) and the code."""
+    h = _hasher("up", *_UP_MODULES)
+    h.update(f"gltf={gltf}:".encode())
+    for name, arr, dtype in (("vertices", vertices, np.float64), ("faces", faces, np.int64)):
+        a = np.ascontiguousarray(arr, dtype=dtype)
+        h.update(f"{name}{a.shape}:".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def read_up(key: str) -> np.ndarray | None:
+    """The cached up axis keyed ``key`` ((3,) float64, +Y or +Z), or None."""
+    arrays = _load("up", key, 1)
+    if arrays is None:
+        return None
+    up = arrays[0]
+    if up.shape != (3,) or up.dtype != np.float64 or not (
+        np.array_equal(up, [0.0, 1.0, 0.0]) or np.array_equal(up, [0.0, 0.0, 1.0])
+    ):
+        return None
+    return up
+
+
+def write_up(key: str, up: np.ndarray) -> None:
+    """Store the up axis of the mesh keyed ``key`` (:func:`up_key`)."""
+    _store("up", key, [np.asarray(up, np.float64)])

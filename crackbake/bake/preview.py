@@ -331,7 +331,7 @@ def up_axis(mesh: Mesh, cross: np.ndarray | None = None) -> np.ndarray:
     from scipy.spatial import ConvexHull, QhullError
 
     y_up, z_up = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
-    if str(mesh.source).lower().endswith((".gltf", ".glb")):
+    if _is_gltf(mesh):
         return y_up
     pts = np.asarray(mesh.vertices, np.float64)
     pts = pts[:: max(1, len(pts) // 100_000)]  # the hull of a subset: scans have millions
@@ -355,13 +355,28 @@ def up_axis(mesh: Mesh, cross: np.ndarray | None = None) -> np.ndarray:
     return z_up if strong else y_up
 
 
-def up_vector(up: str | None, mesh: Mesh, cross: np.ndarray | None = None) -> np.ndarray:
+def up_vector(up: str | None, mesh: Mesh, cross: np.ndarray | None = None,
+              cache: bool = False) -> np.ndarray:  # fmt: skip
     """The preview's up: the ``--up`` axis (``x``, ``y``, ``z``, ``-x``, ``-y``, ``-z``) or, when
-    None, :func:`up_axis`'s guess (``cross``: the faces' cross products if known); (3,)
+    None, :func:`up_axis`'s guess (``cross``: the faces' cross products if known; ``cache``:
+    read and keep the guess in the mesh cache, :mod:`crackbake.bake.mesh_cache`); (3,)
     float64."""
-    if up is None:
+    if up is not None:
+        return np.asarray(UP_VECTORS[up], np.float64)
+    if not cache:
         return up_axis(mesh, cross)
-    return np.asarray(UP_VECTORS[up], np.float64)
+    from crackbake.bake.mesh_cache import read_up, up_key, write_up
+
+    key = up_key(mesh.vertices, mesh.faces, _is_gltf(mesh))
+    axis = read_up(key)
+    if axis is None:
+        axis = up_axis(mesh, cross)
+        write_up(key, axis)
+    return axis
+
+
+def _is_gltf(mesh: Mesh) -> bool:
+    return str(mesh.source).lower().endswith((".gltf", ".glb"))
 
 
 def _frame(up: np.ndarray) -> np.ndarray:
@@ -425,17 +440,17 @@ def _direction(cross: np.ndarray, network: CrackNetwork, up: np.ndarray):
     return tuple(float(x) for x in cand[int(np.argmax(score))])
 
 
-def preview_camera(mesh: Mesh, network: CrackNetwork, up: str | None = None):
+def preview_camera(mesh: Mesh, network: CrackNetwork, up: str | np.ndarray | None = None):
     """Where the preview camera looks from: ``(view_dir, up, target, distance)``.
 
-    The view is :func:`preview_direction` with ``up`` (an ``--up`` name; None: the mesh's
-    :func:`up_axis`) up; the camera aims at
+    The view is :func:`preview_direction` with ``up`` (an ``--up`` name, a (3,) vector from
+    :func:`up_vector`; None: the mesh's :func:`up_axis`) up; the camera aims at
     the middle of the crack points seen from there and comes close enough that they fill
     about 80 % of the frame, but never closer than framing 40 % of the mesh (so the picture
     keeps context) nor farther than framing the whole mesh.  Without cracks it frames the mesh.
     """
     an = face_cross(mesh.vertices, mesh.faces)  # once, for the up axis and the direction
-    up = up_vector(up, mesh, an)
+    up = up_vector(up, mesh, an) if up is None or isinstance(up, str) else np.asarray(up, float)
     view_dir = np.asarray(_direction(an, network, up))
     lo, hi = mesh.vertices.min(0), mesh.vertices.max(0)
     if not network.cracks:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
 
 from crackbake.errors import CrackbakeError
 from crackbake.geometry import barycentric, edges, face_areas
@@ -194,6 +193,8 @@ def on_final_mesh(v0: np.ndarray, f0: np.ndarray, values0: np.ndarray,
     points = v1[start:]
     if len(points) == 0:
         return out
+    from scipy.spatial import cKDTree  # a solving run's import (the solver has it already)
+
     k = min(_CANDIDATES, len(f0))
     # Unbalanced, uncompacted: builds 3x faster at 1.5M faces and finds the same neighbours.
     tree = cKDTree(v0[f0].mean(axis=1), balanced_tree=False, compact_nodes=False)

@@ -15,13 +15,13 @@ import warnings
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from crackbake import __version__
 from crackbake.bake.preview import preview_camera, render_preview, up_vector
 from crackbake.bake.raster import CrackMaps
-from crackbake.bake.stress import StressMaps
 from crackbake.bake.uv import UVMesh
 from crackbake.errors import CrackbakeWarning
 from crackbake.exchange.exr import exr_threads, write_exr
@@ -56,6 +56,9 @@ from crackbake.io.texture import base_color_texture, base_color_tiles
 from crackbake.network import CrackNetwork
 from crackbake.params import RunParams
 from crackbake.transaction.stage import OutputStage
+
+if TYPE_CHECKING:  # the stress bake's module (scipy.spatial) is a solving run's, not a re-bake's
+    from crackbake.bake.stress import StressMaps
 
 #: Largest edge of the textures the preview samples (its picture is 1024 pixels wide).
 PREVIEW_TEXTURE_MAX = 2048
@@ -307,15 +310,18 @@ class Writer:
         if stress is not None and "stress" in formats:
             path = stage.path(f"{stem}_stress.exr")
             self.jobs.append(self.pool.submit(_write_stress_exr, path, stress, **self.exr))
+        up = None
+        if self.pages is not None or self.usd_textures is not None:
+            up = up_vector(params.up, mesh, cache=params.cache)  # once: a hull when guessed
         if self.pages is not None:
             colour, normal, levels = self.pages.result()
-            _draw_preview(stage, mesh, uvmesh, self.network, colour, normal, self.ctx,
-                          params.up, levels)  # fmt: skip
+            _draw_preview(stage, mesh, uvmesh, self.network, colour, normal, self.ctx, up,
+                          levels)  # fmt: skip
         if self.glb_keys:
             _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, self.encoded,
                        self.glb_keys)  # fmt: skip
         if self.usd_textures is not None:
-            usd_args = (stem, uvmesh, self.usd_textures, up_vector(params.up, mesh))
+            usd_args = (stem, uvmesh, self.usd_textures, up)
             doc = f"crackbake {__version__}: {stem}"
             if "usd" in formats:
                 write_usd(stage.path(f"{stem}.usda"), *usd_args, doc=doc)
@@ -584,16 +590,18 @@ def _write_udim(stage, stem, params, mesh, uvmesh, network, maps, ctx, stress, e
                                                                        "orm")}
                 encoded = enc.start(set(glb_keys.values()))
                 jobs.extend(encoded.values())
+            up = None
+            if {"preview", "usd"} & set(formats):
+                up = up_vector(params.up, mesh, cache=params.cache)
             if "preview" in formats:
-                _write_preview(stage, mesh, flat, network, packed, packed.texture, ctx,
-                               params.up)
+                _write_preview(stage, mesh, flat, network, packed, packed.texture, ctx, up)
             write_sidecar(network, stage.path("cracks.json"))
             write_obj(network, stage.path("cracks.obj"))
             if "glb" in formats:
                 _write_glb(stage.path(f"{stem}.glb"), stem, flat, packed, encoded, glb_keys)
             if "usd" in formats:
                 write_usd(stage.path(f"{stem}.usda"), stem, uvmesh, _udim_textures(usd_textures),
-                          up_vector(params.up, mesh), doc=f"crackbake {__version__}: {stem}")
+                          up, doc=f"crackbake {__version__}: {stem}")
         finally:
             for job in jobs:
                 job.exception()

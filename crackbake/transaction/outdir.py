@@ -18,12 +18,9 @@ run into the same folder removes them (:func:`remove_leftovers`).
 
 from __future__ import annotations
 
-import ctypes
 import errno
 import fcntl
-import json
 import os
-import shutil
 import stat
 import warnings
 from pathlib import Path
@@ -136,6 +133,8 @@ def check_replaceable(
 
 def _manifest_files(path: Path) -> set[str] | None:
     """Names a crackbake ``manifest.json`` lists, or None when ``path`` is not one."""
+    import json  # json, ctypes, shutil: imported where used, off every run's start-up
+
     try:
         if not path.is_file() or path.stat().st_size > 64 << 20:
             return None
@@ -188,6 +187,8 @@ def remove_tree(path: Path) -> bool:
     parent writable) but its files cannot be deleted: such folders inside the tree are made
     writable first (never through a symlink).
     """
+    import shutil
+
     shutil.rmtree(path, ignore_errors=True)
     if not os.path.lexists(path):
         return True
@@ -338,6 +339,8 @@ _RENAME_EXCHANGE = 2
 
 def _renameat2_exchange(a: Path, b: Path) -> bool:
     """Swap two paths atomically with ``renameat2(RENAME_EXCHANGE)``; False when unsupported."""
+    import ctypes
+
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         fn = libc.renameat2

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import errno
-import hashlib
 import os
-import secrets
 import stat
 import warnings
 from pathlib import Path
@@ -30,6 +28,8 @@ PathLike = str | os.PathLike
 
 def sha256_file(path: PathLike) -> str:
     """Hex SHA-256 of a file's bytes, read in chunks (no whole-file copy in memory)."""
+    import hashlib  # 5 ms of start-up a run without digests need not pay
+
     with open_regular(path) as fh:
         return hashlib.file_digest(fh, "sha256").hexdigest()
 
@@ -240,7 +240,7 @@ def _new_folder(prefix: Path) -> Path:
     Not :func:`tempfile.mkdtemp`: its 0700 folder would become the output folder.
     """
     for _ in range(100):
-        folder = prefix.parent / f"{prefix.name}{secrets.token_hex(4)}"
+        folder = prefix.parent / f"{prefix.name}{os.urandom(4).hex()}"
         try:
             folder.mkdir()
         except FileExistsError:
