@@ -427,10 +427,8 @@ def solve(
 
         sources = stress_sources(params, mesh, relative)
     # The stages' own modules are imported before the thread starts, which then imports only
-    # the solver's: no two threads import one package at once (scipy.spatial too: the stress
-    # field's and the solver's KD-trees; the writers no longer import it before the UV stage).
-    import scipy.spatial  # noqa: F401
-
+    # the solver's: no two threads import one package at once.  No scipy: its 0.35 s of
+    # imports came for KD-trees and graph pieces (crackbake.nearest has them now).
     from crackbake.simulate import simmesh, stress, timing  # noqa: F401
 
     warming = None

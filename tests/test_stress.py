@@ -554,3 +554,31 @@ def test_glass_impacts_on_watertight_meshes_do_not_warn(which):
                 warnings.filterwarnings("ignore", "the impact at .* wraps round a thin feature")
                 field = stress_field(sim, mesh, [ImpactSource(p, radius=radius)])
             assert np.abs(field.stress).max() > 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_face_vertex_smooth_has_the_bits_of_scipys_incidence_sums(seed):
+    """The numba smoothing sums as scipy.sparse's node-by-face incidence matrix did (its
+    row sums and product), bit for bit: fans of high valence (numpy's pairwise sum of the
+    areas past 8 and 128 terms) and faces that repeat a node included."""
+    import scipy.sparse as sp
+
+    from crackbake.geometry import corner_mean
+    from crackbake.simulate.stress.fields import _face_vertex_smooth
+
+    rng = np.random.default_rng(seed)
+    for trial in range(60):
+        n, k = int(rng.integers(3, 60)), int(rng.integers(1, 400))
+        faces = rng.integers(0, n, (k, 3))
+        if trial % 3 == 0:
+            faces[:, 0] = 0  # one node in every face
+        area = rng.random(k) * 10 ** rng.uniform(-3, 3, k)
+        values = rng.normal(size=(k, 2, 2)) * 10 ** rng.uniform(-2, 2, (k, 1, 1))
+        nodes, local = np.unique(faces, return_inverse=True)
+        local = local.reshape(-1)
+        inc = sp.csr_matrix((np.repeat(area, 3), (local, np.repeat(np.arange(k), 3))),
+                            shape=(len(nodes), k))  # fmt: skip
+        node_area = np.asarray(inc.sum(axis=1)).reshape(-1)
+        node = (inc @ values.reshape(k, -1)) / np.where(node_area > 0, node_area, 1.0)[:, None]
+        expected = corner_mean(node[local.reshape(k, 3)]).reshape(values.shape)
+        np.testing.assert_array_equal(_face_vertex_smooth(faces, area, values), expected)

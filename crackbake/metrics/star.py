@@ -257,24 +257,28 @@ def _nearest_centroid(centroid: np.ndarray, corner_reach: float, snapped: np.nda
 
     Searched first among the faces of the impact's patch (the ball :func:`impact_distance`
     keeps: centroids within ``max_distance`` + ``corner_reach`` of ``snapped``), a fraction of
-    a large sim mesh, whose KD-tree costs that fraction (35 ms for the 100k centroids of spot).
+    a large sim mesh, whose search grid costs that fraction.
     A point whose nearest patch centroid is closer than the ball's rim is to it has found its
     face (every centroid outside lies strictly farther); the others are searched among all.
     """
-    from scipy.spatial import cKDTree
+    from crackbake.nearest import nearest_k
+
+    def query(among, at):
+        d, i = nearest_k(among, at, 1)
+        return d[:, 0], i[:, 0]
 
     if max_distance is None or not np.isfinite(max_distance):
-        return cKDTree(centroid).query(pts)[1]
+        return query(centroid, pts)[1]
     rim = (float(max_distance) + corner_reach) * (1 + 1e-9)
     ball = np.flatnonzero(np.linalg.norm(centroid - snapped, axis=1) <= rim)
     if len(ball) == 0:
-        return cKDTree(centroid).query(pts)[1]
-    dist, near = cKDTree(centroid[ball]).query(pts)
+        return query(centroid, pts)[1]
+    dist, near = query(centroid[ball], pts)
     nearest = ball[near]
     # A margin for the rounding of the two distances: a point that close to the rim asks all.
     outside = np.linalg.norm(pts - snapped, axis=1) + dist > rim * (1 - 1e-9)
     if outside.any():
-        nearest[outside] = cKDTree(centroid).query(pts[outside])[1]
+        nearest[outside] = query(centroid, pts[outside])[1]
     return nearest
 
 

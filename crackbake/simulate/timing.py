@@ -27,10 +27,9 @@ import heapq
 
 import numpy as np
 from numba import njit
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from crackbake.graph import NetworkGraph, impact_sources, network_graph
+from crackbake.nearest import components
 from crackbake.network import Crack, CrackNetwork
 
 __all__ = ["arrival_times", "front_speed", "grow_from_impacts"]
@@ -95,8 +94,7 @@ def arrival_times(graph: NetworkGraph, sources: np.ndarray) -> np.ndarray:
     """
     n = len(graph.positions)
     u, v = graph.seg_node[:, 0], graph.seg_node[:, 1]
-    _, label = connected_components(coo_matrix((np.ones(len(u)), (u, v)), shape=(n, n)),
-                                    directed=False)
+    label = components(n, np.stack([u, v], axis=1))
     reached = np.isin(label, label[sources])
     earliest = np.full(label.max() + 1 if n else 0, np.inf)
     np.minimum.at(earliest, label, graph.node_time)

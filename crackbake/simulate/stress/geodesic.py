@@ -14,7 +14,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-import scipy.sparse as sp
 
 from crackbake.errors import CrackbakeWarning
 from crackbake.geometry import (
@@ -63,6 +62,39 @@ def _centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, flo
     return memo("centroids", compute, vertices, faces)
 
 
+def _fast_marching(vertices: np.ndarray, faces: np.ndarray):
+    """potpourri3d's fast-marching solver of a triangle mesh (``compute_distance(curves)``).
+
+    Its compiled solver directly where potpourri3d 1.x has it: the package's Python layer
+    imports scipy.sparse for its other tools, 0.35 s of a run's main thread that the solver
+    does not use.  The arrays are what potpourri3d's own check asks for (float64 (V, 3),
+    int64 (F, 3) indices into them).  Through the package otherwise (another version)."""
+    try:
+        from potpourri3d_bindings import MeshFastMarchingDistance
+    except ImportError:
+        MeshFastMarchingDistance = None
+    v = np.ascontiguousarray(vertices, np.float64)
+    f = np.ascontiguousarray(faces, np.int64)
+    if MeshFastMarchingDistance is None:
+        import potpourri3d as pp3d
+
+        return pp3d.MeshFastMarchingDistanceSolver(v, f)
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError("fast marching: face indices outside the patch's vertices")
+    return _Bound(MeshFastMarchingDistance(v, f))
+
+
+class _Bound:
+    """The compiled solver with potpourri3d's ``compute_distance(curves)`` call (no initial
+    distances, unsigned, as its wrapper passes them)."""
+
+    def __init__(self, solver) -> None:
+        self.solver = solver
+
+    def compute_distance(self, curves):
+        return self.solver.compute_distance(curves, [], False)
+
+
 def _patch_solver(vertices: np.ndarray, faces: np.ndarray):
     """The fast-marching solver of a patch (``vertices`` (P, 3), ``faces`` (Q, 3) into them) and
     the patch node of each of its vertices, (P',): once per patch (the stress field and the
@@ -71,18 +103,17 @@ def _patch_solver(vertices: np.ndarray, faces: np.ndarray):
     without potpourri3d, RuntimeError or ValueError where it refuses the patch."""
 
     def compute():
-        import potpourri3d as pp3d
-
         # A patch cut out of a clean surface can have vertices where two sheets of it meet at
         # one point (its rim zig-zags); fast marching refuses those, so each fan gets its own
         # copy and a node takes the nearest of its copies.  The sim mesh itself is manifold.
         split_faces, origin, _ = split_nonmanifold(faces, len(vertices))
-        return origin, pp3d.MeshFastMarchingDistanceSolver(vertices[origin], split_faces)
+        return origin, _fast_marching(vertices[origin], split_faces)
 
     return memo("fast marching", compute, vertices, faces)
 
 
 def _edge_dijkstra(vertices, faces, face: int, point: np.ndarray, limit: float) -> np.ndarray:
+    import scipy.sparse as sp  # here, not at the top: scipy is 0.35 s of imports
     from scipy.sparse.csgraph import dijkstra
 
     n = len(vertices)
@@ -202,11 +233,9 @@ def _impact_distance(sim, vertices: np.ndarray, faces: np.ndarray, p: np.ndarray
 def _shells(faces: np.ndarray, n: int) -> np.ndarray:
     """Connected piece (shell) of each of ``n`` nodes over the faces' edges, (n,) int."""
     def compute():
-        from scipy.sparse.csgraph import connected_components
+        from crackbake.nearest import components
 
-        e = shared_edges(faces, n)[0]
-        graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-        return (connected_components(graph, directed=False)[1],)
+        return (components(n, shared_edges(faces, n)[0]),)
 
     # Once per mesh: the stress field (twice), the star check and the solver's mates ask.
     return memo("shells", compute, faces, int(n))[0]
@@ -224,6 +253,7 @@ def _hop_shells(vertices: np.ndarray, faces: np.ndarray, d: np.ndarray, link: fl
     shell over the whole sim mesh: parts of one shell that the patch cut apart (the two walls of
     a fold) are not joined, their distance runs round through the shell itself.
     """
+    import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components, dijkstra
     from scipy.spatial import cKDTree
 
