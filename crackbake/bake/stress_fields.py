@@ -169,7 +169,12 @@ def _corner_rows(faces, asset_face, points, verts, tris, uv, tangents, normals, 
                 out[k, 6 + a] = b0 * normals[i0, a] + b1 * normals[i1, a] + b2 * normals[i2, a]
             for a in range(nodal.shape[1]):
                 out[k, 9 + a] = nodal[node, a]
-    return np.count_nonzero(bad)
+    # Counted here, not with np.count_nonzero: its implementation's module (numba.np.arraymath)
+    # imports scipy.linalg when the cached kernel loads, 0.3 s of the stress bake.
+    count = 0
+    for i in range(len(bad)):
+        count += bad[i]
+    return count
 
 
 def on_final_mesh(v0: np.ndarray, f0: np.ndarray, values0: np.ndarray,
