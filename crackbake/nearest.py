@@ -87,6 +87,8 @@ def nearest_k(points: np.ndarray, queries: np.ndarray, k: int = 1) -> tuple[np.n
     qs = np.ascontiguousarray(queries, np.float64).reshape(-1, 3)
     if not 1 <= k <= len(pts):
         raise ValueError(f"k={k} nearest of {len(pts)} points")
+    if not (np.isfinite(pts).all() and np.isfinite(qs).all()):
+        raise ValueError("nearest points of non-finite coordinates")
     lo = pts.min(axis=0)
     extent = float((pts.max(axis=0) - lo).max())
     # About two points a cell over the bounding box's longest side cubed; flat sets (a plate)

@@ -73,6 +73,10 @@ def test_nearest_k_finds_what_ckdtree_finds_on_a_sim_mesh_like_cloud():
     np.testing.assert_allclose(d, d_ref, rtol=1e-14)
 
 
-def test_nearest_k_refuses_more_neighbours_than_points():
+def test_nearest_k_refuses_more_neighbours_than_points_and_non_finite_ones():
     with pytest.raises(ValueError):
         nearest_k(np.zeros((2, 3)), np.zeros((1, 3)), 3)
+    with pytest.raises(ValueError):
+        nearest_k(np.array([[0.0, 0.0, np.nan], [1.0, 0.0, 0.0]]), np.zeros((1, 3)), 1)
+    with pytest.raises(ValueError):
+        nearest_k(np.zeros((2, 3)), np.array([[np.inf, 0.0, 0.0]]), 1)
