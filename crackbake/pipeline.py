@@ -276,8 +276,9 @@ def _targets_ahead(ctx, params: RunParams, tiles: int):
     (:func:`_uvs`): the normal map's targets.  None for a UDIM set (pages of their own)."""
     if tiles > 1:
         return None
+    # Both numba-free: a re-bake starts the allocation before the bake's modules import numba.
+    from crackbake.bake.crack_targets import image_specs, target_specs
     from crackbake.bake.prefetch import TargetPrefetch
-    from crackbake.bake.raster import image_specs, target_specs
 
     return TargetPrefetch(ctx, target_specs(params.res, params.tile, True),
                           image_specs(params.res, True))  # fmt: skip

@@ -322,3 +322,14 @@ def test_runs_from_a_warm_cache_import_no_scipy_spatial_sparse_or_linalg(tmp_pat
         # cached kernel that uses one of those functions loads
         assert not {"scipy.spatial", "scipy.sparse", "scipy.linalg"} & loaded, (args,
                                                                                 sorted(loaded))
+
+
+def test_the_crack_targets_allocate_before_numba_is_imported():
+    """A re-bake starts allocating the crack bake's targets before the bake's modules import
+    numba (0.3-0.4 s the allocation waited): their layout and the prefetch import neither numba
+    nor GL wrappers."""
+    code = ("import sys, crackbake.bake.crack_targets, crackbake.bake.prefetch; "
+            "print(' '.join(m for m in ('numba', 'moderngl', 'scipy') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == ""

@@ -9,8 +9,9 @@ import pytest
 from conftest import plate_mesh
 
 from crackbake.bake.context import GLScope
+from crackbake.bake.crack_targets import image_specs, target_specs
 from crackbake.bake.prefetch import TargetPrefetch
-from crackbake.bake.raster import bake_cracks, image_specs, target_specs
+from crackbake.bake.raster import bake_cracks
 from crackbake.network import Segments
 
 

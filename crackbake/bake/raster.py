@@ -29,10 +29,11 @@ import numpy as np
 
 from crackbake.bake.cells import image_bins
 from crackbake.bake.context import GLScope, shader_source
+from crackbake.bake.crack_targets import NAMES, NUMPY_TYPES, band_rows, channel_dtypes
 from crackbake.bake.dilation import PlanAhead, dilate
 from crackbake.bake.grid import FaceBins, face_bins
 from crackbake.bake.normal_map import NormalPass, frame_attributes, shader_variant
-from crackbake.bake.prefetch import ArraySpec, Spec, TargetPrefetch
+from crackbake.bake.prefetch import TargetPrefetch
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.network import Segments
 from crackbake.params import DEFAULT_MAX_DISTANCE_FRACTION, MIN_PX_DEFAULT, TILE_DEFAULT
@@ -227,8 +228,9 @@ def bake_cracks(
         :data:`SLICE_TEXELS` texels each), in the main thread: a long bake reports as it goes,
         and a SIGINT/SIGTERM handler runs between two calls.
     targets : TargetPrefetch, optional
-        Render targets allocated ahead (:func:`target_specs`, :mod:`crackbake.bake.prefetch`);
-        those it lacks are created here.  The pixels are the same either way.
+        Render targets allocated ahead (:func:`~crackbake.bake.crack_targets.target_specs`,
+        :mod:`crackbake.bake.prefetch`); those it lacks are created here.  The pixels are the
+        same either way.
     gutter : PlanAhead, optional
         The gutter fill planned ahead from :func:`coverage`; used when the bake finds those
         islands and ``dilate_px`` (else planned here).  The pixels are the same either way.
@@ -289,11 +291,6 @@ SLICE_TEXELS = 1 << 21
 RECORDS_SHARE = 16
 RECORDS_LEAST = 1 << 16
 
-_NAMES = ("mask", "width", "time", "depth", "distance", "id", "inside")
-# width is float32 like depth: mesh units are unbounded (half stops at 65504 and loses digits
-# below 6e-5), while mask and time are 0..1.
-_DTYPES = ("f2", "f4", "f2", "f4", "f4", "f4", "f1")
-_NUMPY = {"f1": np.uint8, "f2": np.float16, "f4": np.float32}
 
 
 @dataclass(eq=False)
@@ -438,28 +435,6 @@ def _table_texture(gl: GLScope, items: np.ndarray, width: int, dtype: str, compo
     return tex
 
 
-def band_rows(res: int, tile: int) -> int:
-    """Rows of each full-width band of a ``res``-texel bake: at most ``tile**2`` texels."""
-    return max(1, min(res, (tile * tile) // res))
-
-
-def target_specs(res: int, tile: int, with_normals: bool) -> list[Spec]:
-    """The textures a UV-placed bake of ``res`` texels draws into (``tile`` as given to
-    :func:`bake_cracks`, ``with_normals``: tangents given), for a :class:`TargetPrefetch`:
-    one target per channel, a band each (a camera's placement adds the surface targets)."""
-    size = (res, band_rows(res, tile))
-    return [(size, 1, d) for d in _dtypes(with_normals)]
-
-
-def image_specs(res: int, with_normals: bool) -> list[ArraySpec]:
-    """The numpy images a UV-placed bake of ``res`` texels reads its targets back into, for a
-    :class:`TargetPrefetch` (``arrays``): one per channel, and the normal's three planes."""
-    images = [((res, res), np.dtype(_NUMPY[d]).str) for d in _dtypes(with_normals)]
-    if with_normals:
-        images += [((3, res, res), "<f4"), ((res, res), "<f2")]  # normal, occlusion
-    return images
-
-
 def _image(prefetch: TargetPrefetch | None, shape: tuple[int, ...], dtype,
            zeros: bool = False) -> np.ndarray:
     """A prefetched (zeroed, paged-in) image when there is one left, else a new one (empty, or
@@ -468,11 +443,6 @@ def _image(prefetch: TargetPrefetch | None, shape: tuple[int, ...], dtype,
     if image is None:
         image = np.zeros(shape, dtype) if zeros else np.empty(shape, dtype)
     return image
-
-
-def _dtypes(with_normals: bool) -> tuple[str, ...]:
-    # With the normal map the inside target also says which segment's depth wins (R32F).
-    return (*_DTYPES[:-1], "f4") if with_normals else _DTYPES
 
 
 def coverage(ctx, uv: np.ndarray, faces: np.ndarray, res: int, tile: int = TILE_DEFAULT,
@@ -637,9 +607,9 @@ def _render(
         # target holds the crack texels' records as R32F; a camera's placement adds 48 for the
         # surface pass).
         band = band_rows(res, tile)
-        dtypes = _dtypes(with_normals)
-        images = {n: _image(prefetch, (res, res), _NUMPY[d])
-                  for n, d in zip(_NAMES, dtypes, strict=True)}  # fmt: skip
+        dtypes = channel_dtypes(with_normals)
+        images = {n: _image(prefetch, (res, res), NUMPY_TYPES[d])
+                  for n, d in zip(NAMES, dtypes, strict=True)}  # fmt: skip
         records = None
         if with_normals:
             normal_pass = NormalPass(gl, profile_shape, min_px, terms)
@@ -669,7 +639,7 @@ def _render(
         # surface pass records each texel's point, footprint and bin in float targets, a
         # one-output pass marks the face texels inside, and the crack pass's full-screen
         # triangle shades every face texel (its depth is the camera's: no classes).
-        clear = (0.0, 0.0, 0.0, 0.0, max_distance, -1.0, 0.0)  # _NAMES' order
+        clear = (0.0, 0.0, 0.0, 0.0, max_distance, -1.0, 0.0)  # NAMES' order
         gl.ctx.enable_only(moderngl.DEPTH_TEST)
         timings["setup"] = time.perf_counter() - t1
         t_surface = t_draw = t_read = t_normals = 0.0
@@ -729,7 +699,7 @@ def _render(
                     )
                 records.grow(records.used())  # and draw the band again, reported once
                 reports = None
-            for k, (n, d) in enumerate(zip(_NAMES, dtypes, strict=True)):
+            for k, (n, d) in enumerate(zip(NAMES, dtypes, strict=True)):
                 fbo.read_into(images[n][y0 : y0 + h], viewport=(0, 0, res, h), components=1,
                               attachment=k, dtype=d)  # fmt: skip
             tc = time.perf_counter()
