@@ -582,3 +582,23 @@ def test_face_vertex_smooth_has_the_bits_of_scipys_incidence_sums(seed):
         node = (inc @ values.reshape(k, -1)) / np.where(node_area > 0, node_area, 1.0)[:, None]
         expected = corner_mean(node[local.reshape(k, 3)]).reshape(values.shape)
         np.testing.assert_array_equal(_face_vertex_smooth(faces, area, values), expected)
+
+
+def test_fast_marching_through_the_binding_equals_potpourri3ds_wrapper():
+    """The compiled solver called directly (no scipy import) gives potpourri3d's own
+    wrapper's distances, bit for bit."""
+    import potpourri3d as pp3d
+
+    from crackbake.simulate.stress.geodesic import _fast_marching
+
+    n = 12
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    v = np.column_stack([x.ravel(), y.ravel(), 0.1 * np.sin(3 * x.ravel())])
+    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    f = np.concatenate([np.column_stack([i, i + 1, i + n + 1]),
+                        np.column_stack([i, i + n + 1, i + n])]).astype(np.int64)
+    curves = [[(7, [0.2, 0.3, 0.5])]]
+    ours = np.asarray(_fast_marching(v, f).compute_distance(curves))
+    theirs = np.asarray(pp3d.MeshFastMarchingDistanceSolver(v, f).compute_distance(curves))
+    np.testing.assert_array_equal(ours, theirs)
+    assert np.isfinite(ours).all() and ours.max() > 0.5

@@ -76,23 +76,35 @@ def _fast_marching(vertices: np.ndarray, faces: np.ndarray):
     v = np.ascontiguousarray(vertices, np.float64)
     f = np.ascontiguousarray(faces, np.int64)
     if MeshFastMarchingDistance is None:
-        import potpourri3d as pp3d
-
-        return pp3d.MeshFastMarchingDistanceSolver(v, f)
+        return _packaged(v, f)
     if len(f) and (f.min() < 0 or f.max() >= len(v)):
         raise ValueError("fast marching: face indices outside the patch's vertices")
-    return _Bound(MeshFastMarchingDistance(v, f))
+    try:
+        return _Bound(MeshFastMarchingDistance(v, f), v, f)
+    except TypeError:  # another binding's signature: the package knows its own
+        return _packaged(v, f)
+
+
+def _packaged(v: np.ndarray, f: np.ndarray):
+    import potpourri3d as pp3d
+
+    return pp3d.MeshFastMarchingDistanceSolver(v, f)
 
 
 class _Bound:
     """The compiled solver with potpourri3d's ``compute_distance(curves)`` call (no initial
-    distances, unsigned, as its wrapper passes them)."""
+    distances, unsigned, as its wrapper passes them); through the package when the binding
+    takes its arguments otherwise."""
 
-    def __init__(self, solver) -> None:
-        self.solver = solver
+    def __init__(self, solver, v: np.ndarray, f: np.ndarray) -> None:
+        self.solver, self.v, self.f = solver, v, f
 
     def compute_distance(self, curves):
-        return self.solver.compute_distance(curves, [], False)
+        try:
+            return self.solver.compute_distance(curves, [], False)
+        except TypeError:
+            self.solver = _packaged(self.v, self.f)
+            return self.solver.compute_distance(curves)
 
 
 def _patch_solver(vertices: np.ndarray, faces: np.ndarray):
