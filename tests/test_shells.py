@@ -140,4 +140,3 @@ def test_cracks_cross_a_seam_between_sheets(tmp_path):
     # and the solver's crossing carried them, not cracks of the other sheet's own that happen to
     # end near them
     assert solved.result.stats["shell_crossings"] >= 0.5 * len(left)
-
