@@ -11,11 +11,15 @@ the cache still compiles as before (numba's compiler refreshes the context itsel
 0.2-0.3 CPU-s of numba's 1 CPU-s start-up, on the critical path of every run, re-bake and
 batch job (docs/benchmarks.md).
 
-The kernels are not loaded ahead on a thread: the start-up is imports and loads that hold the
-GIL, so a thread gained little (docs/benchmarks.md).
+The start-up's own kernels are not loaded ahead on a thread: the start-up is imports and loads
+that hold the GIL, so a thread gained little (docs/benchmarks.md).  The stages after the solver
+are another matter: :func:`preload` loads their kernels on the solver's warm-up thread while the
+solver's loop runs without the GIL (:func:`crackbake.simulate.warm.start`).
 """
 
 from __future__ import annotations
+
+import os
 
 
 def light_cache_loads() -> bool:
@@ -43,3 +47,32 @@ def light_cache_loads() -> bool:
     load_overload._crackbake_light = True
     cache.load_overload = load_overload
     return True
+
+
+def preload(dispatcher) -> int:
+    """Load ``dispatcher``'s machine code from numba's disk cache for every signature the cache
+    holds for this source and this machine, without calling it; how many were loaded.
+
+    For a thread that loads a later stage's kernels while the run's own thread computes: a
+    kernel's first call otherwise loads it there, under numba's global compiler lock, so the
+    write stage's encoders waited on each other's loads (0.4 s of them, serialised).  Never
+    compiles: an entry whose key is another source's or another machine's, or whose data file
+    is gone, is skipped (its first call compiles it as before).  Nothing is raised: this is only
+    a head start, and it relies on numba's cache internals (another numba version loads
+    nothing here).
+    """
+    count = 0
+    try:
+        cache = dispatcher._cache
+        files = cache._cache_file
+        codegen = dispatcher.targetctx.codegen()
+        for key, name in files._load_index().items():
+            sig = key[0]
+            if (tuple(sig) in dispatcher.overloads or cache._index_key(sig, codegen) != key
+                    or not os.path.exists(files._data_path(name))):
+                continue
+            dispatcher.compile(sig)
+            count += 1
+    except Exception:  # noqa: BLE001
+        pass
+    return count

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import re
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -186,7 +187,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         if params.cracks is None and uvmesh.udim is None:
             targets = _targets_ahead(ctx, params, 1)
         if params.cracks is None:
-            network, solver_stats, solved = solve(mesh, params, relative, timings, sources)
+            network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
+                                                  later=_later_kernels(params, uvmesh))
         maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
         # The writers are imported here, not before the UV stage: each stage imports its own
         # modules (the bake's GL and numba kernels, the stress bake's scipy.spatial) where it runs.
@@ -409,11 +411,14 @@ def solve(
     relative: dict,
     timings: dict[str, float],
     sources: list | None = None,
+    later: tuple = (),
 ) -> tuple[CrackNetwork, dict, Solved]:
     """Simulation mesh, stress field and crack solver: the network for a resolved run.
 
     Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).  ``sources``
     are the run's :func:`~crackbake.simulate.setup.stress_sources` when the caller built them.
+    ``later``: numba kernels of the stages after it, loaded from the cache on the solver's
+    warm-up thread once it is done (:func:`crackbake.simulate.warm.start`).
 
     Returns
     -------
@@ -433,19 +438,59 @@ def solve(
     from crackbake.simulate import simmesh, stress, timing  # noqa: F401
 
     warming = None
+    stop = threading.Event()
     if (params.method or "iben") == "iben":
         from crackbake.simulate import warm
 
-        # The solver's kernels load on a thread while the sim mesh and the field are built.
-        warming = warm.start()
+        # The solver's kernels load on a thread while the sim mesh and the field are built,
+        # then the later stages' while it solves.
+        warming = warm.start(later, stop)
     try:
         return _solve(mesh, params, relative, timings, sources)
     finally:
         if warming is not None:  # no numba load left running past the run (or its error)
+            stop.set()
             warming.join()
         from crackbake.geometry import forget
 
         forget()  # the sim mesh's memoised edges, shells and patches: this run's only
+
+
+def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
+    """The numba kernels a UV-placed bake of ``params`` calls after the solver, for the warm-up
+    thread to load from the cache while the solver runs: the bake's and the stress bake's
+    (on the run's thread), the encoders' (the write threads, whose first calls each loaded under
+    numba's one compiler lock, 0.4 s serialised).  Empty for UDIM pages and projected decals
+    (other kernels)."""
+    if uvmesh.udim is not None or params.decal is not None:
+        return ()
+    from crackbake import nearest
+    from crackbake.bake import dilation, grid, stress, stress_fields
+    from crackbake.geometry_kernels import facing_sum_kernel
+    from crackbake.simulate import timing
+
+    # the solve's end (the arrival times, the star check) first, then the bake's
+    later = [timing._arrival, nearest._grid, nearest._query, grid._bin_candidates,
+             dilation._gather]  # fmt: skip
+    formats = set(params.formats)
+    if "stress" in formats:
+        later += [stress_fields._node_sums, stress_fields._corner_rows,
+                  dilation._nearest_row_per_column, dilation._nearest_source,
+                  stress._fill_principal]  # fmt: skip
+    if {"exr", "stress"} & formats:
+        from crackbake.exchange import exrzip, stats_kernels
+
+        later += [exrzip._to_half, exrzip._predict_channel, stats_kernels.float_stats,
+                  stats_kernels.half_stats]  # fmt: skip
+    if {"png", "glb", "preview", "usd", "usdz"} & formats:
+        from crackbake.exchange import halving, packing
+
+        later += [packing._data16_rows, halving._base_color_half, halving._normal_half,
+                  halving._mip_half, packing._base_color, packing._normal_q, packing._lut_planes,
+                  packing._take, packing._quantise]  # fmt: skip
+    if "preview" in formats:
+        later.append(facing_sum_kernel)
+    return tuple(later)
 
 
 def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],

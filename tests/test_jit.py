@@ -75,3 +75,43 @@ def test_light_cache_loads_is_idempotent():
     patched = caching.Cache.load_overload
     assert jit.light_cache_loads()
     assert caching.Cache.load_overload is patched
+
+
+# Preloads the kernel from the cache (no call), then calls it: what preload loaded, and
+# whether the call compiled or loaded anything more.
+_PRELOAD = """
+import json
+from crackbake.jit import light_cache_loads, preload
+light_cache_loads()
+from tiny_kernel import ramp
+loaded = preload(ramp)
+had = len(ramp.overloads)
+out = ramp(5)
+print(json.dumps({"loaded": loaded, "had": had, "out": out.tolist(),
+                  "hits": sum(ramp.stats.cache_hits.values()),
+                  "misses": sum(ramp.stats.cache_misses.values())}))
+"""
+
+
+def test_preload_loads_the_cached_signatures_without_compiling(tmp_path):
+    (tmp_path / "tiny_kernel.py").write_text(textwrap.dedent(_KERNEL))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path), str(REPO)]))
+
+    def run() -> dict:
+        r = subprocess.run([sys.executable, "-c", _PRELOAD], env=env, capture_output=True,
+                           text=True, timeout=300)  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout.strip().splitlines()[-1])
+
+    cold = run()  # nothing cached: preload compiles nothing, the call compiles (and caches)
+    assert cold["loaded"] == 0 and cold["had"] == 0 and cold["misses"] == 1
+    warm = run()  # cached: preload loads it, and the call finds it loaded
+    assert warm["loaded"] == 1 and warm["had"] == 1
+    assert warm["hits"] == 1 and warm["misses"] == 0
+    assert cold["out"] == warm["out"] == [0.0, 0.5, 1.0, 1.5, 2.0]
+    # a source edited since: its old entries are another source's, never loaded
+    (tmp_path / "tiny_kernel.py").write_text(textwrap.dedent(_KERNEL).replace("0.5", "0.25"))
+    edited = run()
+    assert edited["loaded"] == 0 and edited["misses"] == 1
+    assert edited["out"] == [0.0, 0.25, 0.5, 0.75, 1.0]

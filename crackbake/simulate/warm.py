@@ -12,6 +12,7 @@ state with the run, and its result is dropped.
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from types import SimpleNamespace
 
 import numpy as np
@@ -52,16 +53,28 @@ def warm() -> None:
     solve_iben(sim, field, SolverParams(max_steps=50, max_cracks=4))
 
 
-def start() -> threading.Thread:
-    """:func:`warm` on a daemon thread, started; join it or let it run out."""
-    thread = threading.Thread(target=_quiet_warm, name="crackbake-iben-warm", daemon=True)
+def start(later: Sequence = (), stop: threading.Event | None = None) -> threading.Thread:
+    """:func:`warm` on a daemon thread, started; join it or let it run out.
+
+    ``later``: numba dispatchers of the stages after the solve (the bake's, the stress bake's,
+    the writers'), loaded from the disk cache next (:func:`crackbake.jit.preload`) while the
+    run's thread builds the field and solves, until ``stop`` is set (before the join)."""
+    thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop),
+                              name="crackbake-iben-warm", daemon=True)  # fmt: skip
     thread.start()
     return thread
 
 
-def _quiet_warm() -> None:
+def _quiet_warm(later: tuple = (), stop: threading.Event | None = None) -> None:
     # Only a head start: a failure here is the real solve's to report, with its own inputs.
     try:
         warm()
     except Exception:  # noqa: BLE001
         pass
+    if later:
+        from crackbake.jit import preload
+
+        for dispatcher in later:
+            if stop is not None and stop.is_set():
+                break
+            preload(dispatcher)
