@@ -133,6 +133,22 @@ def test_keep_mode_warns_on_overlapping_uvs(gl_ctx):
     assert out.overlap_fraction > 0.9
 
 
+def test_keep_mode_warns_when_the_uvs_cover_a_sliver_of_the_page():
+    """Kept UVs squeezed into a corner of the page (an atlas share, another tool's packing)
+    leave the cracks few texels: one line says so, with the texels across and the fixes; a
+    share of an atlas (9 % of the page) stays quiet."""
+    pts, faces = uv_grid(4, 4, 1.0, 1.0)
+    xyz = np.c_[pts, np.zeros(len(pts))]
+    small = make_mesh(xyz, faces, uv=0.4 + 0.1 * pts)  # 1 % of the page
+    with pytest.warns(CrackbakeWarning, match=r"cover only 1\.0% of the 2048px texture \(about "
+                      r"205 px across\).*raise --res, or use --uv unwrap"):
+        U.prepare_uvs(small, mode="keep", res=2048)
+    fine = make_mesh(xyz, faces, uv=0.4 + 0.3 * pts)  # 9 %: an atlas share, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CrackbakeWarning)
+        U.prepare_uvs(fine, mode="keep", res=2048)
+
+
 def test_keep_mode_refuses_out_of_range_uvs():
     mesh = torus_mesh(24, 12)
     tiled = make_mesh(mesh.vertices, mesh.faces, uv=mesh.vertices[:, :2] * 2.0)

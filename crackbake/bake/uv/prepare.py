@@ -13,13 +13,18 @@ import numpy as np
 
 from crackbake.bake.uv.check import DEGENERATE_AREA2, UVCheck, check_uvs, uv_area2
 from crackbake.bake.uv.unwrap import unwrap
-from crackbake.bake.uv.uvmesh import UVMesh, mesh_label
+from crackbake.bake.uv.uvmesh import UVMesh, mesh_label, uv_area_coverage
 from crackbake.errors import CrackbakeError, CrackbakeWarning
 from crackbake.io.mesh import Mesh
 from crackbake.params import UV_MODES
 
 # Above this overlap fraction kept UVs get a warning: mirrored/stacked islands repeat cracks.
 OVERLAP_WARN_FRACTION = 0.01
+#: Kept UVs covering less of the page than this get a warning: the maps have few texels for the
+#: cracks (a 4096² page then gives the asset under 920 texels across).  Lower than an unwrap's
+#: (:data:`crackbake.bake.uv.unwrap.COVERAGE_WARN`): a prop's share of a shared atlas is often
+#: a tenth of it, and an artist chose that layout.
+KEPT_COVERAGE_WARN = 0.05
 
 
 def kept_uvmesh(mesh: Mesh, check: UVCheck, res: int = 2048) -> UVMesh:
@@ -37,9 +42,21 @@ def kept_uvmesh(mesh: Mesh, check: UVCheck, res: int = 2048) -> UVMesh:
         )
     if check.outside_fraction > 0:
         warnings.warn(stray_message(label, mesh, check, res), CrackbakeWarning, stacklevel=3)
+    uv = np.asarray(mesh.uv, dtype=np.float64)
+    if check.tiles is None:  # a UDIM set has a page per tile
+        # The summed triangle area counts stacked islands twice: an upper bound of the page's
+        # share, so the warning never comes from overlap.
+        coverage = uv_area_coverage(uv, mesh.faces)
+        if coverage < KEPT_COVERAGE_WARN:
+            warnings.warn(
+                f"{label}: its own UVs cover only {coverage:.1%} of the {res}px texture (about "
+                f"{np.sqrt(coverage) * res:.0f} px across), so cracks get few texels; raise "
+                "--res, or use --uv unwrap for a page of the asset's own",
+                CrackbakeWarning,
+                stacklevel=3,
+            )
     # Not clipped: clipping would distort the straying faces.  The GLB keeps the artist's UVs
     # and the bake draws the straying parts again where REPEAT sampling shows them (wraps).
-    uv = np.asarray(mesh.uv, dtype=np.float64)
     n_degenerate = int(np.count_nonzero(uv_area2(uv[mesh.faces]) <= DEGENERATE_AREA2))
     if n_degenerate > OVERLAP_WARN_FRACTION * len(mesh.faces):
         warnings.warn(
@@ -123,7 +140,8 @@ def prepare_uvs(
     Warns
     -----
     CrackbakeWarning
-        Kept UVs overlapping by more than 1 %, or ``"auto"`` falling back to an unwrap.
+        Kept UVs overlapping by more than 1 % or covering under 5 % of the page, or ``"auto"``
+        falling back to an unwrap.
     """
     if mode not in UV_MODES:
         raise CrackbakeError(f"unknown UV mode '{mode}'; use one of {', '.join(UV_MODES)}")
