@@ -107,6 +107,32 @@ def test_started_is_set_before_the_kernel_and_changes_nothing():
     assert np.array_equal(pv, qv) and np.array_equal(pf, qf) and len(pf) < len(f)
 
 
+def test_the_kernel_is_loaded_before_started_is_set():
+    # In a fresh interpreter (nothing loaded yet): the caller starts GIL-holding work (libigl's
+    # AABB tree) once started is set, so a kernel still to load then waited for all of it.
+    import subprocess
+    import sys
+
+    code = """
+import threading
+from crackbake.simulate.simmesh.collapse import _fan, decimate_shortest
+from crackbake.simulate.simmesh.collapse_kernels import collapse_rounds
+
+class Seen(threading.Event):
+    def set(self):
+        self.loaded = len(collapse_rounds.overloads)
+        super().set()
+
+assert not collapse_rounds.overloads
+seen = Seen()
+decimate_shortest(*_fan(), 6, seen)
+print(seen.loaded)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.split() == ["1"]
+
+
 def test_border_edges_match_the_edge_counts():
     """The proxy's asset-border list (a per-vertex kernel) is exactly the sorted edges that
     ``geometry.edges`` counts once, on a plate with holes punched in it and a closed sphere."""

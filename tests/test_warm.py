@@ -48,3 +48,16 @@ def test_start_runs_a_daemon_thread_that_ends():
     assert thread.daemon
     thread.join(120)
     assert not thread.is_alive()
+
+
+def test_the_long_kernels_release_the_gil():
+    # The solve is seconds of one kernel on the run's thread; holding the GIL it kept the
+    # warm-up's loads, the targets' allocation and the gutter plan off the idle core.
+    from crackbake.bake import dilation, grid
+    from crackbake.simulate import timing
+    from crackbake.simulate.solver.iben import loop, update
+    from crackbake.simulate.solver.thesis import growth
+
+    for kernel in (loop.run, update.rebuild, update.requeue_all, growth.grow, timing._arrival,
+                   grid._bin_candidates, dilation._fill_plan):
+        assert kernel.targetoptions.get("nogil") is True, kernel.py_func.__qualname__

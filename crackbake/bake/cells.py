@@ -139,7 +139,7 @@ def _no_lists(n_faces: int, edge: int, nx: int) -> FaceBins:
                     np.zeros(1, np.uint32), np.zeros(1, np.float32), edge, nx)  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _nearest_bounds(lo, hi, a, b, origin, grid_cell, dims, cell_start, cell_items, limit):
     """Per box (lo, hi: (C, 3); empty where lo > hi), an upper bound of the distance from any of
     its points to the nearest segment (a, b: (S, 3)): the distance from its centre to the
@@ -211,7 +211,7 @@ def _clip(src, n, dst, axis, value, keep_above):
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_boxes(texel, faces, cover, edge, nx, res, to_local):
     """Per cell, the box (projector frame) of the faces clipped to its column, and the largest
     anti-aliasing reach of those faces; empty cells get lo > hi."""
@@ -310,7 +310,7 @@ def _box_distance2(a, b, lo, hi, ts):
     return best
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_candidates(lo, hi, reach, a, b, seg_lo, seg_hi, ids, origin, grid_cell, dims,
                      cell_start, cell_items, slack):  # fmt: skip
     """Each cell's segments (``ids``: their indices in the bake) within its reach, ascending by

@@ -109,7 +109,7 @@ def _nearest_source(near: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return src, dist2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _fill_plan(
     inside: np.ndarray, src: np.ndarray, dist2: np.ndarray, limit2: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

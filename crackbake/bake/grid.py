@@ -276,7 +276,7 @@ def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
     return origin, float(cell), dims, cell_start, seg[order]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bin_candidates(
     bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, origin, cell, dims, cell_start, cell_items,
     bin_start, out, bound, slack, fill,

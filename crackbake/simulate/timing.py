@@ -35,7 +35,7 @@ from crackbake.network import Crack, CrackNetwork
 __all__ = ["arrival_times", "front_speed", "grow_from_impacts"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _arrival(ptr, nbr, cost, t_node, start):  # pragma: no cover - compiled
     """Label-setting (Dijkstra) pass of T(v) = min over neighbours u of f(T(u)), with
     f(x) = t(v) when x <= t(v) and x + cost(u, v) otherwise.

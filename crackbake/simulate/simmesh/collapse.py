@@ -56,6 +56,11 @@ def decimate_shortest(vertices: np.ndarray, faces: np.ndarray, n_faces: int,
     v = np.array(vertices, dtype=np.float64)
     f = np.array(faces, dtype=np.int64)
     if started is not None:
+        # Loaded before the signal, so the call below goes straight into the GIL-free kernel:
+        # a first call loads it under numba's compiler lock, which the solver's warm-up thread
+        # may hold while it waits for the GIL, and the caller's GIL-holding work (libigl's AABB
+        # tree, 3 s at 1.5M faces) then kept the kernel waiting until the tree was done.
+        _load(collapse_rounds)
         started.set()
     alive = collapse_rounds(v, f, max(int(n_faces), 1), ROUND_SHARE, CLOSE_ENOUGH, MAX_ROUNDS)
     f = f[alive]
@@ -65,14 +70,30 @@ def decimate_shortest(vertices: np.ndarray, faces: np.ndarray, n_faces: int,
     return v[used], index[f]
 
 
+def _load(kernel) -> None:
+    """``kernel`` (:func:`.collapse_kernels.collapse_rounds`) loaded from numba's cache, or
+    compiled on a fan of faces when the cache has none for this source."""
+    from crackbake.jit import preload
+
+    preload(kernel)
+    if not kernel.overloads:
+        v, f = _fan()
+        kernel(v, f, 6, ROUND_SHARE, CLOSE_ENOUGH, MAX_ROUNDS)
+
+
+def _fan() -> tuple[np.ndarray, np.ndarray]:
+    """Eight faces around a raised centre: (9, 3) float64, (8, 3) int64."""
+    ring = np.array([[np.cos(a), np.sin(a), 0.0] for a in np.linspace(0, 2 * np.pi, 9)[:-1]])
+    v = np.vstack([[0.0, 0.0, 0.1], ring])
+    return v, np.array([[0, 1 + i, 1 + (i + 1) % 8] for i in range(8)], np.int64)
+
+
 def warm() -> None:
     """Compile (or load from numba's cache) the decimation kernel, which only assets above
     200k faces reach (:mod:`crackbake.precompile`'s runs are smaller): a fan of eight faces
     taken to six, and its border
     (:func:`.proxy.decimate` lists the asset's border edges)."""
-    ring = np.array([[np.cos(a), np.sin(a), 0.0] for a in np.linspace(0, 2 * np.pi, 9)[:-1]])
-    v = np.vstack([[0.0, 0.0, 0.1], ring])
-    f = np.array([[0, 1 + i, 1 + (i + 1) % 8] for i in range(8)], np.int64)
+    v, f = _fan()
     decimate_shortest(v, f, 6)
     from crackbake.simulate.simmesh.collapse_kernels import border_edges
 

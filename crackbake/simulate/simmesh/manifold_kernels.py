@@ -65,7 +65,7 @@ def fan_split(a: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     return vertex, extra[:n_extra].copy()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sorted_sides(a, b, n_vertices):  # pragma: no cover - numba
     """The face sides (a -> b, (3F,) each) in a stable order by undirected edge (by low, then
     high vertex, then side index: ``np.argsort(lo * n + hi, kind="stable")``), each side's

@@ -69,7 +69,7 @@ _WIDEN = 2  # crack_event: the table needs widening
 _NO_CRACK = np.int64(-1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def run(s, p, w, chunk):
     """Advance the crack loop on state ``s`` (a State) with parameters ``p`` (LoopParams) and
     scratch ``w`` (a Work) by at most ``chunk`` steps; see :func:`loop`."""

@@ -81,7 +81,7 @@ def key(val, taun, crack_of, n, tip_first):
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def rebuild(s, tip_first):
     """:func:`rebuild_heap` on named tuple ``s`` (a State)."""
     rebuild_heap(state_ref(s), tip_first)
@@ -109,7 +109,7 @@ def push(s, n, tip_first):
             rebuild_heap(s, tip_first)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def requeue_all(s, tip_first):
     """After a drying step (every node recomputed): invalidate every node's heap entry, mark it
     evaluated with the current shadow and rebuild the heap (``s``: a State)."""

@@ -19,7 +19,7 @@ from crackbake.simulate.solver.thesis.kernels import (
 )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grow(
     x: np.ndarray,
     normal: np.ndarray,
