@@ -172,7 +172,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     ctx = create_context()
-    targets = gutter = None
+    targets = gutter = stress_ahead = None
     try:
         # A re-bake has no solver to hide the targets' allocation behind: it starts before the
         # UV stage (which then shares the machine with it); a solving run starts it after its
@@ -189,6 +189,9 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
                                                   later=_later_kernels(params, uvmesh))
+        # The stress bake's rows (closest asset points, nodal values: CPU only) are computed on
+        # a thread while the crack bake runs; its draw waits for them.
+        stress_ahead = _stress_ahead(uvmesh, solved, params)
         maps = _bake(ctx, uvmesh, network, params, timings, targets, gutter)
         # The writers are imported here, not before the UV stage: each stage imports its own
         # modules (the bake's GL and numba kernels, the stress bake's scipy.spatial) where it runs.
@@ -200,7 +203,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         # leaving the block waits for every file, whatever happened inside it.
         with Writer(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx,
                     effective) as writer:  # fmt: skip
-            stress = _bake_stress(ctx, uvmesh, solved, params, timings)
+            stress = _bake_stress(ctx, uvmesh, solved, params, timings, stress_ahead)
             logger.info("writing %s", params.out_dir, extra={"stage": "write"})
             t = time.perf_counter()
             writer.finish(stress)
@@ -215,7 +218,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
-        for ahead in (targets, gutter):  # their threads end before the context
+        for ahead in (targets, gutter, stress_ahead):  # their threads end before the context
             if ahead is not None:
                 ahead.close()
         ctx.release()
@@ -370,10 +373,41 @@ def _decals(ctx, uvmesh, network, maps, params: RunParams, stage, timings) -> No
     timings["decals"] = time.perf_counter() - t
 
 
+class _StressAhead:
+    """:func:`crackbake.bake.stress.stress_rows` on a thread of its own, started now."""
+
+    def __init__(self, uvmesh: UVMesh, solved: Solved) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        from crackbake.bake.stress import stress_rows
+
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="crackbake-stress")
+        self.future = self._pool.submit(stress_rows, uvmesh, solved.result, uvmesh.tangents,
+                                        solved.sim)  # fmt: skip
+
+    def rows(self) -> tuple:
+        """The rows (the thread's error, if it failed)."""
+        return self.future.result()
+
+    def close(self) -> None:
+        """Wait for the thread (a run never leaves it running)."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _stress_ahead(uvmesh: UVMesh, solved: Solved | None, params: RunParams):
+    """The stress bake's rows started on a thread (:class:`_StressAhead`), or None where the
+    run bakes no stress, or pages of a UDIM set (each tile its own rows)."""
+    if solved is None or "stress" not in params.formats or uvmesh.udim is not None:
+        return None
+    return _StressAhead(uvmesh, solved)
+
+
 def _bake_stress(
-    ctx, uvmesh: UVMesh, solved: Solved | None, params: RunParams, timings: dict[str, float]
+    ctx, uvmesh: UVMesh, solved: Solved | None, params: RunParams, timings: dict[str, float],
+    ahead: _StressAhead | None = None,
 ) -> StressMaps | None:
-    """The stress-field maps, timed as ``stress_bake``; None when nothing was solved."""
+    """The stress-field maps, timed as ``stress_bake``; None when nothing was solved.
+    ``ahead``: their rows, started on a thread (:func:`_stress_ahead`)."""
     if solved is None or "stress" not in params.formats:
         return None  # a --cracks re-bake has no stress field
     from crackbake.bake.stress import bake_stress
@@ -400,6 +434,7 @@ def _bake_stress(
         dilate_px=params.dilate,
         tile=params.tile,
         ctx=ctx,
+        rows=None if ahead is None else ahead.rows(),
     )
     timings["stress_bake"] = time.perf_counter() - t
     return stress

@@ -174,7 +174,8 @@ def at_points(vertices: np.ndarray, faces: np.ndarray, nodal: np.ndarray,
 
 
 def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, initial=None,
-                dilate_px: int | None = None, tile: int = TILE_DEFAULT, ctx=None) -> StressMaps:
+                dilate_px: int | None = None, tile: int = TILE_DEFAULT, ctx=None,
+                rows: tuple | None = None) -> StressMaps:
     """Bake the solver's initial and final stress into tangent-frame maps.
 
     Parameters
@@ -199,11 +200,41 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
         Largest framebuffer edge: images are drawn in full-width bands of <= tile**2 texels.
     ctx : moderngl.Context, optional
         The run's context; a temporary one when not given.
+    rows : tuple, optional
+        :func:`stress_rows` of these arguments, prepared ahead (on another thread while the
+        crack bake runs); the maps are the same either way.
     """
     if res < 1:
         raise ValueError(f"res must be a positive texel count, got {res}")
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    data, index = rows if rows is not None else stress_rows(uvmesh, result, tangents, initial)
+    timings["prepare"] = time.perf_counter() - t0
+    planes = _render(ctx, data, res, tile, timings, index)
+    t1 = time.perf_counter()
+    inside = planes.pop("inside")
+    source = _sources(inside, dilate_px)
+    timings["nearest"] = time.perf_counter() - t1
+    t2 = time.perf_counter()
+    maps = {f: _principal_maps(planes, f, res, source) for f in FIELDS}
+    timings["principal"] = time.perf_counter() - t2
+    return StressMaps(res=res, stress0=maps["stress0"], stress=maps["stress"], inside=inside,
+                      timings=timings)
+
+
+def stress_rows(uvmesh, result, tangents: np.ndarray | None = None,
+                initial=None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The stress bake's vertex rows: the CPU half of :func:`bake_stress` (same arguments),
+    no GL.
+
+    Returns
+    -------
+    data : (R, 9 + 14) float32
+        Rows of uv, T, w, N and both fields' nodal values (:func:`draw_data` or, for a proxy
+        run, :func:`vertex_rows`).
+    index : (3M,) uint32 or None
+        The indexed draw's corners (a proxy run), None for an unindexed draw.
+    """
     tan = _tangents(uvmesh, tangents)
     v0, f0 = _initial_mesh(result, initial)
     s0 = np.asarray(result.stress_initial, np.float64)
@@ -226,17 +257,7 @@ def bake_stress(uvmesh, result, res: int, tangents: np.ndarray | None = None, in
     else:  # sim nodes lie near the asset, not in its faces: draw the asset at its own vertices
         data, index = vertex_rows(uvmesh, tan, at_points(v1, f1, nodal, uvmesh.vertices),
                                   getattr(uvmesh, "wraps", None))
-    timings["prepare"] = time.perf_counter() - t0
-    planes = _render(ctx, data, res, tile, timings, index)
-    t1 = time.perf_counter()
-    inside = planes.pop("inside")
-    source = _sources(inside, dilate_px)
-    timings["nearest"] = time.perf_counter() - t1
-    t2 = time.perf_counter()
-    maps = {f: _principal_maps(planes, f, res, source) for f in FIELDS}
-    timings["principal"] = time.perf_counter() - t2
-    return StressMaps(res=res, stress0=maps["stress0"], stress=maps["stress"], inside=inside,
-                      timings=timings)
+    return data, index
 
 
 def vertex_rows(uvmesh, tangents: np.ndarray, nodal: np.ndarray,
