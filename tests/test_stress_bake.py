@@ -243,6 +243,35 @@ def test_real_solver_on_a_plate_end_to_end(gl_ctx, method):
         assert (maps.stress.sep >= 0).all() and (maps.stress0.sep > 0).any()
 
 
+def test_rows_prepared_on_another_thread_bake_the_same_maps(gl_ctx):
+    # The pipeline computes stress_rows on a thread while the crack bake runs.
+    from concurrent.futures import ThreadPoolExecutor
+
+    from crackbake.bake.stress import stress_rows
+    from crackbake.simulate.solver import SolverParams
+    from crackbake.simulate.solver.iben import solve_iben
+    from crackbake.simulate.stress import ShrinkSource, stress_field
+
+    mesh = plate_mesh(2)
+    sim = build_simmesh(mesh, target_faces=3000, seed=2)
+    field = stress_field(sim, mesh, [ShrinkSource(strength=2.0)], seed=2)
+    result = solve_iben(sim, field, SolverParams(seed=2, max_cracks=20))
+    uvmesh = UVMesh(vertices=mesh.vertices, faces=mesh.faces, uv=mesh.uv, normals=mesh.normals,
+                    vertex_map=np.arange(len(mesh.vertices)), method="kept",
+                    overlap_fraction=0.0, padding_px=0)
+    tangents = np.tile([1.0, 0.0, 0.0, 1.0], (len(mesh.vertices), 1))
+    with ThreadPoolExecutor(1) as pool:
+        rows = pool.submit(stress_rows, uvmesh, result, tangents, sim).result()
+    ahead = bake_stress(uvmesh, result, 96, tangents=tangents, initial=sim, ctx=gl_ctx,
+                        rows=rows)
+    here = bake_stress(uvmesh, result, 96, tangents=tangents, initial=sim, ctx=gl_ctx)
+    assert np.array_equal(ahead.inside, here.inside) and ahead.inside.any()
+    for name in ("stress0", "stress"):
+        a, b = getattr(ahead, name), getattr(here, name)
+        for channel in ("xx", "yy", "xy", "p1", "p2", "dir", "sep"):
+            assert np.array_equal(getattr(a, channel), getattr(b, channel)), (name, channel)
+
+
 def test_initial_field_carried_onto_the_split_mesh_exactly(gl_ctx):
     """iben splits edges and nodes; the initial field drawn through the final mesh must be the
     same picture as drawn through the initial mesh (it is piecewise linear on both)."""
