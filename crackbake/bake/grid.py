@@ -183,14 +183,8 @@ def face_bins(
     a, b = np.asarray(segments.a, np.float64), np.asarray(segments.b, np.float64)
     seg_lo, seg_hi = np.minimum(a, b), np.maximum(a, b)
     grid = _segment_grid(seg_lo, seg_hi, cell)
-    args = (bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, *grid)
-    empty = np.zeros(0, np.uint32), np.zeros(0, np.float32)
-    counts = _bin_candidates(*args, np.zeros(1, np.int64), *empty, 0.0, False)
-    bin_start = np.zeros(len(first) + 1, np.int64)
-    np.cumsum(counts, out=bin_start[1:])
-    candidates = np.zeros(max(int(bin_start[-1]), 1), np.uint32)
-    bounds = np.zeros(len(candidates), np.float32)
-    _bin_candidates(*args, bin_start, candidates, bounds, slack, True)
+    bin_start, candidates, bounds = _bin_candidates(bin_lo, bin_hi, bin_reach, seg_lo, seg_hi,
+                                                    *grid, slack)  # fmt: skip
     return FaceBins(face_bin.astype(np.uint32), bin_start.astype(np.uint32), candidates, bounds)
 
 
@@ -278,13 +272,21 @@ def _segment_grid(seg_lo: np.ndarray, seg_hi: np.ndarray, cell: float):
 
 @njit(cache=True, nogil=True)
 def _bin_candidates(
-    bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, origin, cell, dims, cell_start, cell_items,
-    bin_start, out, bound, slack, fill,
+    bin_lo, bin_hi, bin_reach, seg_lo, seg_hi, origin, cell, dims, cell_start, cell_items, slack,
 ):  # fmt: skip
-    """Count (``fill`` False) or write (True) each bin's segments and their distance bounds."""
+    """Each bin's segments and their distance bounds, in one pass: ``bin_start`` (B + 1,)
+    int64, ``candidates`` (K,) uint32 and ``bounds`` (K,) float32 as :class:`FaceBins` holds
+    them (one zero entry when no bin lists a segment: GL refuses empty buffers).  The lists
+    grow by doubling: counting first and filling in a second search cost the search twice
+    (0.8 s at 1.5M faces)."""
     n_bins = bin_lo.shape[0]
-    counts = np.zeros(n_bins, np.int64)
+    bin_start = np.zeros(n_bins + 1, np.int64)
+    capacity = max(8 * n_bins, 1024)
+    out = np.zeros(capacity, np.uint32)
+    bound = np.zeros(capacity, np.float32)
+    total = 0
     for bi in range(n_bins):
+        bin_start[bi] = total
         r = bin_reach[bi]
         c0 = np.empty(3, np.int64)
         c1 = np.empty(3, np.int64)
@@ -330,16 +332,26 @@ def _bin_candidates(
             if j == 0 or found[by_index[j]] != found[by_index[j - 1]]:
                 keep[u] = by_index[j]
                 u += 1
-        counts[bi] = u
-        if fill:
-            keep = keep[:u]
-            # mergesort is stable: equal bounds keep ascending segment order.
-            order = np.argsort(gaps[keep], kind="mergesort")
-            for j in range(u):
-                e = keep[order[j]]
-                out[bin_start[bi] + j] = found[e]
-                bound[bin_start[bi] + j] = max(np.sqrt(gaps[e]) - slack, 0.0)
-    return counts
+        if total + u > capacity:
+            while total + u > capacity:
+                capacity *= 2
+            grown = np.zeros(capacity, np.uint32)
+            grown[:total] = out[:total]
+            out = grown
+            wider = np.zeros(capacity, np.float32)
+            wider[:total] = bound[:total]
+            bound = wider
+        keep = keep[:u]
+        # mergesort is stable: equal bounds keep ascending segment order.
+        order = np.argsort(gaps[keep], kind="mergesort")
+        for j in range(u):
+            e = keep[order[j]]
+            out[total + j] = found[e]
+            bound[total + j] = max(np.sqrt(gaps[e]) - slack, 0.0)
+        total += u
+    bin_start[n_bins] = total
+    size = max(total, 1)
+    return bin_start, out[:size].copy(), bound[:size].copy()
 
 
 def warm() -> None:
