@@ -99,3 +99,50 @@ def test_scope_without_a_context_makes_and_releases_its_own():
         assert ctx.version_code >= 430
         gl.keep(ctx.buffer(reserve=16))
     assert gl.ctx is None
+
+
+def test_finish_waits_for_the_draw_and_lets_other_threads_run(gl_ctx):
+    # moderngl holds the GIL while llvmpipe renders; finish() waits through ctypes instead, so
+    # a Python thread (the write stage's encoders, the stress bake's rows) keeps running.
+    import threading
+
+    import numpy as np
+
+    from crackbake.bake.context import _gl_finish, finish
+
+    assert _gl_finish() is not None  # glvnd's libOpenGL: the EGL set-up test_context needs
+    with GLScope(gl_ctx) as gl:
+        prog = gl.keep(gl.ctx.program(
+            vertex_shader="#version 330\nin vec2 p; void main() { gl_Position = vec4(p, 0, 1); }",
+            fragment_shader="#version 330\nout vec4 c; uniform int n; void main() { float s = 0;"
+                            " for (int i = 0; i < n; ++i) s += sin(float(i) * gl_FragCoord.x);"
+                            " c = vec4(s > -1e9 ? 1.0 : 0.0); }"))  # fmt: skip
+        vbo = gl.keep(gl.ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], np.float32)))
+        vao = gl.keep(gl.ctx.vertex_array(prog, [(vbo, "2f", "p")]))
+        tex = gl.keep(gl.ctx.texture((512, 512), 1, dtype="f4"))
+        fbo = gl.keep(gl.ctx.framebuffer([tex]))
+        fbo.use()
+        prog["n"].value = 600
+        count, stop = [0], threading.Event()
+
+        def spin():
+            while not stop.is_set():
+                count[0] += 1
+
+        spins = {}
+        thread = threading.Thread(target=spin)
+        thread.start()
+        try:
+            for name, wait in (("moderngl", gl_ctx.finish), ("finish", lambda: finish(gl_ctx))):
+                fbo.clear(0.0)
+                gl_ctx.finish()
+                start = count[0]
+                vao.render()
+                wait()
+                spins[name] = count[0] - start
+                pixels = np.frombuffer(fbo.read(components=1, dtype="f4"), np.float32)
+                assert (pixels == 1.0).all(), name  # the draw was complete
+        finally:
+            stop.set()
+            thread.join()
+    assert spins["finish"] > 5 * max(spins["moderngl"], 1000), spins

@@ -121,6 +121,35 @@ class GLScope:
             self.ctx = None
 
 
+def finish(ctx) -> None:
+    """Wait for ``ctx``'s GL work, letting other Python threads run meanwhile.
+
+    moderngl holds the GIL in every call, ``Context.finish`` and the readbacks included, so
+    while llvmpipe rendered (the crack pass, the stress bake, the preview: seconds at 4096² or
+    1.5M faces) the run's other threads stood still at their next Python line: the encoders
+    between chunks, the stress bake's rows, the sidecar.  ``glFinish`` called through
+    :mod:`ctypes` releases the GIL while it waits.  ``ctx.finish()`` follows it: a no-op once
+    the work is done, and the wait itself where the library is missing or ``ctx`` is not the
+    context current on this thread.
+    """
+    gl_finish = _gl_finish()
+    if gl_finish is not None:
+        gl_finish()
+    ctx.finish()
+
+
+@cache
+def _gl_finish():
+    """glvnd's ``glFinish`` (the context current on the calling thread) as a ctypes function,
+    or None."""
+    import ctypes
+
+    try:
+        return ctypes.CDLL("libOpenGL.so.0").glFinish
+    except (OSError, AttributeError):
+        return None
+
+
 def renderer_info(ctx) -> dict:
     """Vendor, renderer and version strings, for the manifest."""
     info = ctx.info

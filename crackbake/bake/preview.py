@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from crackbake.bake.context import GLScope, shader_source
+from crackbake.bake.context import GLScope, finish, shader_source
 from crackbake.geometry import face_cross, unit_rows
 from crackbake.io.mesh import Mesh
 from crackbake.network import CrackNetwork
@@ -270,10 +270,12 @@ def _draw(gl: GLScope, mesh, color, normal_map, size, mvp, key, fill,
         ctx.enable_only(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
     ms_fbo.clear(0.16, 0.17, 0.19, 1.0, depth=1.0)
     vao.render(moderngl.TRIANGLES)
+    finish(ctx)  # the GIL free while llvmpipe draws: the write stage's encoders go on
     if cull is not None:  # the context's other draws see both sides
         ctx.enable_only(moderngl.DEPTH_TEST)
         ctx.cull_face = "back"
     ctx.copy_framebuffer(out_fbo, ms_fbo)
+    finish(ctx)
     return np.frombuffer(out_fbo.read(components=3), np.uint8).reshape(size, size, 3)
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from crackbake.bake.cells import image_bins
-from crackbake.bake.context import GLScope, shader_source
+from crackbake.bake.context import GLScope, finish, shader_source
 from crackbake.bake.crack_targets import NAMES, NUMPY_TYPES, band_rows, channel_dtypes
 from crackbake.bake.dilation import PlanAhead, dilate
 from crackbake.bake.grid import FaceBins, face_bins
@@ -671,7 +671,7 @@ def _render(
                 passes.surface.render(moderngl.TRIANGLES)
                 # Finished here only so the profile splits the two passes (the crack pass
                 # waits for the surface targets anyway).
-                gl.ctx.finish()
+                finish(gl.ctx)
                 t_surface += time.perf_counter() - ta
                 gl.ctx.depth_func = ">"
                 singles[-1].depth_mask = False
@@ -736,7 +736,7 @@ def _crack_pass(ctx, fbo, cracks, res: int, rows: int, y0: int = 0, progress=Non
             if step < rows:
                 fbo.scissor = (0, r0, res, min(step, rows - r0))
             cracks.render(moderngl.TRIANGLES, vertices=vertices)
-            ctx.finish()
+            finish(ctx)  # the GIL free meanwhile: the stress bake's rows go on
             if progress is not None:
                 progress(y0 + min(r0 + step, rows), res)
     finally:

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit, prange
 
-from crackbake.bake.context import GLScope, shader_source
+from crackbake.bake.context import GLScope, finish, shader_source
 from crackbake.bake.dilation import nearest_island
 from crackbake.bake.stress_fields import (
     draw_data,
@@ -388,7 +388,7 @@ def _render(ctx, data: np.ndarray, res: int, tile: int, timings: dict[str, float
             fbo.use()
             fbo.clear(-1.0, -1.0, -1.0, -1.0)
             vao.render(moderngl.TRIANGLES)
-            gl.ctx.finish()
+            finish(gl.ctx)  # the GIL free meanwhile: the encoders go on
             tb = time.perf_counter()
             for k, n in enumerate(names):
                 fbo.read_into(images[n][y0:y0 + h], viewport=(0, 0, res, h), components=1,
