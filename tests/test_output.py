@@ -243,3 +243,20 @@ def test_a_signal_of_an_earlier_run_does_not_stop_a_later_commit(tmp_path):
         stage.path("mask.png").write_bytes(b"mask")
         stage.commit()
     assert (out / "mask.png").read_bytes() == b"mask"
+
+
+def test_remembered_hashes_are_the_records_and_follow_a_rewrite(tmp_path):
+    with OutputStage(tmp_path / "out") as stage:
+        a, b = stage.path("a.bin"), stage.path("b.bin")
+        a.write_bytes(b"first")
+        stage.remember(a, b"first")  # the bytes just written
+        b.write_bytes(b"second" * 1000)
+        stage.remember(b)  # read back
+        records = {r["name"]: r for r in stage.records()}
+        assert records["a.bin"]["sha256"] == hashlib.sha256(b"first").hexdigest()
+        assert records["b.bin"]["sha256"] == hashlib.sha256(b"second" * 1000).hexdigest()
+        a.write_bytes(b"other")  # rewritten after: hashed again
+        os.utime(a, ns=(1, 1))
+        again = {r["name"]: r for r in stage.records()}
+        assert again["a.bin"]["sha256"] == hashlib.sha256(b"other").hexdigest()
+        stage.commit()

@@ -128,10 +128,12 @@ def _smaller(maps: CrackMaps, size: int) -> CrackMaps | _Smaller:
 class _Encoder:
     """Encodes each distinct (content, bits, normal_y, size) texture once on the pool."""
 
-    def __init__(self, pool: ThreadPoolExecutor, maps: CrackMaps, texture: np.ndarray | None):
+    def __init__(self, pool: ThreadPoolExecutor, maps: CrackMaps, texture: np.ndarray | None,
+                 stage=None):  # fmt: skip
         self.pool = pool
         self.maps = maps
         self.texture = texture
+        self.stage = stage  # hashes each file as it is written (OutputStage.remember)
         self.requests: dict[tuple, list] = {}
 
     def want(self, key: tuple, path=None) -> tuple:
@@ -161,6 +163,8 @@ class _Encoder:
         del rows
         for path in paths:
             write_bytes(path, data)
+            if self.stage is not None:
+                self.stage.remember(path, data)
         return data if keep else None
 
     def _base(self, maps, size: int) -> np.ndarray:
@@ -272,13 +276,14 @@ class Writer:
             # converted in the job: numpy casts release the GIL, and the texture packs are
             # nogil kernels, so the conversion no longer waits behind them.
             path = stage.path(f"{stem}_cracks.exr")
-            jobs.append(pool.submit(_write_exr, path, maps, params.float32, **self.exr))
+            jobs.append(pool.submit(_write_exr, path, maps, params.float32, **self.exr,
+                                    stage=stage))  # fmt: skip
         self.pages = None
         if "preview" in formats:  # the picture is drawn by finish(); its pages are ready by then
             with_normal = getattr(self.uvmesh, "tangents", None) is not None
             self.pages = pool.submit(_preview_levels, maps, texture, with_normal)
             jobs.append(self.pages)
-        enc = _Encoder(pool, maps, texture)
+        enc = _Encoder(pool, maps, texture, stage)
         if "png" in formats:
             normal_y = normal_convention(params.target, params.normal_y)
             for f in TARGETS[params.target].files:
@@ -309,7 +314,8 @@ class Writer:
             return
         if stress is not None and "stress" in formats:
             path = stage.path(f"{stem}_stress.exr")
-            self.jobs.append(self.pool.submit(_write_stress_exr, path, stress, **self.exr))
+            self.jobs.append(self.pool.submit(_write_stress_exr, path, stress, **self.exr,
+                                              stage=stage))  # fmt: skip
         up = None
         if self.pages is not None or self.usd_textures is not None:
             up = up_vector(params.up, mesh, cache=params.cache)  # once: a hull when guessed
@@ -334,23 +340,30 @@ class Writer:
 
 
 def _write_network(network: CrackNetwork, stage) -> None:
-    write_sidecar(network, stage.path("cracks.json"))
-    write_obj(network, stage.path("cracks.obj"))
+    for name, write in (("cracks.json", write_sidecar), ("cracks.obj", write_obj)):
+        write(network, stage.path(name))
+        stage.remember(stage.path(name))  # hashed here, beside the encoders
 
 
-def _write_exr(path, maps: CrackMaps, float32: bool, compression: str, run: dict) -> None:
+def _write_exr(path, maps: CrackMaps, float32: bool, compression: str, run: dict,
+               stage=None) -> None:  # fmt: skip
     planes = crack_planes(maps.channels(), float32=float32)
     attributes = crack_attributes(
         __version__, maps.max_distance, maps.profile_shape, channels=planes
     )
     write_exr(path, planes, attributes={**run, **attributes}, compression=compression)
+    if stage is not None:  # hashed here, beside the other encoders (OutputStage.remember)
+        stage.remember(path)
 
 
-def _write_stress_exr(path, stress: StressMaps, compression: str, run: dict) -> None:
+def _write_stress_exr(path, stress: StressMaps, compression: str, run: dict,
+                      stage=None) -> None:  # fmt: skip
     attributes = stress_attributes(__version__, units=stress.units)
     attributes["crackbake:stressFrame"] = stress.frame
     write_exr(path, stress_planes(stress.fields(), units=stress.units),
               attributes={**run, **attributes}, compression=compression)  # fmt: skip
+    if stage is not None:
+        stage.remember(path)
 
 
 #: The glTF profile's name of each file the USD material reads, when the run's own PNGs hold
