@@ -172,7 +172,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     ctx = create_context()
-    targets = gutter = stress_ahead = None
+    targets = gutter = stress_ahead = preview_ahead = None
     try:
         # A re-bake has no solver to hide the targets' allocation behind: it starts before the
         # UV stage (which then shares the machine with it); a solving run starts it after its
@@ -184,6 +184,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
             targets.close()
             targets = None
         gutter = _bake_ahead(ctx, uvmesh, params, timings)
+        preview_ahead = _preview_ahead(uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets = _targets_ahead(ctx, params, 1)
         if params.cracks is None:
@@ -202,7 +203,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         # The crack maps' files encode on threads while the stress bake draws (issue 25);
         # leaving the block waits for every file, whatever happened inside it.
         with Writer(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx,
-                    effective) as writer:  # fmt: skip
+                    effective, closed=preview_ahead) as writer:  # fmt: skip
             stress = _bake_stress(ctx, uvmesh, solved, params, timings, stress_ahead)
             logger.info("writing %s", params.out_dir, extra={"stage": "write"})
             t = time.perf_counter()
@@ -218,7 +219,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
-        for ahead in (targets, gutter, stress_ahead):  # their threads end before the context
+        for ahead in (targets, gutter, stress_ahead, preview_ahead):  # threads end first
             if ahead is not None:
                 ahead.close()
         ctx.release()
@@ -373,20 +374,19 @@ def _decals(ctx, uvmesh, network, maps, params: RunParams, stage, timings) -> No
     timings["decals"] = time.perf_counter() - t
 
 
-class _StressAhead:
-    """:func:`crackbake.bake.stress.stress_rows` on a thread of its own, started now."""
+class _Ahead:
+    """``fn(*args)`` on a thread of its own, started now: later work that needs no GL and
+    does not wait on what the run's thread does meanwhile.  It raises no warning (they would
+    land in whatever the run's thread is recording)."""
 
-    def __init__(self, uvmesh: UVMesh, solved: Solved) -> None:
+    def __init__(self, name: str, fn, *args) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
-        from crackbake.bake.stress import stress_rows
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix=f"crackbake-{name}")
+        self.future = self._pool.submit(fn, *args)
 
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="crackbake-stress")
-        self.future = self._pool.submit(stress_rows, uvmesh, solved.result, uvmesh.tangents,
-                                        solved.sim)  # fmt: skip
-
-    def rows(self) -> tuple:
-        """The rows (the thread's error, if it failed)."""
+    def result(self):
+        """Its result (the thread's error, if it failed)."""
         return self.future.result()
 
     def close(self) -> None:
@@ -394,17 +394,31 @@ class _StressAhead:
         self._pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _stress_ahead(uvmesh: UVMesh, solved: Solved | None, params: RunParams):
-    """The stress bake's rows started on a thread (:class:`_StressAhead`), or None where the
-    run bakes no stress, or pages of a UDIM set (each tile its own rows)."""
+def _stress_ahead(uvmesh: UVMesh, solved: Solved | None, params: RunParams) -> _Ahead | None:
+    """The stress bake's rows (:func:`crackbake.bake.stress.stress_rows`) started on a
+    thread, or None where the run bakes no stress, or pages of a UDIM set (each tile its own
+    rows)."""
     if solved is None or "stress" not in params.formats or uvmesh.udim is not None:
         return None
-    return _StressAhead(uvmesh, solved)
+    from crackbake.bake.stress import stress_rows
+
+    return _Ahead("stress", stress_rows, uvmesh, solved.result, uvmesh.tangents, solved.sim)
+
+
+def _preview_ahead(uvmesh: UVMesh, params: RunParams) -> _Ahead | None:
+    """Whether the preview's faces close a surface (:func:`crackbake.bake.preview.closed_surface`,
+    the camera-free half of its culling check), worked out on a thread while the run solves;
+    None where the preview draws every face anyway."""
+    from crackbake.bake.preview import CULL_FACES, closed_surface
+
+    if "preview" not in params.formats or len(uvmesh.faces) < CULL_FACES:
+        return None
+    return _Ahead("preview", closed_surface, uvmesh.vertices, uvmesh.faces)
 
 
 def _bake_stress(
     ctx, uvmesh: UVMesh, solved: Solved | None, params: RunParams, timings: dict[str, float],
-    ahead: _StressAhead | None = None,
+    ahead: _Ahead | None = None,
 ) -> StressMaps | None:
     """The stress-field maps, timed as ``stress_bake``; None when nothing was solved.
     ``ahead``: their rows, started on a thread (:func:`_stress_ahead`)."""
@@ -434,7 +448,7 @@ def _bake_stress(
         dilate_px=params.dilate,
         tile=params.tile,
         ctx=ctx,
-        rows=None if ahead is None else ahead.rows(),
+        rows=None if ahead is None else ahead.result(),
     )
     timings["stress_bake"] = time.perf_counter() - t
     return stress

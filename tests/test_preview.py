@@ -78,6 +78,21 @@ def test_hidden_side_only_for_a_closed_surface_seen_from_outside():
     assert hidden_side(v, f, eye, 1.6) is None  # the near plane would cut it
 
 
+def test_closed_surface_worked_out_ahead_gives_the_same_side():
+    # The pipeline works out closed_surface on a thread while it solves.
+    from crackbake.bake.preview import closed_surface
+
+    v, f, _, _ = _sphere()
+    eye = np.array([0.0, 0.0, 4.0])
+    assert closed_surface(v, f) and closed_surface(v, f[:, ::-1])
+    assert not closed_surface(v, f[2:])
+    for faces in (f, f[:, ::-1], f[2:]):
+        for at, near in ((eye, 0.1), (np.array([0.0, 0.1, 0.2]), 0.01), (eye, 1.6)):
+            assert (hidden_side(v, faces, at, near, closed_surface(v, faces))
+                    == hidden_side(v, faces, at, near))
+    assert hidden_side(v, f[2:], eye, 0.1, closed=True) == "back"  # it takes the answer given
+
+
 def test_culled_preview_equals_the_full_draw_on_a_closed_surface(gl_ctx, monkeypatch):
     # The faces turned away are hidden behind the others: the pictures agree but for a few
     # silhouette samples where a face turned away won the depth test.

@@ -227,8 +227,9 @@ class Writer:
 
     def __init__(self, stage: OutputStage, stem: str, params: RunParams, mesh: Mesh,
                  uvmesh: UVMesh, network: CrackNetwork, maps: CrackMaps, ctx=None,
-                 effective: dict | None = None):  # fmt: skip
+                 effective: dict | None = None, closed=None):  # fmt: skip
         self.stage, self.stem, self.params, self.ctx = stage, stem, params, ctx
+        self.closed = closed  # the preview's closed_surface, worked out ahead (.result())
         self.mesh, self.uvmesh, self.network, self.maps = mesh, uvmesh, network, maps
         self.effective = effective
         self.udim = getattr(uvmesh, "udim", None) is not None
@@ -321,8 +322,9 @@ class Writer:
             up = up_vector(params.up, mesh, cache=params.cache)  # once: a hull when guessed
         if self.pages is not None:
             colour, normal, levels = self.pages.result()
+            closed = None if self.closed is None else self.closed.result()
             _draw_preview(stage, mesh, uvmesh, self.network, colour, normal, self.ctx, up,
-                          levels)  # fmt: skip
+                          levels, closed)  # fmt: skip
         if self.glb_keys:
             _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, self.encoded,
                        self.glb_keys)  # fmt: skip
@@ -490,7 +492,7 @@ def _preview_levels(maps: CrackMaps, texture, with_normal: bool):
 
 
 def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None,
-                  levels=None) -> None:  # fmt: skip
+                  levels=None, closed=None) -> None:  # fmt: skip
     """Render ``preview.png`` from its pages (:func:`_preview_pages`) with ``ctx``."""
     tangents = getattr(uvmesh, "tangents", None)
     view_dir, up, target, distance = preview_camera(mesh, network, up)
@@ -508,6 +510,7 @@ def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None,
         tangents=tangents,
         ctx=ctx,
         levels=levels,
+        closed=closed,
     )
     write_bytes(stage.path("preview.png"), png_bytes(picture, level=6, srgb=True))
 
