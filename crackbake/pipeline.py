@@ -520,7 +520,7 @@ def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
 
     # the solve's end (the arrival times, the star check) first, then the bake's
     later = [timing._arrival, nearest._grid, nearest._query, grid._bin_candidates,
-             dilation._gather]  # fmt: skip
+             grid.slice_members, dilation._gather]  # fmt: skip
     formats = set(params.formats)
     if "stress" in formats:
         later += [stress_fields._node_sums, stress_fields._corner_rows,

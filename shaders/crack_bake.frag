@@ -48,8 +48,10 @@ uniform float u_min_px;         // least drawn width, texels (0 = the physical w
 
 #ifdef CRACK_FACES
 in vec3 v_world;  // crack_bake.vert
-// Per drawn primitive p, at texel (p % 4096, p / 4096): its face, its face's bin.
+// Per drawn primitive p, at texel (p % 4096, p / 4096): its face, its face's bin.  Each slice of
+// the crack pass draws its own run of the table (the faces reaching its rows), from u_prim_base.
 layout(binding = 7) uniform usampler2D u_prim;
+uniform int u_prim_base;
 #else
 layout(binding = 0) uniform sampler2D u_point;   // xyz position, w = bin
 layout(binding = 1) uniform sampler2D u_dpx;     // xyz footprint along x, w = 1 on a face
@@ -82,7 +84,8 @@ void main() {
     // World-space footprint of one texel; the surface is affine inside a face.
     vec3 dpx = dFdx(v_world);
     vec3 dpy = dFdy(v_world);
-    uvec2 prim = texelFetch(u_prim, ivec2(gl_PrimitiveID & 4095, gl_PrimitiveID >> 12), 0).xy;
+    int drawn = u_prim_base + gl_PrimitiveID;
+    uvec2 prim = texelFetch(u_prim, ivec2(drawn & 4095, drawn >> 12), 0).xy;
     uint bin = prim.y;
     float face = float(prim.x);  // exact below 2^24 faces
 #else

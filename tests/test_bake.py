@@ -547,3 +547,30 @@ def test_stacked_islands_take_the_face_drawn_last(gl_ctx, crack_last):
     for name, arr in alone.channels().items():
         assert np.array_equal(arr, stacked.channels()[name]), name
     assert (float(alone.mask.max()) > 0.9) == crack_last
+
+
+def test_each_crack_pass_slice_draws_the_faces_reaching_its_rows_in_order(monkeypatch):
+    # Each slice of the crack pass draws only the listed faces whose rows reach it, in their
+    # order; compared with the rows measured here, over bands that do not divide the image.
+    import crackbake.bake.raster as raster
+
+    monkeypatch.setattr(raster, "SLICE_TEXELS", 64 * 37)  # 37 rows a slice at 64 texels
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(-0.05, 1.05, (400, 2))
+    uv[7, 1] = np.nan  # goes everywhere
+    faces = rng.integers(0, 400, (300, 3))
+    faces[:40, 1:] = faces[:40, :1]  # thin ones: a single row
+    listed = np.sort(rng.choice(300, 220, replace=False))
+    for band in (64, 50, 17):
+        drawn, slices = raster._slice_runs(uv, faces, listed, 64, band)
+        rows = (1.0 - uv[:, 1][faces[listed]]) * 64
+        reached = 0
+        for (y0, r0), (first, count) in slices.items():
+            top, bottom = y0 + r0, min(y0 + r0 + 37, y0 + band, 64)
+            lo, hi = np.nanmin(rows, axis=1), np.nanmax(rows, axis=1)
+            near = (np.ceil(hi) + 2 >= top) & (np.floor(lo) - 2 < bottom)
+            want = listed[near | np.isnan(rows).any(axis=1)]
+            assert np.array_equal(drawn[first:first + count], want), (band, y0, r0)
+            reached += count
+        assert reached == len(drawn)
+        assert len(slices) == sum(-(-min(band, 64 - y0) // 37) for y0 in range(0, 64, band))

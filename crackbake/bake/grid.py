@@ -354,6 +354,46 @@ def _bin_candidates(
     return bin_start, out[:size].copy(), bound[:size].copy()
 
 
+@njit(cache=True, nogil=True)
+def slice_members(v, faces, listed, res, tops, bottoms):  # pragma: no cover - numba
+    """For image slices of rows ``tops[s] <= row < bottoms[s]`` (sorted, disjoint): the
+    ``listed`` faces whose rows ``(1 - v) res``, widened by two, reach each slice, in their
+    order, slice after slice ((D,) int64), and each slice's first entry ((S + 1,) int64).  A
+    face with a coordinate that is not finite reaches every slice."""
+    n_slices = len(tops)
+    span = np.empty((len(listed), 2), np.int64)
+    counts = np.zeros(n_slices + 1, np.int64)
+    for k in range(len(listed)):
+        f = listed[k]
+        lo = np.inf
+        hi = -np.inf
+        finite = True
+        for c in range(3):
+            y = (1.0 - v[faces[f, c]]) * res
+            if not np.isfinite(y):
+                finite = False
+            lo = min(lo, y)
+            hi = max(hi, y)
+        first, last = 0, n_slices - 1
+        if finite:
+            lo = np.floor(lo) - 2.0
+            hi = np.ceil(hi) + 2.0
+            first = np.searchsorted(bottoms, lo, side="right")  # first slice with bottom > lo
+            last = np.searchsorted(tops, hi, side="right") - 1  # last slice with top <= hi
+        span[k, 0] = first
+        span[k, 1] = last
+        for s in range(first, last + 1):
+            counts[s + 1] += 1
+    starts = np.cumsum(counts)
+    fill = starts[:-1].copy()
+    out = np.empty(starts[-1], np.int64)
+    for k in range(len(listed)):
+        for s in range(span[k, 0], span[k, 1] + 1):
+            out[fill[s]] = listed[k]
+            fill[s] += 1
+    return out, starts
+
+
 def warm() -> None:
     """Compile (or load from numba's cache) :func:`_face_geometry`, which only meshes of
     :data:`KERNEL_FACES` faces or more reach (:mod:`crackbake.precompile`'s plates are

@@ -309,12 +309,15 @@ class _Passes:
     cracks: object | None
     inside: object | None
     program: object
+    #: With a UV placement: (first, count) of the crack pass's primitives for each slice,
+    #: keyed by (band's first row, slice's first row in the band); None: every slice draws all.
+    slices: dict | None = None
 
 
 def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bins: FaceBins,
               max_distance: float, profile_shape: float, frames: np.ndarray | None,
               projection: np.ndarray | None = None, min_px: float = 0.0,
-              terms: dict | None = None) -> _Passes:
+              terms: dict | None = None, band: int | None = None) -> _Passes:
     """The bake's passes (:class:`_Passes`) with their buffers and tables.
 
     The placement is the vertex shader: ``crack_bake.vert`` puts each face at its UVs,
@@ -365,13 +368,15 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
             fragment_shader=shader_variant("crack_bake.frag", with_normals,
                                            defines + ("CRACK_FACES",))))  # fmt: skip
         # The crack pass draws only the faces whose bin lists a segment, in their order (so
-        # where faces overlap the last drawn still wins), each with its face and bin.
+        # where faces overlap the last drawn still wins), each with its face and bin; each
+        # slice of it only those reaching the slice's rows (:func:`_slice_runs`).
         listed = np.flatnonzero(listed_face)
-        cracks = inside_screen = None
+        cracks = inside_screen = slices = None
         if len(listed):
-            prim = np.column_stack([listed, face_bin[listed]]).astype(np.uint32)
+            drawn, slices = _slice_runs(uv, faces, listed, res, band or res)
+            prim = np.column_stack([drawn, face_bin[drawn]]).astype(np.uint32)
             _table_texture(gl, prim, 1 << LIST_ROW_LOG2, "u4", 2).use(7)
-            sub = gl.keep(ctx.buffer(np.ascontiguousarray(faces[listed], np.uint32)))
+            sub = gl.keep(ctx.buffer(np.ascontiguousarray(faces[drawn], np.uint32)))
             cracks = gl.keep(ctx.vertex_array(prog, [(vbo, "2f 3f", "in_uv", "in_pos")],
                                               index_buffer=sub, index_element_size=4))
         prog["u_res"].value = float(res)
@@ -407,7 +412,7 @@ def _programs(gl: GLScope, vertices, faces, uv, segments: Segments, res: int, bi
     if bins.cell:
         prog["u_cell"].value = bins.cell
         prog["u_cells_x"].value = bins.cells_x
-    return _Passes(vao, cracks, inside_screen, prog)
+    return _Passes(vao, cracks, inside_screen, prog, None if projected else slices)
 
 
 #: Texture table rows of ``shaders/crack_bake.frag``: 2**10 segments (4 texels each), and 2**12
@@ -594,19 +599,18 @@ def _render(
     import moderngl
 
     with_normals = frames is not None
+    # Full-width bands of at most tile*tile texels: each band reads straight into the rows of
+    # the planar channel images (no interleaved copy), and GL memory stays bounded (25 bytes a
+    # texel: 4 of depth, 21 for the maps; 28 with the normal map, whose inside target holds the
+    # crack texels' records as R32F; a camera's placement adds 48 for the surface pass).
+    band = band_rows(res, tile)
     with GLScope(ctx) as gl:
         t1 = time.perf_counter()
         passes = _programs(
             gl, vertices, faces, uv, segments, res, bins, max_distance, profile_shape, frames,
-            projection, min_px, terms,
+            projection, min_px, terms, band,
         )  # fmt: skip
         prog_row0 = passes.program["u_row0"] if bins.cell else None
-        # Full-width bands of at most tile*tile texels: each band reads straight into the rows
-        # of the planar channel images (no interleaved copy), and GL memory stays bounded
-        # (25 bytes a texel: 4 of depth, 21 for the maps; 28 with the normal map, whose inside
-        # target holds the crack texels' records as R32F; a camera's placement adds 48 for the
-        # surface pass).
-        band = band_rows(res, tile)
         dtypes = channel_dtypes(with_normals)
         images = {n: _image(prefetch, (res, res), NUMPY_TYPES[d])
                   for n, d in zip(NAMES, dtypes, strict=True)}  # fmt: skip
@@ -687,7 +691,8 @@ def _render(
                     if not projected:
                         passes.program["u_tile"].value = tile_rect
                     _crack_pass(gl.ctx, fbo, passes.cracks, res, h, y0, reports,
-                                vertices=3 if projected else -1)  # fmt: skip
+                                vertices=3 if projected else -1, runs=passes.slices,
+                                program=passes.program)  # fmt: skip
                 tb = time.perf_counter()
                 t_draw += tb - ta
                 if records is None or records.used() <= records.capacity:
@@ -724,10 +729,12 @@ def _render(
 
 
 def _crack_pass(ctx, fbo, cracks, res: int, rows: int, y0: int = 0, progress=None,
-                vertices: int = -1) -> None:
+                vertices: int = -1, runs: dict | None = None, program=None) -> None:
     """Run the crack pass (``cracks``: its vertex array, ``vertices`` as its render takes)
     over the band's first ``rows`` rows (image rows ``y0 ..``), in slices of at most
-    :data:`SLICE_TEXELS` texels, each finished before the next is drawn."""
+    :data:`SLICE_TEXELS` texels, each finished before the next is drawn.  ``runs``
+    (:func:`_slice_runs`): each slice draws its own run of the primitives, from ``program``'s
+    ``u_prim_base``; None: every slice draws them all."""
     import moderngl
 
     step = max(1, SLICE_TEXELS // res)
@@ -735,13 +742,47 @@ def _crack_pass(ctx, fbo, cracks, res: int, rows: int, y0: int = 0, progress=Non
         for r0 in range(0, rows, step):
             if step < rows:
                 fbo.scissor = (0, r0, res, min(step, rows - r0))
-            cracks.render(moderngl.TRIANGLES, vertices=vertices)
+            if runs is None:
+                cracks.render(moderngl.TRIANGLES, vertices=vertices)
+            else:
+                first, count = runs[(y0, r0)]
+                if count:
+                    program["u_prim_base"].value = first
+                    cracks.render(moderngl.TRIANGLES, vertices=3 * count, first=3 * first)
             finish(ctx)  # the GIL free meanwhile: the stress bake's rows go on
             if progress is not None:
                 progress(y0 + min(r0 + step, rows), res)
     finally:
         if step < rows:
             fbo.scissor = None
+
+
+def _slice_runs(uv: np.ndarray, faces: np.ndarray, listed: np.ndarray, res: int,
+                band: int) -> tuple[np.ndarray, dict]:
+    """The crack pass's faces slice by slice (the slices of :func:`_crack_pass` in every
+    band of ``band`` rows): ``drawn`` (D,) int64, the ``listed`` faces that reach each slice's
+    rows in their order, one slice's run after the other, and ``{(band's first row, slice's
+    first row in the band): (first, count)}`` into it.
+
+    Every slice drew every listed face, and llvmpipe shaded and binned all of them before the
+    scissor dropped those elsewhere: at 1.5M faces 0.2 s a slice, 8 slices at 4096².  A
+    face's texels lie within its rows ``(1 - v) res`` (``crack_bake.vert``), widened by two
+    rows; a face with a coordinate that is not finite goes to every slice.  Within a slice the
+    faces keep their order, so where faces overlap the last drawn still wins: the pixels are
+    those of every face drawn.
+    """
+    from crackbake.bake.grid import slice_members
+
+    step = max(1, SLICE_TEXELS // res)
+    keys = [(y0, r0) for y0 in range(0, res, band) for r0 in range(0, min(band, res - y0), step)]
+    tops = np.array([y0 + r0 for y0, r0 in keys], np.float64)
+    bottoms = np.array([y0 + min(r0 + step, band, res - y0) for y0, r0 in keys], np.float64)
+    drawn, starts = slice_members(np.ascontiguousarray(np.asarray(uv, np.float64)[:, 1]),
+                                  np.ascontiguousarray(faces, np.int64),
+                                  np.ascontiguousarray(listed, np.int64), float(res), tops,
+                                  bottoms)  # fmt: skip
+    slices = {k: (int(starts[s]), int(starts[s + 1] - starts[s])) for s, k in enumerate(keys)}
+    return drawn, slices
 
 
 def _max_distance(vertices: np.ndarray, segments: Segments, max_distance: float | None) -> float:
