@@ -354,15 +354,30 @@ def _bin_candidates(
     return bin_start, out[:size].copy(), bound[:size].copy()
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _count_at_most(sorted_values, x):  # pragma: no cover - numba
+    # How many of the ascending values are <= x (a bisection).
+    lo, hi = 0, len(sorted_values)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_values[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @njit(cache=True, nogil=True)
 def slice_members(v, faces, listed, res, tops, bottoms):  # pragma: no cover - numba
     """For image slices of rows ``tops[s] <= row < bottoms[s]`` (sorted, disjoint): the
     ``listed`` faces whose rows ``(1 - v) res``, widened by two, reach each slice, in their
     order, slice after slice ((D,) int64), and each slice's first entry ((S + 1,) int64).  A
     face with a coordinate that is not finite reaches every slice."""
+    # Plain loops only: a cached kernel calling numba's numpy functions (np.cumsum,
+    # np.searchsorted) imports scipy.linalg when it loads (numba's BLAS check, 0.3 s).
     n_slices = len(tops)
     span = np.empty((len(listed), 2), np.int64)
-    counts = np.zeros(n_slices + 1, np.int64)
+    starts = np.zeros(n_slices + 1, np.int64)
     for k in range(len(listed)):
         f = listed[k]
         lo = np.inf
@@ -378,15 +393,16 @@ def slice_members(v, faces, listed, res, tops, bottoms):  # pragma: no cover - n
         if finite:
             lo = np.floor(lo) - 2.0
             hi = np.ceil(hi) + 2.0
-            first = np.searchsorted(bottoms, lo, side="right")  # first slice with bottom > lo
-            last = np.searchsorted(tops, hi, side="right") - 1  # last slice with top <= hi
+            first = _count_at_most(bottoms, lo)  # the first slice ending below lo
+            last = _count_at_most(tops, hi) - 1  # the last slice starting by hi
         span[k, 0] = first
         span[k, 1] = last
         for s in range(first, last + 1):
-            counts[s + 1] += 1
-    starts = np.cumsum(counts)
+            starts[s + 1] += 1
+    for s in range(n_slices):
+        starts[s + 1] += starts[s]
     fill = starts[:-1].copy()
-    out = np.empty(starts[-1], np.int64)
+    out = np.empty(starts[n_slices], np.int64)
     for k in range(len(listed)):
         for s in range(span[k, 0], span[k, 1] + 1):
             out[fill[s]] = listed[k]
