@@ -141,11 +141,12 @@ def readme_set(res: int) -> dict:
 
         class Capture(real):
             def __init__(self, stage, stem, params, mesh, uvmesh, network, maps, ctx=None,
-                         effective=None):  # fmt: skip
+                         effective=None, **later):  # fmt: skip
+                # ``later``: arguments of newer trees (``closed``, the preview's surface test)
                 captured.update(stem=stem, params=params, mesh=mesh, uvmesh=uvmesh,
                                 network=network, maps=maps, effective=effective)  # fmt: skip
                 super().__init__(stage, stem, params, mesh, uvmesh, network, maps, ctx,
-                                 effective)  # fmt: skip
+                                 effective, **later)  # fmt: skip
 
             def finish(self, stress=None):
                 captured["stress"] = stress

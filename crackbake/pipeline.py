@@ -509,18 +509,18 @@ def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
     """The numba kernels a UV-placed bake of ``params`` calls after the solver, for the warm-up
     thread to load from the cache while the solver runs: the bake's and the stress bake's
     (on the run's thread), the encoders' (the write threads, whose first calls each loaded under
-    numba's one compiler lock, 0.4 s serialised).  Empty for UDIM pages and projected decals
-    (other kernels)."""
+    numba's one compiler lock, 0.4 s serialised); then the writer's modules by name, to import.
+    Empty for UDIM pages and projected decals (other kernels)."""
     if uvmesh.udim is not None or params.decal is not None:
         return ()
     from crackbake import nearest
-    from crackbake.bake import dilation, grid, stress, stress_fields
+    from crackbake.bake import dilation, grid, normal_map, stress, stress_fields
     from crackbake.geometry_kernels import facing_sum_kernel
     from crackbake.simulate import timing
 
     # the solve's end (the arrival times, the star check) first, then the bake's
     later = [timing._arrival, nearest._grid, nearest._query, grid._bin_candidates,
-             grid.slice_members, dilation._gather]  # fmt: skip
+             grid.slice_members, normal_map.crack_texels, dilation._gather]  # fmt: skip
     formats = set(params.formats)
     if "stress" in formats:
         later += [stress_fields._node_sums, stress_fields._corner_rows,
@@ -539,6 +539,8 @@ def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
                   packing._take, packing._quantise]  # fmt: skip
     if "preview" in formats:
         later.append(facing_sum_kernel)
+    # the write stage's modules last (about 30 ms of imports, OpenEXR's bindings among them)
+    later += ["crackbake.exchange.bundle", "crackbake.exchange.manifest"]
     return tuple(later)
 
 

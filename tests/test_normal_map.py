@@ -525,3 +525,23 @@ def test_thin_groove_near_a_texel_row_shades_smoothly_along_the_crack(gl_ctx, w_
     np.testing.assert_allclose(maps.depth[rows][:, cols], mean_v(sd), rtol=0, atol=2e-3 * peak)
     expect = (mean_v(sd + e) - mean_v(sd - e)) / (2 * e) * np.cos(theta)
     np.testing.assert_allclose(band, expect, rtol=0, atol=0.01 * slope)
+
+
+def test_crack_texels_are_numpys_nonzero_and_gather():
+    # The compute pass's job list: the texels whose inside code is 2 + a record, row-major,
+    # as np.nonzero and a truncating gather give them (NaN and codes below 2 left out).
+    from crackbake.bake.normal_map import crack_texels
+
+    rng = np.random.default_rng(3)
+    code = np.zeros((64, 96), np.float32)
+    code[rng.random(code.shape) < 0.3] = 1.0
+    hit = rng.random(code.shape) < 0.05
+    code[hit] = 2.0 + rng.integers(0, 1 << 22, hit.sum()).astype(np.float32)
+    code[0, :4] = [np.nan, 2.0, np.nextafter(np.float32(2.0), np.float32(0.0)), 2.5]
+    rows, cols = np.nonzero(code >= 2)
+    want = (rows, cols, code[rows, cols].astype(np.int64) - 2)
+    got = crack_texels(code)
+    for a, b in zip(got, want, strict=True):
+        assert a.dtype == np.int64
+        np.testing.assert_array_equal(a, b)
+    assert [len(a) for a in crack_texels(np.ones((3, 5), np.float32))] == [0, 0, 0]

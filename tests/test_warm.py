@@ -61,3 +61,21 @@ def test_the_long_kernels_release_the_gil():
     for kernel in (loop.run, update.rebuild, update.requeue_all, growth.grow, timing._arrival,
                    grid._bin_candidates, dilation._fill_plan):
         assert kernel.targetoptions.get("nogil") is True, kernel.py_func.__qualname__
+
+
+def test_named_modules_are_imported_on_the_thread_and_a_bad_name_is_ignored():
+    # The pipeline hands the writer's modules by name: imported beside the solve, not after it.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from crackbake.simulate import warm\n"
+        "assert 'crackbake.exchange.manifest' not in sys.modules\n"
+        "t = warm.start(['crackbake.no_such_module', 'crackbake.exchange.manifest'])\n"
+        "t.join(120)\n"
+        "print('crackbake.exchange.manifest' in sys.modules, t.is_alive())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=180, check=True)  # fmt: skip
+    assert out.stdout.split() == ["True", "False"], out.stderr

@@ -37,6 +37,7 @@ reciprocity (``cos(alpha)`` for a V).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from crackbake.bake.context import shader_source
 from crackbake.errors import CrackbakeError
@@ -171,13 +172,12 @@ class NormalPass:
         y0 : int
             First image row of the band.
         """
-        rows, cols = np.nonzero(code >= 2)
+        rows, cols, record = crack_texels(np.ascontiguousarray(code, np.float32))
         if len(rows) == 0:
             return
         ctx = self.gl.ctx
         job = np.zeros((len(rows), 4), np.int32)
-        job[:, 0], job[:, 1] = cols, rows
-        job[:, 2] = code[rows, cols].astype(np.int64) - 2
+        job[:, 0], job[:, 1], job[:, 2] = cols, rows, record
         out = np.empty((len(rows), 4), np.float32)
         for start in range(0, len(rows), _DISPATCH):
             part = job[start : start + _DISPATCH]
@@ -197,3 +197,34 @@ class NormalPass:
                 result.release()
         for k, plane in enumerate(planes):
             plane[y0 + rows, cols] = out[:, k]
+
+
+@njit(cache=True, nogil=True)
+def crack_texels(code: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The texels of a band whose inside code is 2 or more, in row-major order: their rows,
+    columns and records (the code minus 2, truncated), each (K,) int64.
+
+    ``np.nonzero(code >= 2)`` and a gather give the same arrays; on a 4096² band they took
+    40-60 ms of the bake's main thread (a 16 MB mask, then numpy's 2-D nonzero), this scan
+    (one counting pass, one filling pass) about a tenth of that.
+    """
+    h, w = code.shape
+    n = 0
+    for i in range(h):
+        row = code[i]
+        for j in range(w):
+            n += row[j] >= np.float32(2.0)
+    rows = np.empty(n, np.int64)
+    cols = np.empty(n, np.int64)
+    record = np.empty(n, np.int64)
+    k = 0
+    for i in range(h):
+        row = code[i]
+        for j in range(w):
+            v = row[j]
+            if v >= np.float32(2.0):
+                rows[k] = i
+                cols[k] = j
+                record[k] = np.int64(v) - 2
+                k += 1
+    return rows, cols, record

@@ -58,7 +58,9 @@ def start(later: Sequence = (), stop: threading.Event | None = None) -> threadin
 
     ``later``: numba dispatchers of the stages after the solve (the bake's, the stress bake's,
     the writers'), loaded from the disk cache next (:func:`crackbake.jit.preload`) while the
-    run's thread builds the field and solves, until ``stop`` is set (before the join)."""
+    run's thread builds the field and solves, until ``stop`` is set (before the join); a
+    string is a module's name, imported there (the writers' modules: the solver's loop runs
+    without the GIL, so an import beside it is not on the run's path)."""
     thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop),
                               name="crackbake-iben-warm", daemon=True)  # fmt: skip
     thread.start()
@@ -72,9 +74,17 @@ def _quiet_warm(later: tuple = (), stop: threading.Event | None = None) -> None:
     except Exception:  # noqa: BLE001
         pass
     if later:
+        from importlib import import_module
+
         from crackbake.jit import preload
 
-        for dispatcher in later:
+        for item in later:
             if stop is not None and stop.is_set():
                 break
-            preload(dispatcher)
+            if isinstance(item, str):
+                try:
+                    import_module(item)
+                except Exception:  # noqa: BLE001 - the run's own import reports it
+                    pass
+            else:
+                preload(item)
