@@ -316,3 +316,41 @@ def test_concurrent_writes_give_the_same_bytes(tmp_path):
         w.join()
     assert len(got) == 12
     assert sum(g != want for g in got) == 0
+
+
+def test_uniform_chunks_reuse_the_first_ones_data(tmp_path, monkeypatch):
+    """A chunk whose channels each hold one value throughout takes the data of the first
+    such chunk of the same values and height: the file is the one each chunk encoded alone
+    gives, bit for bit (OpenEXR and OpenImageIO read the pixels back), with fewer deflates."""
+    import crackbake.exchange.exrzip as ez
+
+    h, w = 16 * 7 + 5, 40  # a short last chunk, uniform too
+    half = np.zeros((h, w), np.float16)
+    single = np.full((h, w), 0.05, np.float32)
+    ids = np.full((h, w), 7, np.uint32)
+    half[20:22, 3:9] = 0.5  # chunk 1 differs
+    single[16 * 4 : 16 * 5] = -0.0  # chunk 4: other bits, uniform (-0 is not +0)
+    ids[16 * 5 + 3, 11] = 8  # chunk 5 differs in one texel of one channel
+    planes = {"a.V": half, "b.V": single, "c.V": ids, "d.V": np.full((h, w), np.nan, np.float16)}
+    names = sorted(planes)
+    arrays = [np.ascontiguousarray(planes[n]) for n in names]
+    rows = [a.view(np.uint8).reshape(h, -1) for a in arrays]
+    line = sum(r.shape[1] for r in rows)
+    starts = range(0, h, 16)
+    calls = []
+    real = ez.deflate
+    monkeypatch.setattr(ez, "deflate",
+                        lambda data, level=None: calls.append(1) or real(data, level))
+    alone = ez._chunks(rows, starts, 16, h, line, None)
+    n_alone = len(calls)
+    reused = ez._chunks(rows, starts, 16, h, line, None, [a.dtype.itemsize for a in arrays])
+    assert reused == alone
+    assert n_alone == 8 and len(calls) - n_alone == 5  # chunks 0, 1, 4, 5 and the short 7th
+    path = tmp_path / "u.exr"
+    write_scanline(path, planes, {}, "zip", threads=1)
+    _same(read_exr(path)[0], planes)
+    img = oiio.ImageInput.open(str(path))
+    channel = list(img.spec().channelnames).index("b.V")
+    pixels = img.read_image("float")
+    img.close()
+    np.testing.assert_array_equal(pixels[..., channel], single)
