@@ -562,7 +562,8 @@ def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, flo
     try:
         with warnings.catch_warnings(record=True) as first:
             sim = build_simmesh(mesh, detail=params.detail, target_faces=params.sim_faces,
-                                seed=params.seed, proxy_above=params.proxy_above)
+                                seed=params.seed, proxy_above=params.proxy_above,
+                                cache=params.cache)
             timings["simmesh"] = time.perf_counter() - t
             logger.info("stress field on %d simulation faces", len(sim.faces),
                         extra={"stage": "stress"})
@@ -579,7 +580,8 @@ def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, flo
             with warnings.catch_warnings(record=True) as second:
                 origin = noise_origin(sim)
                 sim = build_simmesh(mesh, detail=sim.edge_length, seed=params.seed,
-                                    proxy=sim.proxy, proxy_above=params.proxy_above, local=local)
+                                    proxy=sim.proxy, proxy_above=params.proxy_above, local=local,
+                                    cache=params.cache)
                 field = stress_field(sim, mesh, sources, seed=params.seed, noise_origin=origin)
     finally:
         _warn_once(first, second)

@@ -260,3 +260,94 @@ def test_rebakes_from_the_cache_write_the_same_files(cache, tmp_path):
     # the positions did not move: the up axis is the one guessed before
     assert all(len(list(cache.glob(f"{k}-*.npys"))) == 2 for k in kinds[:3])
     assert len(list(cache.glob("up-*.npys"))) == 1
+
+
+def _sim_arrays(sim) -> dict:
+    names = ("vertices", "faces", "asset_face", "node_face", "node_bary", "boundary")
+    return {n: getattr(sim, n) for n in names}
+
+
+def _same_sim(a, b) -> bool:
+    return a.edge_length == b.edge_length and a.proxy is None and b.proxy is None and all(
+        x.dtype == y.dtype and np.array_equal(x, y)
+        for x, y in zip(_sim_arrays(a).values(), _sim_arrays(b).values(), strict=True))
+
+
+def test_sim_mesh_cached_equals_the_built_and_says_its_warnings_again(cache):
+    """The sim mesh refined in the asset's faces: stored by the first build, read by the next
+    (the same arrays and edge length), with the build's warnings given again; another seed,
+    edge length or refined ball is another mesh; the cache off touches no file."""
+    import warnings
+
+    from crackbake.simulate.simmesh import Local, build_simmesh
+
+    mesh = plate_mesh(6, wobble=0.4, seed=2)
+    # a duplicated face: the build warns (and leaves it out of the simulation)
+    mesh = type(mesh)(vertices=mesh.vertices, faces=np.vstack([mesh.faces, mesh.faces[:1]]),
+                      uv=mesh.uv, normals=mesh.normals, source=mesh.source)  # fmt: skip
+
+    def build(**kw):
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            sim = build_simmesh(mesh, target_faces=400, **kw)
+        return sim, [str(w.message) for w in said]
+
+    plain, said = build()
+    assert said and "duplicated face" in said[0]
+    assert not cache.exists()
+    first, said_first = build(cache=True)
+    (path,) = cache.glob("simmesh-*.npys")
+    second, said_second = build(cache=True)
+    assert _same_sim(plain, first) and _same_sim(plain, second)
+    assert said_first == said_second == said
+    assert list(cache.glob("simmesh-*.npys")) == [path]
+    other, _ = build(cache=True, seed=5)
+    assert not _same_sim(plain, other) and _same_sim(other, build(seed=5)[0])
+    ball = Local(centres=np.array([[0.5, 0.5, 0.0]]), radii=np.array([0.2]),
+                 edges=np.array([0.02]))  # fmt: skip
+    fine, _ = build(cache=True, local=ball)
+    assert _same_sim(fine, build(local=ball)[0]) and len(fine.faces) > len(plain.faces)
+    assert len(list(cache.glob("simmesh-*.npys"))) == 3
+    # a file whose arrays do not fit the asset is built again, and replaced
+    with open(path, "wb") as fh:
+        np.save(fh, np.array(path.stem.removeprefix("simmesh-")))
+        for a in _sim_arrays(plain).values():
+            np.save(fh, a + 1000 if a.dtype == np.int64 else a)
+        np.save(fh, np.array('{"edge_length": 1.0, "warnings": []}'))
+    again, said_again = build(cache=True)
+    assert _same_sim(plain, again) and said_again == said
+
+
+def test_a_proxy_sim_mesh_is_never_cached(cache):
+    from crackbake.simulate.simmesh import build_simmesh
+
+    mesh = plate_mesh(12)
+    sim = build_simmesh(mesh, target_faces=100, proxy_above=100, cache=True)
+    assert sim.proxy is not None
+    assert not list(cache.glob("simmesh-*.npys"))
+    small = build_simmesh(mesh, target_faces=100, proxy_above=10_000, cache=True)
+    assert small.proxy is None and len(list(cache.glob("simmesh-*.npys"))) == 1
+
+
+def test_solving_runs_from_the_cached_sim_mesh_write_the_same_files(cache, tmp_path):
+    """Two solving bakes through the pipeline: the second reads the sim mesh and writes the
+    bytes a run without the cache writes."""
+    from crackbake.params import RunParams
+    from crackbake.params.impacts import Impact
+    from crackbake.pipeline import run
+
+    obj = tmp_path / "plate.obj"
+    _obj(obj, 0.1)
+
+    def bake(name, folder=cache):
+        os.environ["CRACKBAKE_CACHE_DIR"] = str(folder)  # the fixture restores it
+        run(RunParams(mesh=obj, impacts=(Impact((1.0, 0.5, 0.0)),), res=128, sim_faces=2000,
+                      out=tmp_path / name))  # fmt: skip
+        return _files(tmp_path / name)
+
+    plain = bake("plain", tmp_path / "empty")
+    assert bake("first") == plain
+    (path,) = cache.glob("simmesh-*.npys")
+    inode = path.stat().st_ino
+    assert bake("second") == plain
+    assert path.stat().st_ino == inode  # read, not written again

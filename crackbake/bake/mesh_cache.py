@@ -17,12 +17,18 @@ Two results are kept, each a pure function of inputs the key hashes in full:
 - the check of an asset's own UVs (:func:`crackbake.bake.uv.check.check_uvs`: range, strays,
   their wrapped copies, overlap measured with GL): keyed by the UVs, the faces, the vertex count
   and the renderer (vendor, renderer and version strings), whose rasterisation it counts.
+- the simulation mesh (:func:`crackbake.simulate.simmesh.build_simmesh`, refined in the
+  asset's own faces: an asset under :data:`~crackbake.simulate.simmesh.proxy.PROXY_MIN_FACES`),
+  with the warnings its build gave: keyed by the asset's positions and faces, the build's
+  arguments (edge length or face count, seed, jitter, refined balls) and the versions of
+  numpy, numba and Triangle.  An artist who moves the impact re-solves on the same sim mesh
+  (the README bake: 0.4-0.5 s of its 2-core wall).
 
 Each key also hashes the source of the modules that compute the result, so an edited kernel
 never meets an old answer.  The files live beside the cached unwraps
 (:func:`crackbake.bake.uv.cache.cache_dir`) as ``<kind>-<key>.npys`` (``gutter``,
-``tangents``, ``up``, ``uvcheck``; .npy records in a row: read straight into the arrays,
-without a zip's CRC and copies), and together take at most :data:`MAX_BYTES`, the least
+``tangents``, ``up``, ``uvcheck``, ``simmesh``; .npy records in a row: read straight into the
+arrays, without a zip's CRC and copies), and together take at most :data:`MAX_BYTES`, the least
 recently used removed first (a hit refreshes a file's time).  A failure to write is logged,
 never raised: the cache is an optimisation.
 """
@@ -47,7 +53,7 @@ MESH_CACHE_VERSION = 1
 MAX_BYTES = 1 << 30
 
 _SUFFIX = ".npys"
-_KINDS = ("gutter", "tangents", "uvcheck", "up")
+_KINDS = ("gutter", "tangents", "uvcheck", "up", "simmesh")
 
 
 @cache
@@ -349,3 +355,100 @@ def read_up(key: str) -> np.ndarray | None:
 def write_up(key: str, up: np.ndarray) -> None:
     """Store the up axis of the mesh keyed ``key`` (:func:`up_key`)."""
     _store("up", key, [np.asarray(up, np.float64)])
+
+
+# --- the simulation mesh --------------------------------------------------------------------
+
+_SIMMESH_MODULES = ("crackbake.simulate.simmesh.build", "crackbake.simulate.simmesh.layout",
+                    "crackbake.simulate.simmesh.manifold",
+                    "crackbake.simulate.simmesh.manifold_kernels",
+                    "crackbake.simulate.simmesh.triangulate", "crackbake.geometry",
+                    "crackbake.geometry_kernels")  # fmt: skip
+_SIMMESH_ARRAYS = ("vertices", "faces", "asset_face", "node_face", "node_bary", "boundary")
+
+
+@cache
+def _versions() -> str:
+    """The versions of the libraries a sim mesh's numbers come from (their ``__version__``:
+    a solving run has imported numpy and numba by then; the package metadata took 40 ms)."""
+    import numba
+    import triangle
+
+    return ",".join(f"{m.__name__}={getattr(m, '__version__', '?')}"
+                    for m in (np, numba, triangle))  # fmt: skip
+
+
+def simmesh_key(vertices, faces, settings: dict, local=None) -> str:
+    """Hex SHA-256 of what a sim mesh refined in the asset's faces depends on: the asset's
+    positions and faces, the build's ``settings`` (JSON-able scalars), the refined balls
+    ``local`` (:class:`~crackbake.simulate.simmesh.Local` or None), the code and the
+    libraries' versions."""
+    import json
+
+    h = _hasher("simmesh", *_SIMMESH_MODULES)
+    h.update(f"{_versions()}:{json.dumps(settings, sort_keys=True)}:".encode())
+    parts = [("vertices", vertices, np.float64), ("faces", faces, np.int64)]
+    if local is not None:
+        parts += [("centres", local.centres, np.float64), ("radii", local.radii, np.float64),
+                  ("edges", local.edges, np.float64)]  # fmt: skip
+    for name, arr, dtype in parts:
+        a = np.ascontiguousarray(arr, dtype=dtype)
+        h.update(f"{name}{a.shape}:".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def read_simmesh(key: str, n_asset_faces: int):
+    """``(arrays, edge_length, warnings)`` of the sim mesh keyed ``key``: its six arrays by
+    name, its edge length and the warnings its build gave (category, message, filename,
+    line), or None (missing, unreadable, or arrays that do not fit together or the asset)."""
+    import json
+
+    from crackbake.errors import CrackbakeWarning
+
+    loaded = _load("simmesh", key, len(_SIMMESH_ARRAYS) + 1)
+    if loaded is None:
+        return None
+    arrays = dict(zip(_SIMMESH_ARRAYS, loaded, strict=False))
+    try:
+        extra = json.loads(str(loaded[-1]))
+        edge_length = float(extra["edge_length"])
+        said = []
+        for category, message, filename, line in extra["warnings"]:
+            kind = {"CrackbakeWarning": CrackbakeWarning}.get(category)
+            if kind is None:
+                return None
+            said.append((kind, str(message), str(filename), int(line)))
+    except (ValueError, KeyError, TypeError):
+        return None
+    v, f = arrays["vertices"], arrays["faces"]
+    n = len(v)
+    if (
+        v.dtype != np.float64 or v.ndim != 2 or v.shape[1] != 3
+        or f.dtype != np.int64 or f.ndim != 2 or f.shape[1] != 3
+        or (f.size and (f.min() < 0 or f.max() >= n))
+        or arrays["asset_face"].dtype != np.int64 or arrays["asset_face"].shape != (len(f),)
+        or arrays["node_face"].dtype != np.int64 or arrays["node_face"].shape != (n,)
+        or arrays["node_bary"].dtype != np.float64 or arrays["node_bary"].shape != (n, 3)
+        or arrays["boundary"].dtype != np.bool_ or arrays["boundary"].shape != (n,)
+        or any(len(a) and (a.min() < 0 or a.max() >= n_asset_faces)
+               for a in (arrays["asset_face"], arrays["node_face"]))
+    ):  # fmt: skip
+        return None
+    return arrays, edge_length, said
+
+
+def write_simmesh(key: str, sim, said: list) -> None:
+    """Store the sim mesh ``sim`` (refined in the asset's faces: no proxy) and its build's
+    warnings ``said`` (``warnings.WarningMessage``) under ``key`` (:func:`simmesh_key`);
+    nothing is stored when a warning is not crackbake's own."""
+    import json
+
+    rows = []
+    for w in said:
+        if w.category.__name__ != "CrackbakeWarning":
+            return
+        rows.append([w.category.__name__, str(w.message), str(w.filename), int(w.lineno)])
+    text = json.dumps({"edge_length": float(sim.edge_length), "warnings": rows})
+    _store("simmesh", key, [np.asarray(getattr(sim, name)) for name in _SIMMESH_ARRAYS]
+           + [np.array(text)])  # fmt: skip

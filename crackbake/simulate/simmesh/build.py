@@ -14,7 +14,7 @@ from crackbake.params import SIM_FACES_DEFAULT
 from crackbake.params import SIM_FACES_MAX as MAX_SIM_FACES
 from crackbake.simulate.simmesh.layout import edge_point_counts, face_frames_2d, lattice_points
 from crackbake.simulate.simmesh.manifold import duplicate_faces, split_nonmanifold
-from crackbake.simulate.simmesh.proxy import Proxy, decimate, proxy_limit
+from crackbake.simulate.simmesh.proxy import PROXY_MIN_FACES, Proxy, decimate, proxy_limit
 from crackbake.simulate.simmesh.triangulate import FaceSet, Refined, refine_faces
 
 # Area of an equilateral triangle of unit side: a triangular lattice of spacing h holds
@@ -212,6 +212,7 @@ def build_simmesh(
     proxy_above: int | None = None,
     proxy: Proxy | None = None,
     local: Local | None = None,
+    cache: bool = False,
 ) -> SimMesh:
     """Build the simulation mesh: a conforming, welded refinement inside each asset face, or
     inside the faces of a decimated proxy when the asset is far denser than wanted.
@@ -240,6 +241,11 @@ def build_simmesh(
         Balls meshed finer: an asset (or proxy) face whose centroid lies in a ball gets that
         ball's edge length (the faces' shared edges take the mean of their point requests and
         Triangle's quality bound grades the transition).
+    cache : bool
+        Read and store a mesh refined in the asset's own faces (an asset of at most
+        :data:`~.proxy.PROXY_MIN_FACES` faces, or ``proxy_above``) in the mesh cache
+        (:mod:`crackbake.bake.mesh_cache`), with the warnings its build gave, which a read
+        gives again: the same arrays as a build.
 
     Returns
     -------
@@ -251,6 +257,36 @@ def build_simmesh(
         ``detail`` <= 0, ``target_faces`` < 100, an estimated sim mesh above 20M faces, a bad
         jitter, or a mesh without area.
     """
+    limit = PROXY_MIN_FACES if proxy_above is None else proxy_above
+    if not cache or proxy is not None or len(mesh.faces) > limit:  # a proxy: never cached
+        return _build(mesh, detail, target_faces, seed, jitter, proxy_above, proxy, local)
+    from crackbake.bake.mesh_cache import read_simmesh, simmesh_key, write_simmesh
+
+    settings = {"detail": None if detail is None else float(detail),
+                "target_faces": None if target_faces is None else int(target_faces),
+                "default_faces": int(SIM_FACES_DEFAULT), "seed": int(seed),
+                "jitter": float(jitter)}  # fmt: skip
+    key = simmesh_key(mesh.vertices, mesh.faces, settings, local)
+    hit = read_simmesh(key, len(mesh.faces))
+    if hit is not None:
+        arrays, edge_length, said = hit
+        for category, message, filename, line in said:
+            warnings.warn_explicit(message, category, filename, line)
+        return SimMesh(**arrays, edge_length=edge_length, proxy=None, local=local)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")  # every warning recorded, whatever the caller's filters
+        sim = _build(mesh, detail, target_faces, seed, jitter, proxy_above, proxy, local)
+    for w in said:  # the caller's filters decide now, as they would have
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
+    if sim.proxy is None:
+        write_simmesh(key, sim, said)
+    return sim
+
+
+def _build(mesh: Mesh, detail: float | None, target_faces: int | None, seed: int,
+           jitter: float, proxy_above: int | None, proxy: Proxy | None,
+           local: Local | None) -> SimMesh:
+    """:func:`build_simmesh` without the cache."""
     h, wanted = _check_size(mesh, detail, target_faces, jitter)
     rng = np.random.default_rng(seed)
     if proxy is None:
@@ -366,7 +402,7 @@ def _manifold_copy(wv: np.ndarray, wf_all: np.ndarray, keep: np.ndarray):
             f"{int(dup.sum())} duplicated face(s) (same three vertices as another face) are left "
             "out of the crack simulation and still baked; remove them to silence this",
             CrackbakeWarning,
-            stacklevel=5,
+            stacklevel=6,
         )
     wf, origin, n_cut = split_nonmanifold(wf_all[keep], len(wv))
     n_split = len(origin) - len(wv)
@@ -380,7 +416,7 @@ def _manifold_copy(wv: np.ndarray, wf_all: np.ndarray, keep: np.ndarray):
             f"the mesh is not manifold ({' and '.join(what)}); each manifold patch is simulated "
             "on its own and cracks end where patches meet; repair the mesh to join them",
             CrackbakeWarning,
-            stacklevel=5,
+            stacklevel=6,
         )
         wv = wv[origin]
     return wf, keep, wv, len(wv)
