@@ -93,4 +93,4 @@ def test_each_case_runs_with_an_empty_cache_of_its_own(tmp_path, monkeypatch):
     pc._run_case("probe", tmp_path)
     assert not user.exists()
     own = {p.name.split("-")[0] for p in (tmp_path / "cache-probe").iterdir()}
-    assert own == {"gutter", "tangents", "uvcheck", "up"}
+    assert own == {"gutter", "tangents", "uvcheck", "up", "simmesh"}

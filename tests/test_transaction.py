@@ -336,6 +336,39 @@ def test_signals_wait_for_a_deferred_section():
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # handler put back
 
 
+def test_a_signal_during_an_import_is_raised_after_it(tmp_path):
+    """SIGTERM arriving while the main thread imports a module is raised once the import is
+    done: an exception inside the import machinery can leave Python's import lock held, and a
+    re-bake stopped so hung (its encoder threads waiting on their imports for ever)."""
+    code = (
+        "import os, signal, sys, threading, time\n"
+        "sys.path.insert(0, sys.argv[1])\n"
+        "from crackbake.transaction.interrupt import Interrupt, interruptible\n"
+        "def slow():\n"
+        "    time.sleep(0.3)\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "threading.Thread(target=slow).start()\n"
+        "try:\n"
+        "    with interruptible():\n"
+        "        import slowmod\n"
+        "        time.sleep(5)\n"
+        "except Interrupt as exc:\n"
+        "    print('interrupted', exc.signum, slowmod.DONE)\n"
+        "t = threading.Thread(target=lambda: __import__('json'))\n"
+        "t.start(); t.join(10)\n"
+        "print('imports work', not t.is_alive())\n"
+    )
+    # the module's body spins in Python (the signal's handler runs in it) for about a second
+    (tmp_path / "slowmod.py").write_text(
+        "import time\nend = time.monotonic() + 1.0\nwhile time.monotonic() < end:\n"
+        "    pass\nDONE = True\n")  # fmt: skip
+    repo = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True,
+                         text=True, timeout=60, cwd=repo)  # fmt: skip
+    assert out.stdout.split("\n")[:2] == [f"interrupted {int(signal.SIGTERM)} True",
+                                           "imports work True"], out.stderr
+
+
 @pytest.fixture
 def nouv_obj(tmp_path) -> Path:
     mesh = torus_mesh(24, 12)

@@ -9,7 +9,9 @@ cleans up, and :func:`deferred` holds them back while the output folder is being
 from __future__ import annotations
 
 import signal
+import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TypeVar
@@ -53,12 +55,53 @@ class _State(threading.local):
 _state = _State()
 
 
-def _handler(signum, _frame) -> None:
+#: Code of Python's import machinery: an exception raised there can leave the global import
+#: lock (or a module's lock) held for good, and every later import in any thread then waits for
+#: ever.  A re-bake stopped while its main thread imported a module hung so, its encoder threads
+#: blocked on their own imports and the main thread waiting for them.
+_IMPORT_CODE = ("<frozen importlib._bootstrap>", "<frozen importlib._bootstrap_external>")
+
+
+def _importing(frame) -> bool:
+    """Whether ``frame`` or one of its callers runs Python's import machinery."""
+    while frame is not None:
+        if frame.f_code.co_filename in _IMPORT_CODE:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _handler(signum, frame) -> None:
     _state.received = signum
     if _state.depth > 0:
         _state.pending = signum  # raised when the deferred block ends
         return
+    if _importing(frame):  # raised once the import is done (signalled again then)
+        _signal_after_import(signum)
+        return
     raise Interrupt(signum)
+
+
+#: Seconds between two looks at the main thread while a signal waits for its import to end.
+_IMPORT_POLL = 0.005
+
+
+def _signal_after_import(signum: int) -> None:
+    """Send ``signum`` to the main thread again as soon as no import runs in it (a watcher
+    thread): the handler then raises :class:`Interrupt` outside the import machinery."""
+    main = threading.main_thread().ident
+
+    def watch() -> None:
+        while True:
+            time.sleep(_IMPORT_POLL)
+            frame = sys._current_frames().get(main)
+            if frame is None:  # the main thread is gone: nothing left to stop
+                return
+            if not _importing(frame):
+                break
+        signal.pthread_kill(main, signum)
+
+    threading.Thread(target=watch, name="crackbake-signal", daemon=True).start()
 
 
 @contextmanager
