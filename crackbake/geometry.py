@@ -239,17 +239,26 @@ class SurfaceIndex:
         Mesh units.
     faces : (F, 3) int64
         At least one face.
+    lazy : bool
+        Build the tree at the first query instead of now (a sim mesh read from the mesh cache:
+        its proxy's surface is asked only where cracks move onto the asset).
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
-        import igl  # only the simulation proxy and its stress bake need it
-
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, lazy: bool = False) -> None:
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
         if not len(self.faces):
             raise ValueError("a surface index needs at least one face")
-        self._tree = igl.AABB()
-        self._tree.init(self.vertices, self.faces)
+        self._tree = None
+        if not lazy:
+            self._build()
+
+    def _build(self) -> None:
+        import igl  # only the simulation proxy and its stress bake need it
+
+        tree = igl.AABB()
+        tree.init(self.vertices, self.faces)
+        self._tree = tree
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The closest surface point to each of ``points`` (K, 3).
@@ -266,6 +275,8 @@ class SurfaceIndex:
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if not len(p):
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
+        if self._tree is None:
+            self._build()
         _, face, position = self._tree.squared_distance(self.vertices, self.faces, p)
         face = np.asarray(face, dtype=np.int64)
         bary = np.clip(barycentric(self.vertices[self.faces[face]], position), 0.0, None)

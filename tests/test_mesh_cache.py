@@ -318,15 +318,31 @@ def test_sim_mesh_cached_equals_the_built_and_says_its_warnings_again(cache):
     assert _same_sim(plain, again) and said_again == said
 
 
-def test_a_proxy_sim_mesh_is_never_cached(cache):
+def test_a_proxy_sim_mesh_is_cached_with_its_proxy_and_a_lazy_surface(cache):
+    """A sim mesh refined in a decimated proxy: read back with the proxy's arrays and the
+    asset surface, whose AABB tree is built at its first query and answers as the built one."""
     from crackbake.simulate.simmesh import build_simmesh
 
-    mesh = plate_mesh(12)
-    sim = build_simmesh(mesh, target_faces=100, proxy_above=100, cache=True)
-    assert sim.proxy is not None
-    assert not list(cache.glob("simmesh-*.npys"))
-    small = build_simmesh(mesh, target_faces=100, proxy_above=10_000, cache=True)
-    assert small.proxy is None and len(list(cache.glob("simmesh-*.npys"))) == 1
+    mesh = plate_mesh(12, wobble=0.3, seed=4)
+    built = build_simmesh(mesh, target_faces=100, proxy_above=100)
+    assert built.proxy is not None
+    first = build_simmesh(mesh, target_faces=100, proxy_above=100, cache=True)
+    read = build_simmesh(mesh, target_faces=100, proxy_above=100, cache=True)
+    assert len(list(cache.glob("simmesh-*.npys"))) == 1
+    for sim in (first, read):
+        assert all(np.array_equal(a, b) for a, b in zip(_sim_arrays(built).values(),
+                                                        _sim_arrays(sim).values(), strict=True))
+        for name in ("vertices", "faces", "rows"):
+            assert np.array_equal(getattr(sim.proxy, name), getattr(built.proxy, name))
+        for name in ("vertices", "faces"):
+            assert np.array_equal(getattr(sim.proxy.surface, name),
+                                  getattr(built.proxy.surface, name))
+    assert read.proxy.surface._tree is None  # not built until asked
+    points = np.random.default_rng(0).uniform(-0.1, 1.1, (200, 3)) * [1, 1, 0.1]
+    for a, b in zip(read.proxy.onto_asset(points), built.proxy.onto_asset(points), strict=True):
+        np.testing.assert_array_equal(a, b)
+    other = build_simmesh(mesh, target_faces=100, proxy_above=10_000, cache=True)
+    assert other.proxy is None and len(list(cache.glob("simmesh-*.npys"))) == 2
 
 
 def test_solving_runs_from_the_cached_sim_mesh_write_the_same_files(cache, tmp_path):
@@ -339,10 +355,10 @@ def test_solving_runs_from_the_cached_sim_mesh_write_the_same_files(cache, tmp_p
     obj = tmp_path / "plate.obj"
     _obj(obj, 0.1)
 
-    def bake(name, folder=cache):
+    def bake(name, folder=cache, **more):
         os.environ["CRACKBAKE_CACHE_DIR"] = str(folder)  # the fixture restores it
         run(RunParams(mesh=obj, impacts=(Impact((1.0, 0.5, 0.0)),), res=128, sim_faces=2000,
-                      out=tmp_path / name))  # fmt: skip
+                      out=tmp_path / name, **more))  # fmt: skip
         return _files(tmp_path / name)
 
     plain = bake("plain", tmp_path / "empty")
@@ -351,3 +367,9 @@ def test_solving_runs_from_the_cached_sim_mesh_write_the_same_files(cache, tmp_p
     inode = path.stat().st_ino
     assert bake("second") == plain
     assert path.stat().st_ino == inode  # read, not written again
+    # the same through a decimated proxy (its asset tree built when the cracks move onto it)
+    proxied = bake("proxied_plain", tmp_path / "empty2", sim_proxy="always")
+    assert proxied != plain
+    assert bake("proxied_first", sim_proxy="always") == proxied
+    assert bake("proxied_second", sim_proxy="always") == proxied
+    assert len(list(cache.glob("simmesh-*.npys"))) == 2

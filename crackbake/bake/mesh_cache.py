@@ -17,12 +17,13 @@ Two results are kept, each a pure function of inputs the key hashes in full:
 - the check of an asset's own UVs (:func:`crackbake.bake.uv.check.check_uvs`: range, strays,
   their wrapped copies, overlap measured with GL): keyed by the UVs, the faces, the vertex count
   and the renderer (vendor, renderer and version strings), whose rasterisation it counts.
-- the simulation mesh (:func:`crackbake.simulate.simmesh.build_simmesh`, refined in the
-  asset's own faces: an asset under :data:`~crackbake.simulate.simmesh.proxy.PROXY_MIN_FACES`),
-  with the warnings its build gave: keyed by the asset's positions and faces, the build's
-  arguments (edge length or face count, seed, jitter, refined balls) and the versions of
-  numpy, numba and Triangle.  An artist who moves the impact re-solves on the same sim mesh
-  (the README bake: 0.4-0.5 s of its 2-core wall).
+- the simulation mesh (:func:`crackbake.simulate.simmesh.build_simmesh`), with the warnings
+  its build gave and, for a dense asset, its decimated proxy and the welded asset surface the
+  proxy's closest points are found on (whose AABB tree a read builds only when first asked):
+  keyed by the asset's positions and faces, the build's arguments (edge length or face count,
+  seed, jitter, proxy limit, refined balls) and the versions of numpy, numba and Triangle.  An
+  artist who moves the impact re-solves on the same sim mesh (the README bake: 0.4-0.5 s of its
+  2-core wall; a 1.5M-face asset: 5.5-7 s).
 
 Each key also hashes the source of the modules that compute the result, so an edited kernel
 never meets an old answer.  The files live beside the cached unwraps
@@ -362,20 +363,35 @@ def write_up(key: str, up: np.ndarray) -> None:
 _SIMMESH_MODULES = ("crackbake.simulate.simmesh.build", "crackbake.simulate.simmesh.layout",
                     "crackbake.simulate.simmesh.manifold",
                     "crackbake.simulate.simmesh.manifold_kernels",
-                    "crackbake.simulate.simmesh.triangulate", "crackbake.geometry",
+                    "crackbake.simulate.simmesh.triangulate", "crackbake.simulate.simmesh.proxy",
+                    "crackbake.simulate.simmesh.collapse",
+                    "crackbake.simulate.simmesh.collapse_kernels", "crackbake.geometry",
                     "crackbake.geometry_kernels")  # fmt: skip
 _SIMMESH_ARRAYS = ("vertices", "faces", "asset_face", "node_face", "node_bary", "boundary")
 
 
 @cache
 def _versions() -> str:
-    """The versions of the libraries a sim mesh's numbers come from (their ``__version__``:
-    a solving run has imported numpy and numba by then; the package metadata took 40 ms)."""
+    """The versions of the libraries a sim mesh's numbers come from: numpy's, numba's and
+    Triangle's ``__version__`` (a solving run has imported them or soon will), libigl's from
+    its installed distribution's folder name (importing it takes 0.35 s, the package
+    metadata 15-65 ms a package)."""
+    import importlib.util
+
     import numba
     import triangle
 
-    return ",".join(f"{m.__name__}={getattr(m, '__version__', '?')}"
-                    for m in (np, numba, triangle))  # fmt: skip
+    found = [f"{m.__name__}={getattr(m, '__version__', '?')}" for m in (np, numba, triangle)]
+    igl = "?"
+    try:
+        spec = importlib.util.find_spec("igl")
+        if spec is not None and spec.origin:
+            site = Path(spec.origin).resolve().parent.parent
+            names = sorted(p.name for p in site.glob("libigl-*.dist-info"))
+            igl = names[-1].removeprefix("libigl-").removesuffix(".dist-info") if names else "?"
+    except (ImportError, OSError, ValueError):
+        pass
+    return ",".join([*found, f"igl={igl}"])
 
 
 def simmesh_key(vertices, faces, settings: dict, local=None) -> str:
@@ -398,21 +414,29 @@ def simmesh_key(vertices, faces, settings: dict, local=None) -> str:
     return h.hexdigest()
 
 
+_PROXY_ARRAYS = ("proxy_vertices", "proxy_faces", "proxy_rows", "surface_vertices",
+                 "surface_faces")  # fmt: skip
+
+
 def read_simmesh(key: str, n_asset_faces: int):
-    """``(arrays, edge_length, warnings)`` of the sim mesh keyed ``key``: its six arrays by
-    name, its edge length and the warnings its build gave (category, message, filename,
-    line), or None (missing, unreadable, or arrays that do not fit together or the asset)."""
+    """``(arrays, edge_length, warnings, proxy)`` of the sim mesh keyed ``key``: its six arrays
+    by name, its edge length, the warnings its build gave (category, message, filename,
+    line) and, for a mesh refined in a proxy, the proxy's arrays by name (its vertices, faces
+    and asset rows, and the welded asset surface its closest points are found on), else None;
+    or None (missing, unreadable, or arrays that do not fit together or the asset)."""
     import json
 
     from crackbake.errors import CrackbakeWarning
 
-    loaded = _load("simmesh", key, len(_SIMMESH_ARRAYS) + 1)
+    loaded = _load("simmesh", key, len(_SIMMESH_ARRAYS) + len(_PROXY_ARRAYS) + 1)
     if loaded is None:
         return None
     arrays = dict(zip(_SIMMESH_ARRAYS, loaded, strict=False))
+    parts = dict(zip(_PROXY_ARRAYS, loaded[len(_SIMMESH_ARRAYS):], strict=False))
     try:
         extra = json.loads(str(loaded[-1]))
         edge_length = float(extra["edge_length"])
+        has_proxy = bool(extra["proxy"])
         said = []
         for category, message, filename, line in extra["warnings"]:
             kind = {"CrackbakeWarning": CrackbakeWarning}.get(category)
@@ -421,27 +445,41 @@ def read_simmesh(key: str, n_asset_faces: int):
             said.append((kind, str(message), str(filename), int(line)))
     except (ValueError, KeyError, TypeError):
         return None
+
+    def mesh_ok(v, f) -> bool:
+        return (v.dtype == np.float64 and v.ndim == 2 and v.shape[1] == 3
+                and f.dtype == np.int64 and f.ndim == 2 and f.shape[1] == 3
+                and not (f.size and (f.min() < 0 or f.max() >= len(v))))  # fmt: skip
+
+    def rows_ok(a, n: int) -> bool:
+        return a.dtype == np.int64 and a.shape == (n,) and not (
+            len(a) and (a.min() < 0 or a.max() >= n_asset_faces))
+
     v, f = arrays["vertices"], arrays["faces"]
     n = len(v)
-    if (
-        v.dtype != np.float64 or v.ndim != 2 or v.shape[1] != 3
-        or f.dtype != np.int64 or f.ndim != 2 or f.shape[1] != 3
-        or (f.size and (f.min() < 0 or f.max() >= n))
-        or arrays["asset_face"].dtype != np.int64 or arrays["asset_face"].shape != (len(f),)
-        or arrays["node_face"].dtype != np.int64 or arrays["node_face"].shape != (n,)
-        or arrays["node_bary"].dtype != np.float64 or arrays["node_bary"].shape != (n, 3)
-        or arrays["boundary"].dtype != np.bool_ or arrays["boundary"].shape != (n,)
-        or any(len(a) and (a.min() < 0 or a.max() >= n_asset_faces)
-               for a in (arrays["asset_face"], arrays["node_face"]))
+    if not (
+        mesh_ok(v, f) and rows_ok(arrays["asset_face"], len(f))
+        and rows_ok(arrays["node_face"], n)
+        and arrays["node_bary"].dtype == np.float64 and arrays["node_bary"].shape == (n, 3)
+        and arrays["boundary"].dtype == np.bool_ and arrays["boundary"].shape == (n,)
     ):  # fmt: skip
         return None
-    return arrays, edge_length, said
+    if not has_proxy:
+        return arrays, edge_length, said, None
+    sf = parts["surface_faces"]
+    if not (
+        mesh_ok(parts["proxy_vertices"], parts["proxy_faces"]) and len(parts["proxy_faces"])
+        and mesh_ok(parts["surface_vertices"], sf) and len(sf)
+        and rows_ok(parts["proxy_rows"], len(sf))
+    ):  # fmt: skip
+        return None
+    return arrays, edge_length, said, parts
 
 
 def write_simmesh(key: str, sim, said: list) -> None:
-    """Store the sim mesh ``sim`` (refined in the asset's faces: no proxy) and its build's
-    warnings ``said`` (``warnings.WarningMessage``) under ``key`` (:func:`simmesh_key`);
-    nothing is stored when a warning is not crackbake's own."""
+    """Store the sim mesh ``sim`` (with its proxy's arrays and surface when it has one) and its
+    build's warnings ``said`` (``warnings.WarningMessage``) under ``key``
+    (:func:`simmesh_key`); nothing is stored when a warning is not crackbake's own."""
     import json
 
     rows = []
@@ -449,6 +487,16 @@ def write_simmesh(key: str, sim, said: list) -> None:
         if w.category.__name__ != "CrackbakeWarning":
             return
         rows.append([w.category.__name__, str(w.message), str(w.filename), int(w.lineno)])
-    text = json.dumps({"edge_length": float(sim.edge_length), "warnings": rows})
+    proxy = sim.proxy
+    if proxy is None:
+        none3 = np.zeros((0, 3))
+        parts = [none3, none3.astype(np.int64), np.zeros(0, np.int64), none3,
+                 none3.astype(np.int64)]  # fmt: skip
+    else:
+        parts = [np.asarray(proxy.vertices, np.float64), np.asarray(proxy.faces, np.int64),
+                 np.asarray(proxy.rows, np.int64), proxy.surface.vertices,
+                 proxy.surface.faces]  # fmt: skip
+    text = json.dumps({"edge_length": float(sim.edge_length), "warnings": rows,
+                       "proxy": proxy is not None})  # fmt: skip
     _store("simmesh", key, [np.asarray(getattr(sim, name)) for name in _SIMMESH_ARRAYS]
-           + [np.array(text)])  # fmt: skip
+           + parts + [np.array(text)])  # fmt: skip

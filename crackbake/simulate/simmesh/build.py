@@ -8,7 +8,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.geometry import barycentric, corner_mean, face_cross, weld_by_position
+from crackbake.geometry import (
+    SurfaceIndex,
+    barycentric,
+    corner_mean,
+    face_cross,
+    weld_by_position,
+)
 from crackbake.io.mesh import Mesh
 from crackbake.params import SIM_FACES_DEFAULT
 from crackbake.params import SIM_FACES_MAX as MAX_SIM_FACES
@@ -242,10 +248,10 @@ def build_simmesh(
         ball's edge length (the faces' shared edges take the mean of their point requests and
         Triangle's quality bound grades the transition).
     cache : bool
-        Read and store a mesh refined in the asset's own faces (an asset of at most
-        :data:`~.proxy.PROXY_MIN_FACES` faces, or ``proxy_above``) in the mesh cache
-        (:mod:`crackbake.bake.mesh_cache`), with the warnings its build gave, which a read
-        gives again: the same arrays as a build.
+        Read and store the mesh in the mesh cache (:mod:`crackbake.bake.mesh_cache`) with the
+        warnings its build gave, which a read gives again, and its proxy (the proxy's asset
+        tree is then built at its first query): the same arrays as a build.  A rebuild in a
+        given ``proxy`` is not cached.
 
     Returns
     -------
@@ -257,29 +263,34 @@ def build_simmesh(
         ``detail`` <= 0, ``target_faces`` < 100, an estimated sim mesh above 20M faces, a bad
         jitter, or a mesh without area.
     """
-    limit = PROXY_MIN_FACES if proxy_above is None else proxy_above
-    if not cache or proxy is not None or len(mesh.faces) > limit:  # a proxy: never cached
+    if not cache or proxy is not None:  # a rebuild in a given proxy: not cached
         return _build(mesh, detail, target_faces, seed, jitter, proxy_above, proxy, local)
     from crackbake.bake.mesh_cache import read_simmesh, simmesh_key, write_simmesh
 
     settings = {"detail": None if detail is None else float(detail),
                 "target_faces": None if target_faces is None else int(target_faces),
                 "default_faces": int(SIM_FACES_DEFAULT), "seed": int(seed),
-                "jitter": float(jitter)}  # fmt: skip
+                "jitter": float(jitter),
+                "proxy_above": None if proxy_above is None else int(proxy_above),
+                "proxy_min": int(PROXY_MIN_FACES)}  # fmt: skip
     key = simmesh_key(mesh.vertices, mesh.faces, settings, local)
     hit = read_simmesh(key, len(mesh.faces))
     if hit is not None:
-        arrays, edge_length, said = hit
+        arrays, edge_length, said, parts = hit
         for category, message, filename, line in said:
             warnings.warn_explicit(message, category, filename, line)
-        return SimMesh(**arrays, edge_length=edge_length, proxy=None, local=local)
+        read_proxy = None
+        if parts is not None:  # the asset's AABB tree is built when the cracks first ask
+            surface = SurfaceIndex(parts["surface_vertices"], parts["surface_faces"], lazy=True)
+            read_proxy = Proxy(vertices=parts["proxy_vertices"], faces=parts["proxy_faces"],
+                               surface=surface, rows=parts["proxy_rows"])  # fmt: skip
+        return SimMesh(**arrays, edge_length=edge_length, proxy=read_proxy, local=local)
     with warnings.catch_warnings(record=True) as said:
         warnings.simplefilter("always")  # every warning recorded, whatever the caller's filters
         sim = _build(mesh, detail, target_faces, seed, jitter, proxy_above, proxy, local)
     for w in said:  # the caller's filters decide now, as they would have
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
-    if sim.proxy is None:
-        write_simmesh(key, sim, said)
+    write_simmesh(key, sim, said)
     return sim
 
 
