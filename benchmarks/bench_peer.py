@@ -23,6 +23,9 @@ Usage::
         [--samples 1]
 
 The numba cache (``NUMBA_CACHE_DIR``) must be warm (``python -m crackbake.precompile``).
+crackbake's modules are byte-compiled first (``compile_bytecode``), as ``make setup`` leaves them:
+where ``PYTHONDONTWRITEBYTECODE`` is set, a module edited since would be compiled from source in
+every timed run.
 """
 
 from __future__ import annotations
@@ -119,6 +122,10 @@ def main() -> None:
                     or str(ROOT / ".venv-blender" / "bin" / "python"),
                     help="a Python that imports bpy [.venv-blender/bin/python]")
     a = ap.parse_args()
+    sys.path.insert(0, str(ROOT))
+    from crackbake.precompile import compile_bytecode
+
+    compile_bytecode()
     extra = os.environ.get("PYTHONPATH")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), *([extra] if extra else [])]))
     bpy_env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}

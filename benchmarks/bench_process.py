@@ -219,6 +219,11 @@ def main() -> None:
     repos = {"this": ROOT}
     if a.repo is not None:
         repos = {"other": a.repo.resolve(), "this": ROOT}
+    sys.path.insert(0, str(ROOT))
+    from crackbake.precompile import compile_bytecode
+
+    for repo in repos.values():  # as `make setup` leaves them (PYTHONDONTWRITEBYTECODE)
+        compile_bytecode(repo / "crackbake")
     scratch = Path(a.keep or tempfile.mkdtemp(prefix="bench_process_"))
     scratch.mkdir(parents=True, exist_ok=True)
     textured_spot(scratch / "textured")
