@@ -374,7 +374,8 @@ def levels(s: dict, repeat: int = 2) -> list[tuple[str, str, float, int]]:
     if maps.res > GLB_TEXTURE_MAX:
         files += [(f"{c} {GLB_TEXTURE_MAX} (GLB)", c, 8, "gl") for c in ("base_color", "orm")]
     for name, content, bits, ny in files:
-        if (content, bits) == ("data", 16) and (filtered := data16_filtered(maps)) is not None:
+        filtered = data16_filtered(maps, bands=False) if (content, bits) == ("data", 16) else None
+        if filtered is not None:
             data = filtered
         else:
             px = pack(content, maps, bits, ny, base=lambda: enc._base(maps, maps.res))

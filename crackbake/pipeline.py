@@ -534,7 +534,7 @@ def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
     if {"png", "glb", "preview", "usd", "usdz"} & formats:
         from crackbake.exchange import halving, packing
 
-        later += [packing._data16_rows, halving._base_color_half, halving._normal_half,
+        later += [packing._data16_band, halving._base_color_half, halving._normal_half,
                   halving._mip_half, packing._base_color, packing._normal_q, packing._lut_planes,
                   packing._take, packing._quantise]  # fmt: skip
     if "preview" in formats:

@@ -188,12 +188,39 @@ def test_filtered_data_rows_give_the_same_png():
         mask=_halves(rng), width=(rng.random((RES, RES)) * 0.01).astype(np.float32),
         time=_halves(rng), depth=depth, occlusion=None,
     )  # fmt: skip
-    rows = targets.data16_filtered(m)
+    rows = targets.data16_filtered(m, bands=False)
     assert rows.shape == (RES, 1 + 8 * RES) and (rows[:, 0] == 2).all()
     pixels = targets.pack("data", m, 16)
     assert png_rows(rows, RES, 16, 4) == png_bytes(pixels)
     # the unfiltered first row is the big-endian pixels themselves
     assert rows[0, 1:].tobytes() == pixels[0].tobytes()
+
+
+def test_data_rows_band_by_band_are_the_same_rows_and_file():
+    # The write stage's bands (one reused buffer, each band's "above" row carried over) give
+    # the very scanlines of the one-pass kernel, and the streamed deflate the very file.
+    from crackbake.exchange.packing import data16_bands
+    from crackbake.exchange.pngenc import data_compressor, data_deflate, png_bands, png_rows
+
+    rng = np.random.default_rng(14)
+    m = SimpleNamespace(
+        mask=_halves(rng), width=(rng.random((RES, RES)) * 0.01).astype(np.float32),
+        time=_halves(rng), depth=(rng.random((RES, RES)) * 0.02).astype(np.float32),
+        occlusion=None,
+    )  # fmt: skip
+    rows = targets.data16_filtered(m, bands=False)
+    scales = targets.data_scales(m)
+    args = (m.mask, m.width, m.time, m.depth, targets._data16_luts(), scales["width"],
+            scales["depth"])  # fmt: skip
+    line = 1 + 8 * RES
+    for band_bytes in (1, 3 * line, 5 * line + 7, 10 * RES * line):  # 1 row, 3, 5, all of them
+        bands = [b.copy() for b in data16_bands(*args, band_bytes=band_bytes)]
+        assert len(bands) == -(-RES // max(1, min(RES, band_bytes // line)))
+        assert np.array_equal(np.concatenate(bands), rows)
+    whole = png_rows(rows, RES, 16, 4, deflate=data_deflate)
+    streamed = png_bands(data16_bands(*args, band_bytes=3 * line), RES, RES, 16, 4,
+                         compressor=data_compressor())  # fmt: skip
+    assert streamed == whole
 
 
 def test_fused_data_texture_equals_numpy_quantise():

@@ -167,3 +167,25 @@ def test_data_deflate_round_trips():
     assert zlib.decompress(got) == rows.tobytes()
     assert zlib.crc32(ours[ours.index(b"IDAT") : ours.index(b"IEND") - 8]) == int.from_bytes(
         ours[ours.index(b"IEND") - 8 : ours.index(b"IEND") - 4], "big")
+
+
+@pytest.mark.parametrize(("shape", "dtype"), [((37, 53, 3), np.uint8), ((29, 47, 4), ">u2"),
+                                              ((31, 49, 1), "<u2"), ((1, 45, 2), np.uint8)])
+def test_bands_give_the_file_of_all_rows_at_once(monkeypatch, shape, dtype):
+    """png_bytes filters and deflates a band of rows at a time (BAND_BYTES): whatever the band
+    height (one row, a few, rows that do not divide the height, all), the same file as one
+    band of every row, which is the file before bands came in."""
+    import crackbake.exchange.pngenc as enc
+
+    img = _map_like(np.random.default_rng(21), shape, np.dtype(dtype))
+    if shape[2] == 1:
+        img = img[..., 0]  # (H, W): grey
+    monkeypatch.setattr(enc, "BAND_BYTES", 1 << 30)
+    whole = {level: enc.png_bytes(img, level=level) for level in (1, 6)}
+    line = 1 + img[0].size * img.dtype.itemsize
+    for band in (1, line, 3 * line + 1, 4 * line):
+        monkeypatch.setattr(enc, "BAND_BYTES", band)
+        for level, want in whole.items():
+            assert enc.png_bytes(img, level=level) == want
+    raw = np.frombuffer(zlib.decompress(whole[1][whole[1].index(b"IDAT") + 4 : -16]), np.uint8)
+    assert raw.size == img.shape[0] * line

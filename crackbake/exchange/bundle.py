@@ -40,7 +40,7 @@ from crackbake.exchange.materials import (
     base_color_table,
     downsample,
 )
-from crackbake.exchange.pngenc import data_deflate, png_bytes, png_rows, write_bytes
+from crackbake.exchange.pngenc import data_compressor, png_bands, png_bytes, write_bytes
 from crackbake.exchange.targets import (
     TARGETS,
     data16_filtered,
@@ -154,13 +154,13 @@ class _Encoder:
     def _job(self, key: tuple, paths: list, keep: bool) -> bytes | None:
         content, bits, normal_y, size = key
         maps = _smaller(self.maps, size)
-        rows = data16_filtered(maps) if (content, bits) == ("data", 16) else None
-        if rows is not None:  # packed straight into filtered scanlines: one array less
-            data = png_rows(rows, rows.shape[1] // 8, 16, 4, deflate=data_deflate)
+        bands = data16_filtered(maps) if (content, bits) == ("data", 16) else None
+        if bands is not None:  # packed straight into filtered scanlines, band by band
+            h, w = maps.mask.shape
+            data = png_bands(bands, w, h, 16, 4, compressor=data_compressor())
         else:
             pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
             data = png_bytes(pixels, srgb=content == "base_color")
-        del rows
         for path in paths:
             write_bytes(path, data)
             if self.stage is not None:

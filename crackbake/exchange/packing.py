@@ -47,13 +47,16 @@ def _data16(mask, width, time, depth, lut_mask, width_gain, lut_time, depth_gain
 
 
 @njit(cache=True, nogil=True)
-def _data16_rows(mask, width, time, depth, lut_mask, width_gain, lut_time, depth_gain, rows):
-    # The data texture already PNG-filtered ("Up": each byte minus the byte above), written
-    # straight into the scanline buffer: no (H, W, 4) pixel array, no second pass.
-    h, w = mask.shape
-    prev = np.zeros(8 * w, np.uint8)
+def _data16_band(mask, width, time, depth, lut_mask, width_gain, lut_time, depth_gain, y0,
+                 prev, rows):  # pragma: no cover - compiled
+    # The data texture's rows y0 .. y0 + len(rows) already PNG-filtered ("Up": each byte minus
+    # the byte above), written straight into the scanline buffer: no (H, W, 4) pixel array, no
+    # second pass.  ``prev`` holds the unfiltered bytes of row y0 - 1 (zeros above row 0) and
+    # is left holding the band's last row, for the next band.
+    w = mask.shape[1]
     cur = np.empty(8 * w, np.uint8)
-    for i in range(h):
+    for r in range(rows.shape[0]):
+        i = y0 + r
         for j in range(w):
             a, b, q, c = _texel16(i, j, mask, width, time, depth, lut_mask, width_gain,
                                   lut_time, depth_gain)
@@ -62,11 +65,11 @@ def _data16_rows(mask, width, time, depth, lut_mask, width_gain, lut_time, depth
             cur[o + 2], cur[o + 3] = b >> 8, b & 0xFF
             cur[o + 4], cur[o + 5] = q >> 8, q & 0xFF
             cur[o + 6], cur[o + 7] = c >> 8, c & 0xFF
-        row = rows[i]
+        row = rows[r]
         row[0] = 2
         for k in range(8 * w):
             row[k + 1] = cur[k] - prev[k]  # uint8 arithmetic wraps mod 256
-        prev, cur = cur, prev
+            prev[k] = cur[k]
 
 
 def data16_rows(mask, width, time, depth, luts, width_scale: float,
@@ -82,8 +85,27 @@ def data16_rows(mask, width, time, depth, luts, width_scale: float,
     """
     h, w = mask.shape
     rows = np.empty((h, 1 + 8 * w), np.uint8)
-    _data16_rows(*_data16_inputs(mask, width, time, depth, luts, width_scale, depth_scale), rows)
+    inputs = _data16_inputs(mask, width, time, depth, luts, width_scale, depth_scale)
+    _data16_band(*inputs, 0, np.zeros(8 * w, np.uint8), rows)
     return rows
+
+
+def data16_bands(mask, width, time, depth, luts, width_scale: float, depth_scale: float,
+                 band_bytes: int = 1 << 20):
+    """:func:`data16_rows`' scanlines in bands of rows, each (k, 1 + 8 W) uint8 of about
+    ``band_bytes``, from one buffer that the next band overwrites: consume each before asking
+    for the next (:func:`~crackbake.exchange.pngenc.png_bands` deflates it at once).  The same
+    bytes as :func:`data16_rows`, without its image-sized array (128 MB of fresh pages at 4096²,
+    written once and read once)."""
+    h, w = mask.shape
+    inputs = _data16_inputs(mask, width, time, depth, luts, width_scale, depth_scale)
+    k = max(1, min(h, band_bytes // (1 + 8 * w)))
+    band = np.empty((k, 1 + 8 * w), np.uint8)
+    prev = np.zeros(8 * w, np.uint8)
+    for y0 in range(0, h, k):
+        rows = band[: min(k, h - y0)]
+        _data16_band(*inputs, y0, prev, rows)
+        yield rows
 
 
 def data16(

@@ -31,6 +31,7 @@ from crackbake.exchange.packing import (
     SRC_B,
     SRC_CONST,
     data16,
+    data16_bands,
     data16_rows,
     half_max,
     lut_planes,
@@ -300,14 +301,17 @@ def _data16_luts() -> tuple:
     return lut, lut
 
 
-def data16_filtered(maps) -> np.ndarray | None:
-    """The 16-bit data texture as PNG-filtered scanlines (:func:`packing.data16_rows`, for
+def data16_filtered(maps, bands: bool = True):
+    """The 16-bit data texture as PNG-filtered scanlines: band by band
+    (:func:`packing.data16_bands`, for :func:`~crackbake.exchange.pngenc.png_bands`), or with
+    ``bands=False`` all at once (:func:`packing.data16_rows`, (H, 1 + 8 W) uint8, for
     :func:`~crackbake.exchange.pngenc.png_rows`); None unless mask and time are float16."""
     if not all(np.asarray(p).dtype == np.float16 for p in (maps.mask, maps.time)):
         return None
     scales = data_scales(maps)
-    return data16_rows(maps.mask, maps.width, maps.time, maps.depth, _data16_luts(),
-                       scales["width"], scales["depth"])  # fmt: skip
+    pack_rows = data16_bands if bands else data16_rows
+    return pack_rows(maps.mask, maps.width, maps.time, maps.depth, _data16_luts(),
+                     scales["width"], scales["depth"])  # fmt: skip
 
 
 def _data_planes(maps, bits: int):
