@@ -20,7 +20,7 @@ from crackbake.memory import (
     estimate_peak,
     run_sizes,
 )
-from crackbake.params import DECAL_RES_DEFAULT, Impact, RunParams
+from crackbake.params import DECAL_RES_DEFAULT, TILE_DEFAULT, Impact, RunParams
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -68,7 +68,7 @@ def test_run_sizes_follow_the_options(tmp_path):
     p = RunParams(mesh=Path("m.obj"), res=4096, sim_faces=300_000)
     sizes = run_sizes(p, faces=5000)
     assert sizes == {"faces": 5000, "sim_faces": 300_000, "res": 4096, "stress_res": 1024,
-                     "tile": 4096, "decal_res": None, "frames": 0, "unwrap_faces": 0}
+                     "tile": TILE_DEFAULT, "decal_res": None, "frames": 0, "unwrap_faces": 0}
     # An asset finer than wanted is its own sim mesh; far finer gets a proxy of the wanted size.
     assert run_sizes(p, faces=500_000)["sim_faces"] == 500_000
     assert run_sizes(p, faces=5_000_000)["sim_faces"] == 300_000

@@ -30,8 +30,11 @@ TARGET_DEFAULT = "gltf"
 SEED_DEFAULT = 0
 #: Seconds xatlas may run (``--unwrap-timeout``).
 UNWRAP_TIMEOUT_DEFAULT = 300.0
-#: Largest framebuffer edge of one bake pass (the bake tiles bigger textures).
-TILE_DEFAULT = 4096
+#: Largest framebuffer edge of one bake pass (the bake tiles bigger textures): a pass draws a
+#: full-width band of at most ``TILE_DEFAULT**2`` texels.  2048: a 4096² bake draws four bands
+#: into render targets a quarter the size (96 instead of 384 MB, allocated and zero-filled by
+#: llvmpipe in every run), and its stage is as fast or faster (docs/benchmarks.md, "Bands").
+TILE_DEFAULT = 2048
 #: Simulation mesh size in faces when neither ``--detail`` nor ``--sim-faces`` is given.
 SIM_FACES_DEFAULT = 100_000
 #: Impact radius, as a fraction of the bounding-box diagonal, when neither the impact nor the
