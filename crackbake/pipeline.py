@@ -169,16 +169,25 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
 
     from crackbake.bake.context import create_context, renderer_info
 
+    # The inputs are checked: the bake's readback images are made now, on a thread, while the
+    # start-up (EGL, the UV stage) holds the GIL on one core
+    # (crackbake.bake.prefetch.ImagePrefetch); the render targets come later.
+    images = _images_ahead(params, tiles)
     # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
     # mesh, so they are prepared (and --uv keep refused) before the solver runs.
-    ctx = create_context()
+    try:
+        ctx = create_context()
+    except BaseException:
+        if images is not None:
+            images.close()
+        raise
     targets = gutter = stress_ahead = preview_ahead = None
     try:
         # A re-bake has no solver to hide the targets' allocation behind: it starts before the
         # UV stage (which then shares the machine with it); a solving run starts it after its
         # last GL call before the bake (the coverage), to run beside the solver.
         if params.cracks is not None:
-            targets = _targets_ahead(ctx, params, tiles)
+            targets, images = _targets_ahead(ctx, params, tiles, images), None
         uvmesh = _uvs(ctx, mesh, params, timings)
         if uvmesh.udim is not None and targets is not None:  # pages of their own
             targets.close()
@@ -186,7 +195,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         gutter = _bake_ahead(ctx, uvmesh, params, timings)
         preview_ahead = _preview_ahead(uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
-            targets = _targets_ahead(ctx, params, 1)
+            targets, images = _targets_ahead(ctx, params, 1, images), None
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
                                                   later=_later_kernels(params, uvmesh))
@@ -219,7 +228,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
-        for ahead in (targets, gutter, stress_ahead, preview_ahead):  # threads end first
+        for ahead in (images, targets, gutter, stress_ahead, preview_ahead):  # threads end first
             if ahead is not None:
                 ahead.close()
         ctx.release()
@@ -274,20 +283,34 @@ def _uvs(ctx, mesh: Mesh, params: RunParams, timings: dict[str, float]) -> UVMes
     return uvmesh
 
 
-def _targets_ahead(ctx, params: RunParams, tiles: int):
+def _images_ahead(params: RunParams, tiles: int):
+    """The crack bake's readback images (:func:`~crackbake.bake.crack_targets.image_specs`)
+    made on a thread of their own (:class:`crackbake.bake.prefetch.ImagePrefetch`), for
+    :func:`_targets_ahead`; None for a UDIM set (pages of their own)."""
+    if tiles > 1:
+        return None
+    from crackbake.bake.crack_targets import image_specs
+    from crackbake.bake.prefetch import ImagePrefetch
+
+    return ImagePrefetch(image_specs(params.res, True))
+
+
+def _targets_ahead(ctx, params: RunParams, tiles: int, images=None):
     """The crack bake's render targets and readback images, allocated on a thread of their own
     (:class:`crackbake.bake.prefetch.TargetPrefetch`): their sizes follow from ``--res`` and
     ``--tile`` alone, so the allocation runs beside the solver, or in a ``--cracks`` re-bake
     (no solver to hide it) beside the UV stage.  The bake's UV placement always has tangents
     (:func:`_uvs`): the normal map's targets.  None for a UDIM set (pages of their own)."""
     if tiles > 1:
+        if images is not None:
+            images.close()
         return None
     # Both numba-free: a re-bake starts the allocation before the bake's modules import numba.
     from crackbake.bake.crack_targets import image_specs, target_specs
     from crackbake.bake.prefetch import TargetPrefetch
 
     return TargetPrefetch(ctx, target_specs(params.res, params.tile, True),
-                          image_specs(params.res, True))  # fmt: skip
+                          image_specs(params.res, True), images=images)  # fmt: skip
 
 
 def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):

@@ -10,7 +10,7 @@ from conftest import plate_mesh
 
 from crackbake.bake.context import GLScope
 from crackbake.bake.crack_targets import image_specs, target_specs
-from crackbake.bake.prefetch import TargetPrefetch
+from crackbake.bake.prefetch import ImagePrefetch, TargetPrefetch
 from crackbake.bake.raster import bake_cracks
 from crackbake.network import Segments
 
@@ -69,6 +69,21 @@ def test_prefetched_images_are_zeroed_and_taken_once(gl_ctx):
     assert prefetch.take_array((40, 50), np.uint8) is not None
     assert prefetch.take_array((40, 50), np.float16) is None  # never asked for
     prefetch.close()
+
+
+def test_images_made_ahead_are_handed_out_by_the_targets(gl_ctx):
+    # A run makes the readback images before its GL context exists (ImagePrefetch) and hands
+    # them to the targets' prefetch later: take_array gives those, each once; the targets'
+    # own image list is not made a second time, and close closes the images too.
+    images = ImagePrefetch([((3, 40, 50), "<f4"), ((40, 50), "<f2")])
+    prefetch = TargetPrefetch(gl_ctx, [], [((3, 40, 50), "<f4")], images=images)
+    image = prefetch.take_array((3, 40, 50), np.float32)
+    assert image is not None and image.shape == (3, 40, 50) and not image.any()
+    assert prefetch.take_array((3, 40, 50), np.float32) is None  # the targets made none
+    half = prefetch.take_array((40, 50), np.float16)
+    assert half.dtype == np.float16 and not half.any()
+    prefetch.close()
+    assert images._thread is None and images._arrays == {}
 
 
 def test_close_frees_what_the_bake_did_not_take(gl_ctx):
