@@ -197,3 +197,41 @@ def area_counts(cross: np.ndarray) -> tuple[int, int]:
         elif r <= 0:
             zero += 1
     return positive, zero
+
+
+@njit(cache=True, nogil=True)
+def face_geometry_kernel(v: np.ndarray, f: np.ndarray):
+    """:func:`crackbake.simulate.solver.fem.face_geometry` in one pass: twice the area (F,),
+    unit normals (F, 3) and barycentric gradients (F, 3, 3) of faces ``f`` (F, 3) int64 over
+    ``v`` (V, 3) float64, each value the same float64 bits as the numpy version's (the same
+    products, sums and quotients in the same order), without its (F, 3, 3) gather and a dozen
+    (F, 3) temporaries (0.04-0.05 s a call at 100k faces, 4-5 calls a run)."""
+    n = len(f)
+    twice = np.empty(n)
+    normal = np.empty((n, 3))
+    grad = np.empty((n, 3, 3))
+    p = np.empty((3, 3))
+    for k in range(n):
+        for c in range(3):
+            for a in range(3):
+                p[c, a] = v[f[k, c], a]
+        ux, uy, uz = p[1, 0] - p[0, 0], p[1, 1] - p[0, 1], p[1, 2] - p[0, 2]
+        wx, wy, wz = p[2, 0] - p[0, 0], p[2, 1] - p[0, 1], p[2, 2] - p[0, 2]
+        cx, cy, cz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+        t = np.sqrt(cx * cx + cy * cy + cz * cz)
+        twice[k] = t
+        s = t if t > 0 else 1.0  # numpy's: divided by 1, then zeroed where t == 0 (NaN kept)
+        nx, ny, nz = cx / s, cy / s, cz / s
+        normal[k, 0], normal[k, 1], normal[k, 2] = nx, ny, nz
+        for i in range(3):  # grad N_i = n x (x_k - x_j) / (2A), (j, k) opposite vertex i
+            j, m = (i + 1) % 3, (i + 2) % 3
+            ex, ey, ez = p[m, 0] - p[j, 0], p[m, 1] - p[j, 1], p[m, 2] - p[j, 2]
+            grad[k, i, 0] = (ny * ez - nz * ey) / s
+            grad[k, i, 1] = (nz * ex - nx * ez) / s
+            grad[k, i, 2] = (nx * ey - ny * ex) / s
+        if t == 0:  # degenerate: no normal, no gradients
+            for a in range(3):
+                normal[k, a] = 0.0
+                for i in range(3):
+                    grad[k, i, a] = 0.0
+    return twice, normal, grad

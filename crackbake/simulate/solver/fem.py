@@ -37,18 +37,10 @@ def face_geometry(
         ``grad[e, i]`` is the world gradient of barycentric coordinate ``i`` of face ``e``
         (1 / mesh units), lying in the face plane; the three sum to zero.
     """
-    p = vertices[faces]
-    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    twice_area = np.linalg.norm(cross, axis=1)
-    safe = np.where(twice_area > 0, twice_area, 1.0)
-    normal = cross / safe[:, None]
-    normal[twice_area == 0] = 0.0
-    grad = np.empty_like(p)
-    # grad N_i = n x (x_k - x_j) / (2A) for the edge (j, k) opposite vertex i.
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        grad[:, i] = np.cross(normal, p[:, k] - p[:, j]) / safe[:, None]
-    grad[twice_area == 0] = 0.0
+    from crackbake.geometry_kernels import face_geometry_kernel  # numba: where first used
+
+    twice_area, normal, grad = face_geometry_kernel(
+        np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int64))
     return 0.5 * twice_area, normal, grad
 
 
