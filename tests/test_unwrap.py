@@ -170,6 +170,28 @@ def test_unwrap_timeout_is_a_clear_error():
         U.unwrap(torus_mesh(24, 12), 256, timeout=0.01, cache=False)
 
 
+def test_a_stalled_first_try_is_run_again(monkeypatch, caplog):
+    # A first try far over its size's time is killed and run again with the time left (a
+    # 128-face unwrap never returned once).  Here the first try's limit is too short for the
+    # worker to start at all: the second try gives the unwrap a one-try run gives.
+    import importlib
+
+    unwrap_module = importlib.import_module("crackbake.bake.uv.unwrap")
+
+    mesh = torus_mesh(24, 12)
+    want = U.unwrap(mesh, 256, cache=False)
+    monkeypatch.setattr(unwrap_module, "STALL_MIN_S", 0.01)
+    monkeypatch.setattr(unwrap_module, "STALL_S_PER_FACE", 0.0)
+    with caplog.at_level("INFO", logger="crackbake.bake.uv.unwrap"):
+        got = U.unwrap(mesh, 256, timeout=120, cache=False)
+    assert "starting it again" in caplog.text
+    np.testing.assert_array_equal(got.uv, want.uv)
+    np.testing.assert_array_equal(got.faces, want.faces)
+    # Both tries share the time allowed: a limit the first try already spent is an error.
+    with pytest.raises(CrackbakeError, match=r"xatlas did not finish within 0.01 s"):
+        U.unwrap(mesh, 256, timeout=0.01, cache=False)
+
+
 def test_worker_crash_message():
     # A real segfault needs a crashing input (xatlas#146), too slow and fragile for the suite;
     # the message for a signal exit is what the user sees.

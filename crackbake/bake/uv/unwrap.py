@@ -106,6 +106,51 @@ def run_worker(
     package_parent = str(Path(__file__).resolve().parents[3])
     env["PYTHONPATH"] = os.pathsep.join(p for p in (package_parent, env.get("PYTHONPATH", "")) if p)
     env[PARENT_ENV] = str(os.getpid())
+    # A first try that runs far longer than an unwrap of its size does is taken for a stall and
+    # tried once more with the time left: a 128-face unwrap once never returned here (the
+    # full suite, 300 s), and the same call then took 0.1 s.
+    first = min(timeout, max(STALL_MIN_S, STALL_S_PER_FACE * n_faces))
+    try:
+        proc, stdout, stderr = _run_once(buf.getvalue(), env, first)
+    except subprocess.TimeoutExpired:
+        if first >= timeout:
+            raise _timed_out(timeout, label, n_faces) from None
+        logger.info("xatlas made no result in %.0f s for %d faces: starting it again",
+                    first, n_faces)
+        try:
+            proc, stdout, stderr = _run_once(buf.getvalue(), env, timeout - first)
+        except subprocess.TimeoutExpired:
+            raise _timed_out(timeout, label, n_faces) from None
+    if proc.returncode != 0:
+        raise worker_error(proc.returncode, stderr, label, n_faces)
+    try:
+        with np.load(io.BytesIO(stdout), allow_pickle=False) as data:
+            return {k: np.asarray(data[k]) for k in data.files}
+    except (OSError, ValueError, KeyError, EOFError) as exc:
+        raise CrackbakeError(
+            f"xatlas's worker sent no readable result for {label} ({exc}); "
+            "try --uv keep with your own UVs or remesh"
+        ) from exc
+
+
+#: The first try's time limit (:func:`run_worker`): this many seconds a face, at least
+#: :data:`STALL_MIN_S` (an unwrap here: 128 faces 0.1 s, 100k faces 60-90 s).
+STALL_S_PER_FACE = 0.01
+STALL_MIN_S = 30.0
+
+
+def _timed_out(timeout: float, label: str, n_faces: int) -> CrackbakeError:
+    return CrackbakeError(
+        f"xatlas did not finish within {timeout:g} s unwrapping {label} "
+        f"({n_faces} faces); raise --unwrap-timeout, use --uv keep with your own UVs, "
+        "or decimate the mesh"
+    )
+
+
+def _run_once(payload: bytes, env: dict, limit: float):
+    """One run of the worker on ``payload`` (the input ``.npz``) within ``limit`` seconds:
+    (the finished process, its stdout bytes, its non-progress stderr lines); raises
+    :class:`subprocess.TimeoutExpired` (the child killed) when it runs longer."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "crackbake.bake.xatlas_worker"],
         stdin=subprocess.PIPE,
@@ -119,33 +164,17 @@ def run_worker(
     out_chunks: list[bytes] = []
     err_lines: list[str] = []
     pumps = [
-        threading.Thread(target=_feed, args=(proc.stdin, buf.getvalue()), daemon=True),
+        threading.Thread(target=_feed, args=(proc.stdin, payload), daemon=True),
         threading.Thread(target=_drain, args=(proc.stdout, out_chunks), daemon=True),
         threading.Thread(target=_relay, args=(proc.stderr, err_lines), daemon=True),
     ]
     for pump in pumps:
         pump.start()
     try:
-        proc.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        raise CrackbakeError(
-            f"xatlas did not finish within {timeout:g} s unwrapping {label} "
-            f"({n_faces} faces); raise --unwrap-timeout, use --uv keep with your own UVs, "
-            "or decimate the mesh"
-        ) from None
+        proc.wait(timeout=limit)
     finally:
         stop_worker(proc, pumps)
-    stdout, stderr = b"".join(out_chunks), "\n".join(err_lines)
-    if proc.returncode != 0:
-        raise worker_error(proc.returncode, stderr, label, n_faces)
-    try:
-        with np.load(io.BytesIO(stdout), allow_pickle=False) as data:
-            return {k: np.asarray(data[k]) for k in data.files}
-    except (OSError, ValueError, KeyError, EOFError) as exc:
-        raise CrackbakeError(
-            f"xatlas's worker sent no readable result for {label} ({exc}); "
-            "try --uv keep with your own UVs or remesh"
-        ) from exc
+    return proc, b"".join(out_chunks), "\n".join(err_lines)
 
 
 def _feed(pipe, data: bytes) -> None:
