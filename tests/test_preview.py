@@ -153,3 +153,29 @@ def test_preview_with_levels_made_beforehand_is_the_same_picture(gl_ctx):
     by_gl = render_preview(*args, **kw)
     levels = (preview.mip_levels(color), preview.mip_levels(normal))
     np.testing.assert_array_equal(render_preview(*args, levels=levels, **kw), by_gl)
+
+
+def test_cracks_on_an_underside_are_seen_from_below_and_others_from_above():
+    # A box: cracks on its bottom face (normal -y, up +y) face away from every view from above,
+    # which showed them edge-on at the picture's rim (an impact under Suzanne's chin); they
+    # choose a view from below, tilted (up keeps its direction in the picture).  Cracks on a
+    # side face keep a view from above, as before the views from below came in.
+    import trimesh
+
+    box = trimesh.creation.box(extents=(2.0, 1.0, 2.0))
+    m = replace(plate_mesh(2), vertices=np.asarray(box.vertices, float),
+                faces=np.asarray(box.faces, np.int64), uv=None)
+    normals = np.asarray(box.face_normals)
+    bottom, side = (int(np.flatnonzero(normals[:, 1] < -0.9)[0]),
+                    int(np.flatnonzero(normals[:, 0] > 0.9)[0]))
+
+    def direction(face, point):
+        crack = Crack(id=0, points=[point, np.add(point, [0.2, 0.0, 0.2])], faces=[face, face],
+                      time=[0, 1], width=[0.01, 0.01], depth=[0.0, 0.0])
+        return np.asarray(preview_direction(m, CrackNetwork(cracks=[crack], mesh=mesh_info(m)),
+                                            up=(0, 1, 0)))
+
+    below = direction(bottom, [-0.1, -0.5, -0.1])
+    assert below[1] < -0.5 and np.hypot(below[0], below[2]) > 0.3
+    above = direction(side, [1.0, 0.0, -0.1])
+    assert above[1] > 0 and above[0] > 0.5

@@ -419,13 +419,18 @@ def preview_direction(
     """The camera direction (from the mesh towards the camera) that shows the most cracks.
 
     Candidates are the 17 directions of the upper half of a cube's corners, edges and faces
-    (``up`` is up; :func:`up_axis` when not given), tilted 20 degrees upwards; each scores the
-    crack length facing it, with the mesh area facing it breaking ties (and choosing the view
-    when there are no cracks).
+    (``up`` is up; :func:`up_axis` when not given), tilted 20 degrees upwards, and the 8 of its
+    lower corners and edges; each scores the crack length facing it, with the mesh area
+    facing it breaking ties (and choosing the view when there are no cracks).  A view from
+    below counts :data:`BELOW_WEIGHT` of its score: cracks facing down choose it.
     """
     cross = face_cross(mesh.vertices, mesh.faces)
     up = up_axis(mesh, cross) if up is None else np.asarray(up, np.float64)
     return _direction(cross, network, up)
+
+
+#: What a view from below is worth against one from above showing the same crack length.
+BELOW_WEIGHT = 0.5
 
 
 def _direction(cross: np.ndarray, network: CrackNetwork, up: np.ndarray):
@@ -443,7 +448,14 @@ def _direction(cross: np.ndarray, network: CrackNetwork, up: np.ndarray):
     cand /= np.linalg.norm(cand, axis=1, keepdims=True)
     cand[:, 1] += np.tan(np.radians(20))
     cand /= np.linalg.norm(cand, axis=1, keepdims=True)
-    cand = cand @ _frame(up).T
+    # Views from below (not straight up: up would then have no direction in the picture),
+    # after the others (ties keep a view from above) and worth BELOW_WEIGHT
+    # of their score: only cracks that face down (an impact on a chin's or a shelf's
+    # underside) choose one; from above they were seen edge-on at the picture's rim.
+    below = np.array([(x, -1, z) for x in (-1, 0, 1) for z in (-1, 0, 1) if x or z], float)
+    below /= np.linalg.norm(below, axis=1, keepdims=True)
+    weight = np.concatenate([np.ones(len(cand)), np.full(len(below), BELOW_WEIGHT)])
+    cand = np.concatenate([cand, below]) @ _frame(up).T
     from crackbake.geometry_kernels import facing_sum_kernel
 
     # A kernel, not matmul or einsum: a (F, 3) @ (3, 17) product goes to BLAS threads (1.5 s
@@ -457,7 +469,7 @@ def _direction(cross: np.ndarray, network: CrackNetwork, up: np.ndarray):
         fcs = np.concatenate([np.asarray(c.faces)[:-1] for c in network.cracks])
         n = unit_rows(cross[fcs])[0]
         score += (seg[:, None] * np.maximum(np.einsum("si,ci->sc", n, cand), 0)).sum(axis=0)
-    return tuple(float(x) for x in cand[int(np.argmax(score))])
+    return tuple(float(x) for x in cand[int(np.argmax(score * weight))])
 
 
 def preview_camera(mesh: Mesh, network: CrackNetwork, up: str | np.ndarray | None = None):
