@@ -124,32 +124,44 @@ def test_finish_waits_for_the_draw_and_lets_other_threads_run(gl_ctx):
         tex = gl.keep(gl.ctx.texture((1024, 1024), 1, dtype="f4"))
         fbo = gl.keep(gl.ctx.framebuffer([tex]))
         fbo.use()
-        prog["n"].value = 600
-        stall, stop, window = [0.0], threading.Event(), threading.Event()
 
-        def spin():
-            last = time.perf_counter()
-            while not stop.is_set():
-                now = time.perf_counter()
-                if window.is_set():
-                    stall[0] = max(stall[0], now - last)
-                last = now
+        def timed(n: int) -> tuple[float, float, np.ndarray]:
+            """The wait in finish() for a draw of ``n`` iterations a pixel, the spinning
+            thread's longest stall during it, and the pixels drawn."""
+            prog["n"].value = n
+            stall, stop, window = [0.0], threading.Event(), threading.Event()
 
-        thread = threading.Thread(target=spin)
-        thread.start()
-        try:
-            fbo.clear(0.0)
-            gl_ctx.finish()
-            vao.render()
-            window.set()
-            start = time.perf_counter()
-            finish(gl_ctx)
-            waited = time.perf_counter() - start
-            window.clear()
-        finally:
-            stop.set()
-            thread.join()
-        pixels = np.frombuffer(fbo.read(components=1, dtype="f4"), np.float32)
+            def spin():
+                last = time.perf_counter()
+                while not stop.is_set():
+                    now = time.perf_counter()
+                    if window.is_set():
+                        stall[0] = max(stall[0], now - last)
+                    last = now
+
+            thread = threading.Thread(target=spin)
+            thread.start()
+            try:
+                fbo.clear(0.0)
+                gl_ctx.finish()
+                vao.render()
+                window.set()
+                start = time.perf_counter()
+                finish(gl_ctx)
+                waited = time.perf_counter() - start
+                window.clear()
+            finally:
+                stop.set()
+                thread.join()
+            return waited, stall[0], np.frombuffer(fbo.read(components=1, dtype="f4"), np.float32)
+
+        # 600 iterations keep llvmpipe busy for a good part of a second; a GPU draws them in
+        # milliseconds (17 ms on an H200), so the draw grows until the wait can show a stall.
+        n = 600
+        waited, stall, pixels = timed(n)
+        while waited < 0.05 and n < 600 * 4**6:
+            n *= 4
+            waited, stall, pixels = timed(n)
     assert (pixels == 1.0).all()  # the draw was complete
     assert waited > 0.05, waited  # long enough for a stall to show
-    assert stall[0] < 0.5 * waited, (stall[0], waited)
+    assert stall < 0.5 * waited, (stall, waited)
