@@ -438,3 +438,88 @@ def test_a_sim_mesh_rebuilt_for_a_thin_feature_warns_once(tmp_path):
     fins = [ln for ln in lines if "not manifold" in ln]
     assert len(snapped) == 1 and len(fins) == 1, lines
     assert len(lines) == len(set(lines))
+
+
+class _Stages(logging.Handler):
+    """The stage ids of the pipeline's log records, in order."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.stages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if getattr(record, "stage", None):
+            self.stages.append(record.stage)
+
+
+@pytest.fixture
+def stages():
+    handler = _Stages()
+    log = logging.getLogger("crackbake.pipeline")
+    level = log.level
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    yield handler
+    log.removeHandler(handler)
+    log.setLevel(level)
+
+
+def _solver_threads() -> list:
+    import threading
+
+    return [t for t in threading.enumerate() if t.name.startswith("crackbake-solve")]
+
+
+def test_a_solving_run_solves_beside_the_uv_stage(plate, tmp_path, stages):
+    # The sim mesh and the field first, then the solver's loop on a thread while the UV stage
+    # and the bake's set-up run (issue 25); the outputs are a sequential run's (the solve's
+    # result does not depend on what ran beside it).
+    from crackbake.params import Impact
+    from crackbake.pipeline import solve
+
+    obj, _, _ = plate
+    p = RunParams(mesh=obj, out=tmp_path / "a", res=64, formats=("exr",),
+                  impacts=(Impact((1.0, 0.5, 0.0)),), preset="glass", sim_faces=3000)
+    result = run(p)
+    assert stages.stages == ["load", "simmesh", "stress", "solve", "unwrap", "bake", "write"]
+    assert {"simmesh", "stress", "solve", "unwrap"} <= set(result.manifest["timings_s"])
+    assert not _solver_threads()
+    resolved, relative = p.resolved()
+    mesh = load_mesh(obj)
+    network, _, _ = solve(mesh, resolved, relative, {})
+    assert len(network.cracks) == len(result.network.cracks) > 0
+    for a, b in zip(network.cracks, result.network.cracks, strict=True):
+        assert np.array_equal(a.points, b.points)
+
+
+def test_keep_without_uvs_is_refused_before_the_solve(tmp_path, stages):
+    from crackbake.errors import CrackbakeError
+    from crackbake.params import Impact
+
+    obj = tmp_path / "bare.obj"
+    obj.write_text("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n")
+    p = RunParams(mesh=obj, out=tmp_path / "o", res=64, formats=("exr",), uv="keep",
+                  impacts=(Impact((1.0, 0.5, 0.0)),), preset="glass", sim_faces=3000)
+    with pytest.raises(CrackbakeError, match="cannot keep the UVs: the mesh has no UVs; use --uv "
+                                             "unwrap"):
+        run(p)
+    assert stages.stages == ["load"]  # no sim mesh was built for a run that could not bake
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_uv_stage_that_fails_stops_the_solver(tmp_path, stages):
+    # UVs the check refuses (every face degenerate in UV) with --uv keep: the UV stage fails
+    # while the solver runs on its thread; the error is the UV stage's and no thread is left.
+    from crackbake.errors import CrackbakeError
+    from crackbake.params import Impact
+
+    obj = tmp_path / "flat_uv.obj"
+    obj.write_text("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nvt 0.5 0.5\n"
+                   "f 1/1 2/1 3/1\nf 1/1 3/1 4/1\n")
+    p = RunParams(mesh=obj, out=tmp_path / "o", res=64, formats=("exr",), uv="keep",
+                  impacts=(Impact((1.0, 0.5, 0.0)),), preset="glass", sim_faces=3000)
+    with pytest.raises(CrackbakeError, match="cannot keep the UVs"):
+        run(p)
+    assert stages.stages[:5] == ["load", "simmesh", "stress", "solve", "unwrap"]
+    assert not _solver_threads()
+    assert not (tmp_path / "o").exists()
