@@ -170,26 +170,16 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     from crackbake.bake.context import create_context, renderer_info
 
     # The inputs are checked: the bake's readback images are made now, on a thread, while the
-    # start-up holds the GIL on one core (crackbake.bake.prefetch.ImagePrefetch); the render
-    # targets come later.
+    # start-up (EGL, the UV stage) holds the GIL on one core
+    # (crackbake.bake.prefetch.ImagePrefetch); the render targets come later.
     images = _images_ahead(params, tiles)
-    solving = None
+    # One GL context for the UV check, the bake and the preview.  The UVs only depend on the
+    # mesh, so they are prepared (and --uv keep refused) before the solver runs.
     try:
-        if params.cracks is None:
-            from crackbake.bake.uv import refuse_early
-
-            refuse_early(mesh, params.uv)  # what needs no GL: before the solve
-            # The sim mesh and the stress field are built now; the solver's loop runs on a
-            # thread (without the GIL) while this one makes the GL context and the UVs and
-            # plans the bake (issue 25).
-            solving = start_solve(mesh, params, relative, timings, sources,
-                                  later=_later_kernels(params, tiles))  # fmt: skip
-        # One GL context for the UV check, the bake and the preview.
         ctx = create_context()
     except BaseException:
-        for ahead in (solving, images):
-            if ahead is not None:
-                ahead.close()
+        if images is not None:
+            images.close()
         raise
     targets = gutter = stress_ahead = preview_ahead = None
     try:
@@ -206,9 +196,9 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         preview_ahead = _preview_ahead(uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
-        if solving is not None:
-            network, solver_stats, solved = solving.result()
-            solving.close()  # the warm-up thread and the sim mesh's memos: not past the solve
+        if params.cracks is None:
+            network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
+                                                  later=_later_kernels(params, uvmesh))
         # The stress bake's rows (closest asset points, nodal values: CPU only) are computed on
         # a thread while the crack bake runs; its draw waits for them.
         stress_ahead = _stress_ahead(uvmesh, solved, params)
@@ -238,8 +228,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
-        # threads end first
-        for ahead in (solving, images, targets, gutter, stress_ahead, preview_ahead):
+        for ahead in (images, targets, gutter, stress_ahead, preview_ahead):  # threads end first
             if ahead is not None:
                 ahead.close()
         ctx.release()
@@ -511,29 +500,6 @@ def solve(
     solved : Solved
         Sim mesh, stress field and the solver's full result.
     """
-    solving = start_solve(mesh, params, relative, timings, sources, later)
-    try:
-        return solving.result()
-    finally:
-        solving.close()
-
-
-def start_solve(
-    mesh: Mesh,
-    params: RunParams,
-    relative: dict,
-    timings: dict[str, float],
-    sources: list | None = None,
-    later: tuple = (),
-) -> Solving:
-    """:func:`solve` begun: the simulation mesh and the stress field built on this thread, the
-    I&O solver's loop left running on a thread of its own; :meth:`Solving.result` finishes.
-
-    The loop runs without the GIL, so what the caller does meanwhile (the GL context, the UV
-    stage, the bake's set-up) shares the machine with it instead of waiting for it (issue 25).
-    The thesis solver, one compiled call that cannot be stopped, runs here.  Arguments as
-    :func:`solve`'s.
-    """
     if sources is None:
         from crackbake.simulate.setup import stress_sources
 
@@ -542,7 +508,6 @@ def start_solve(
     # the solver's: no two threads import one package at once.  No scipy: its 0.35 s of
     # imports came for KD-trees and graph pieces (crackbake.nearest has them now).
     from crackbake.simulate import simmesh, stress, timing  # noqa: F401
-    from crackbake.simulate.setup import solver_params
 
     warming = None
     stop = threading.Event()
@@ -553,83 +518,23 @@ def start_solve(
         # then the later stages' while it solves.
         warming = warm.start(later, stop)
     try:
-        sim, field, sources = _sim_field(mesh, params, relative, timings, sources)
-        sp = solver_params(params, mesh, relative)
-        logger.info("growing cracks (%s)", sp.method, extra={"stage": "solve"})
-        return Solving((mesh, params, relative, timings, sources), (sim, field, sp),
-                       (warming, stop))
-    except BaseException:
-        _end_solve(warming, stop)
-        raise
+        return _solve(mesh, params, relative, timings, sources)
+    finally:
+        if warming is not None:  # no numba load left running past the run (or its error)
+            stop.set()
+            warming.join()
+        from crackbake.geometry import forget
+
+        forget()  # the sim mesh's memoised edges, shells and patches: this run's only
 
 
-def _end_solve(warming: threading.Thread | None, stop: threading.Event) -> None:
-    if warming is not None:  # no numba load left running past the run (or its error)
-        stop.set()
-        warming.join()
-    from crackbake.geometry import forget
-
-    forget()  # the sim mesh's memoised edges, shells and patches: this run's only
-
-
-class Solving:
-    """A solve under way (:func:`start_solve`): the sim mesh and the stress field built, the
-    solver running.  :meth:`result` waits for it and makes the network; :meth:`close` (always
-    call it, :meth:`result` or not) stops a solver still running and the warm-up thread."""
-
-    def __init__(self, run: tuple, solving: tuple, warming: tuple) -> None:
-        self._run = run  # (mesh, params, relative, timings, sources)
-        self._solving = solving  # (sim, field, solver params)
-        self._warming = warming  # (warm-up thread or None, its stop)
-        self._stop = threading.Event()
-        self._out: list = []
-        self._seconds = 0.0
-        self._closed = False
-        self._thread = None
-        if solving[2].method == "thesis":
-            self._grow()
-        else:
-            self._thread = threading.Thread(target=self._grow, name="crackbake-solve",
-                                            daemon=True)  # fmt: skip
-            self._thread.start()
-
-    def _grow(self) -> None:
-        t = time.perf_counter()
-        try:
-            self._out.append(_grow(*self._solving, self._stop))
-        except BaseException as exc:  # noqa: BLE001 - raised again by result()
-            self._out.append(exc)
-        self._seconds = time.perf_counter() - t
-
-    def result(self) -> tuple[CrackNetwork, dict, Solved]:
-        """The network, the solver's figures and the solve stages' data (as :func:`solve`);
-        the solver's error, if it failed."""
-        if self._thread is not None:
-            self._thread.join()
-        out = self._out[0]
-        if isinstance(out, BaseException):
-            raise out
-        self._run[3]["solve"] = self._seconds
-        return _network(*self._run, *self._solving, out)
-
-    def close(self) -> None:
-        """Stop the solver if it still runs, then the warm-up thread; idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
-        _end_solve(*self._warming)
-
-
-def _later_kernels(params: RunParams, tiles: int = 1) -> tuple:
+def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
     """The numba kernels a UV-placed bake of ``params`` calls after the solver, for the warm-up
     thread to load from the cache while the solver runs: the bake's and the stress bake's
     (on the run's thread), the encoders' (the write threads, whose first calls each loaded under
     numba's one compiler lock, 0.4 s serialised); then the writer's modules by name, to import.
-    Empty for UDIM pages (``tiles`` > 1) and projected decals (other kernels)."""
-    if tiles > 1 or params.decal is not None:
+    Empty for UDIM pages and projected decals (other kernels)."""
+    if uvmesh.udim is not None or params.decal is not None:
         return ()
     from crackbake import nearest
     from crackbake.bake import dilation, grid, normal_map, stress, stress_fields
@@ -662,14 +567,15 @@ def _later_kernels(params: RunParams, tiles: int = 1) -> tuple:
     return tuple(later)
 
 
-def _sim_field(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],
-               sources: list) -> tuple:
-    """The simulation mesh, its stress field and the sources (an impact's radius fitted to a
-    thin feature), once the sources are built and the solver's kernels are loading (timed as
-    ``simmesh`` and ``stress``)."""
-    from crackbake.simulate.setup import with_spacing
-    from crackbake.simulate.simmesh import build_simmesh
+def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],
+           sources: list) -> tuple[CrackNetwork, dict, Solved]:
+    """:func:`solve` once the sources are built and the solver's kernels are loading."""
+    from crackbake.io.sidecar import jsonable
+    from crackbake.network import from_solver
+    from crackbake.simulate.setup import sidecar_params, solver_params, with_spacing
+    from crackbake.simulate.simmesh import build_simmesh, onto_asset
     from crackbake.simulate.stress import impact_refinement, noise_origin, stress_field
+    from crackbake.simulate.timing import grow_from_impacts
 
     logger.info("building the simulation mesh", extra={"stage": "simmesh"})
     t = time.perf_counter()
@@ -704,25 +610,11 @@ def _sim_field(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str,
         _warn_once(first, second)
     field = with_spacing(field, params, mesh.diagonal)
     timings["stress"] = time.perf_counter() - t
-    return sim, field, sources
-
-
-def _network(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],
-             sources: list, sim, field, sp, result) -> tuple[CrackNetwork, dict, Solved]:
-    """The crack network of a finished solve (:class:`Solving`), with the solver's figures."""
-    from crackbake.io.sidecar import jsonable
-    from crackbake.network import from_solver
-    from crackbake.simulate.setup import sidecar_params
-    from crackbake.simulate.simmesh import onto_asset
-    from crackbake.simulate.timing import grow_from_impacts
-
-    if sp.method != "thesis" and result.stats.get("stopped") == "max steps":
-        warnings.warn(
-            f"the solver stopped at --max-steps {sp.max_steps} with cracks still growing; "
-            "raise --max-steps for the complete pattern",
-            CrackbakeWarning,
-            stacklevel=4,
-        )
+    sp = solver_params(params, mesh, relative)
+    logger.info("growing cracks (%s)", sp.method, extra={"stage": "solve"})
+    t = time.perf_counter()
+    result = _grow(sim, field, sp)
+    timings["solve"] = time.perf_counter() - t
     logger.info(
         "%s cracks started, %d polylines, %s steps%s",
         result.stats.get("cracks", len(result.cracks)),
@@ -918,12 +810,20 @@ def _round_up(n: float) -> int:
     return int(np.ceil(n / step) * step)
 
 
-def _grow(sim, field, sp, stop: threading.Event | None = None):
-    """Run the solver ``sp.method`` names (iben stops early, raising, once ``stop`` is set)."""
+def _grow(sim, field, sp):
+    """Run the solver ``sp.method`` names; warn when iben stopped at its step limit."""
     if sp.method == "thesis":
         from crackbake.simulate.solver.thesis import solve_thesis
 
         return solve_thesis(sim, field, sp)
     from crackbake.simulate.solver.iben import solve_iben
 
-    return solve_iben(sim, field, sp, stop)
+    result = solve_iben(sim, field, sp)
+    if result.stats.get("stopped") == "max steps":
+        warnings.warn(
+            f"the solver stopped at --max-steps {sp.max_steps} with cracks still growing; "
+            "raise --max-steps for the complete pattern",
+            CrackbakeWarning,
+            stacklevel=3,
+        )
+    return result

@@ -79,20 +79,3 @@ def test_named_modules_are_imported_on_the_thread_and_a_bad_name_is_ignored():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=180, check=True)  # fmt: skip
     assert out.stdout.split() == ["True", "False"], out.stderr
-
-
-def test_a_set_stop_ends_the_solve_between_chunks():
-    # A run that solves on a thread stops it when another stage fails (pipeline.Solving.close)
-    import threading
-
-    import pytest
-
-    from crackbake.simulate.solver.iben.solve import Stopped
-
-    sim, field = warm.plate()
-    stop = threading.Event()
-    done = solve_iben(sim, field, SolverParams(max_steps=50, max_cracks=4), stop)
-    assert done.steps > 0  # not set: the solve runs to its end
-    stop.set()
-    with pytest.raises(Stopped):
-        solve_iben(sim, field, SolverParams(max_steps=50, max_cracks=4), stop)

@@ -8,7 +8,7 @@ Modules: :mod:`~crackbake.bake.uv.check` (usable? UDIM?), :mod:`~crackbake.bake.
 from crackbake.bake.uv.cache import cache_dir
 from crackbake.bake.uv.check import UVCheck, check_uvs
 from crackbake.bake.uv.overlap import uv_overlap_fraction
-from crackbake.bake.uv.prepare import prepare_uvs, refuse_early
+from crackbake.bake.uv.prepare import prepare_uvs
 from crackbake.bake.uv.unwrap import unwrap
 from crackbake.bake.uv.uvmesh import UVMesh
 from crackbake.params import default_padding
@@ -20,7 +20,6 @@ __all__ = [
     "check_uvs",
     "default_padding",
     "prepare_uvs",
-    "refuse_early",
     "unwrap",
     "uv_overlap_fraction",
 ]

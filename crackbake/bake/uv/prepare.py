@@ -169,23 +169,6 @@ def prepare_uvs(
     return unwrap(mesh, res, padding=padding, timeout=timeout, cache=cache, ctx=ctx)
 
 
-def refuse_early(mesh: Mesh, mode: str) -> None:
-    """The refusals of :func:`prepare_uvs` that need no GL context and no measure, raised
-    before a run's long stages (the solve runs before the UV stage): an unknown mode, and
-    ``"keep"`` for a mesh without UVs (with :func:`prepare_uvs`'s own message).
-
-    Raises
-    ------
-    CrackbakeError
-    """
-    if mode not in UV_MODES:
-        raise CrackbakeError(f"unknown UV mode '{mode}'; use one of {', '.join(UV_MODES)}")
-    if mode == "keep" and mesh.uv is None:
-        check = check_uvs(mesh)
-        raise CrackbakeError(f"{mesh_label(mesh)}: cannot keep the UVs: {check.reason}; "
-                             "use --uv unwrap")
-
-
 def _checked_uvs(mesh: Mesh, ctx, cache: bool) -> UVCheck:
     """:func:`check_uvs`, read from the mesh cache (:mod:`crackbake.bake.mesh_cache`) when an
     earlier run of the same UVs on the same renderer stored it (a re-bake's UV stage: the

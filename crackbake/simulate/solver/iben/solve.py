@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from types import SimpleNamespace
 
@@ -58,12 +57,7 @@ from crackbake.simulate.solver.iben.update import incidence, rebuild, requeue_al
 logger = logging.getLogger(__name__)
 
 
-class Stopped(Exception):
-    """:func:`solve_iben` was asked to stop (its ``stop`` was set) before it was done."""
-
-
-def solve_iben(sim, field, params: SolverParams, stop: threading.Event | None = None
-               ) -> SolverResult:
+def solve_iben(sim, field, params: SolverParams) -> SolverResult:
     """Grow cracks with the Iben & O'Brien hybrid method (docs/solver.md).
 
     Parameters
@@ -76,9 +70,6 @@ def solve_iben(sim, field, params: SolverParams, stop: threading.Event | None = 
         ``(M, 3, 3)`` or None, added per quasi-static growth step.
     params : SolverParams
         ``max_cracks`` bounds the distinct cracks started, ``max_steps`` the solver steps.
-    stop : threading.Event, optional
-        Checked between the compiled loop's chunks (about a tenth of a second each): once set,
-        :class:`Stopped` is raised (a run that solves on a thread and failed elsewhere).
 
     Returns
     -------
@@ -106,7 +97,7 @@ def solve_iben(sim, field, params: SolverParams, stop: threading.Event | None = 
     p = _loop_params(s, mesh, cal, params)
     t_loop = time.perf_counter()
     mesh.landed = [0] if stages else []
-    s = _run_chunks(s, p, mesh.has_growth, stages, mesh.landed, stop) if cal.tau > 0 else s
+    s = _run_chunks(s, p, mesh.has_growth, stages, mesh.landed) if cal.tau > 0 else s
     loop_seconds = time.perf_counter() - t_loop
     return _result(s, mesh, cal, params, loop_seconds, t0)
 
@@ -386,8 +377,7 @@ def _stage_impacts(s: State, mesh: SimpleNamespace, cal: SimpleNamespace, field,
 
 
 def _run_chunks(s: State, p: LoopParams, has_growth: bool,
-                stages: list[np.ndarray] | None = None, landed: list | None = None,
-                stop: threading.Event | None = None) -> State:
+                stages: list[np.ndarray] | None = None, landed: list | None = None) -> State:
     """Run the compiled loop to its end in chunks of about a tenth of a second (so progress
     stays responsive without a clock inside the compiled loop); grow the state when full.
     Each of ``stages`` (per initial sim face, through ``s.AF``) is added to the stress once
@@ -398,8 +388,6 @@ def _run_chunks(s: State, p: LoopParams, has_growth: bool,
     chunk = 64
     last_msg = time.perf_counter()
     while True:
-        if stop is not None and stop.is_set():
-            raise Stopped
         t_call = time.perf_counter()
         code = run(s, p, w, chunk)
         now = time.perf_counter()
