@@ -193,7 +193,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
             targets.close()
             targets = None
         gutter = _bake_ahead(ctx, uvmesh, params, timings)
-        preview_ahead = _preview_ahead(uvmesh, params)
+        preview_ahead = _preview_ahead(mesh, uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
         if params.cracks is None:
@@ -212,7 +212,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         # The crack maps' files encode on threads while the stress bake draws (issue 25);
         # leaving the block waits for every file, whatever happened inside it.
         with Writer(stage, Path(params.mesh).stem, params, mesh, uvmesh, network, maps, ctx,
-                    effective, closed=preview_ahead) as writer:  # fmt: skip
+                    effective, preview=preview_ahead) as writer:  # fmt: skip
             stress = _bake_stress(ctx, uvmesh, solved, params, timings, stress_ahead)
             logger.info("writing %s", params.out_dir, extra={"stage": "write"})
             t = time.perf_counter()
@@ -428,15 +428,16 @@ def _stress_ahead(uvmesh: UVMesh, solved: Solved | None, params: RunParams) -> _
     return _Ahead("stress", stress_rows, uvmesh, solved.result, uvmesh.tangents, solved.sim)
 
 
-def _preview_ahead(uvmesh: UVMesh, params: RunParams) -> _Ahead | None:
-    """Whether the preview's faces close a surface (:func:`crackbake.bake.preview.closed_surface`,
-    the camera-free half of its culling check), worked out on a thread while the run solves;
-    None where the preview draws every face anyway."""
-    from crackbake.bake.preview import CULL_FACES, closed_surface
-
-    if "preview" not in params.formats or len(uvmesh.faces) < CULL_FACES:
+def _preview_ahead(mesh: Mesh, uvmesh: UVMesh, params: RunParams) -> _Ahead | None:
+    """The preview's mesh-only work (:func:`crackbake.bake.preview.preview_ahead`: its up axis,
+    the faces' cross products and the views' area scores, its culling check), worked out on a
+    thread while the run solves; None without a preview, or for pages of a UDIM set."""
+    if "preview" not in params.formats or uvmesh.udim is not None:
         return None
-    return _Ahead("preview", closed_surface, uvmesh.vertices, uvmesh.faces)
+    from crackbake.bake.preview import preview_ahead
+
+    return _Ahead("preview", preview_ahead, mesh, uvmesh.vertices, uvmesh.faces, params.up,
+                  params.cache)
 
 
 def _bake_stress(

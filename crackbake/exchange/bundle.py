@@ -227,9 +227,11 @@ class Writer:
 
     def __init__(self, stage: OutputStage, stem: str, params: RunParams, mesh: Mesh,
                  uvmesh: UVMesh, network: CrackNetwork, maps: CrackMaps, ctx=None,
-                 effective: dict | None = None, closed=None):  # fmt: skip
+                 effective: dict | None = None, preview=None):  # fmt: skip
         self.stage, self.stem, self.params, self.ctx = stage, stem, params, ctx
-        self.closed = closed  # the preview's closed_surface, worked out ahead (.result())
+        # the preview's mesh-only work (crackbake.bake.preview.preview_ahead), begun on a
+        # thread: .result()
+        self.preview = preview
         self.mesh, self.uvmesh, self.network, self.maps = mesh, uvmesh, network, maps
         self.effective = effective
         self.udim = getattr(uvmesh, "udim", None) is not None
@@ -317,14 +319,16 @@ class Writer:
             path = stage.path(f"{stem}_stress.exr")
             self.jobs.append(self.pool.submit(_write_stress_exr, path, stress, **self.exr,
                                               stage=stage))  # fmt: skip
-        up = None
-        if self.pages is not None or self.usd_textures is not None:
+        up = ahead = None
+        if self.preview is not None:
+            ahead = self.preview.result()
+            up = ahead.up
+        elif self.pages is not None or self.usd_textures is not None:
             up = up_vector(params.up, mesh, cache=params.cache)  # once: a hull when guessed
         if self.pages is not None:
             colour, normal, levels = self.pages.result()
-            closed = None if self.closed is None else self.closed.result()
             _draw_preview(stage, mesh, uvmesh, self.network, colour, normal, self.ctx, up,
-                          levels, closed)  # fmt: skip
+                          levels, ahead)  # fmt: skip
         if self.glb_keys:
             _write_glb(stage.path(f"{stem}.glb"), stem, uvmesh, maps, self.encoded,
                        self.glb_keys)  # fmt: skip
@@ -492,10 +496,11 @@ def _preview_levels(maps: CrackMaps, texture, with_normal: bool):
 
 
 def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None,
-                  levels=None, closed=None) -> None:  # fmt: skip
-    """Render ``preview.png`` from its pages (:func:`_preview_pages`) with ``ctx``."""
+                  levels=None, ahead=None) -> None:  # fmt: skip
+    """Render ``preview.png`` from its pages (:func:`_preview_pages`) with ``ctx``; ``ahead``:
+    :func:`~crackbake.bake.preview.preview_ahead` of ``mesh`` and ``uvmesh``."""
     tangents = getattr(uvmesh, "tangents", None)
-    view_dir, up, target, distance = preview_camera(mesh, network, up)
+    view_dir, up, target, distance = preview_camera(mesh, network, up, ahead)
     picture = render_preview(
         uvmesh.vertices,
         uvmesh.faces,
@@ -510,7 +515,7 @@ def _draw_preview(stage, mesh, uvmesh, network, colour, normal, ctx, up=None,
         tangents=tangents,
         ctx=ctx,
         levels=levels,
-        closed=closed,
+        closed=None if ahead is None else ahead.closed,
     )
     write_bytes(stage.path("preview.png"), png_bytes(picture, level=6, srgb=True))
 
