@@ -179,3 +179,31 @@ def test_cracks_on_an_underside_are_seen_from_below_and_others_from_above():
     assert below[1] < -0.5 and np.hypot(below[0], below[2]) > 0.3
     above = direction(side, [1.0, 0.0, -0.1])
     assert above[1] > 0 and above[0] > 0.5
+
+
+def test_the_mesh_only_part_worked_out_ahead_gives_the_same_camera(tmp_path, monkeypatch):
+    # A run works out the up axis, the cross products and the views' area scores on a thread
+    # while it solves (preview_ahead); the camera is the one worked out at once, up included.
+    from crackbake.bake.preview import CULL_FACES, preview_ahead, preview_camera
+
+    monkeypatch.setenv("CRACKBAKE_CACHE_DIR", str(tmp_path))
+    m = _two_sided_box()
+    for faces, side in (([2, 2], -1), ([0, 0], 1)):
+        crack = Crack(id=0, points=[[0.6, 0.1, 0.0], [0.9, 0.2, 0.0]], faces=faces, time=[0, 1],
+                      width=[0.01, 0.01], depth=[0.0, 0.0])  # fmt: skip
+        network = CrackNetwork(cracks=[crack], mesh=mesh_info(m))
+        ahead = preview_ahead(m, m.vertices, m.faces, None, cache=True)
+        assert ahead.closed is None and len(m.faces) < CULL_FACES  # culling only from there
+        assert ahead.cross.shape == (len(m.faces), 3)
+        now = preview_camera(m, network)
+        assert _same(preview_camera(m, network, ahead=ahead), now)
+        assert np.sign(now[0][2]) == side  # the cracked side is the one seen
+        z_up = preview_ahead(m, m.vertices, m.faces, "z", cache=True)
+        assert np.array_equal(z_up.up, [0.0, 0.0, 1.0])
+        assert _same(preview_camera(m, network, ahead=z_up), preview_camera(m, network, "z"))
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    """Two preview cameras (view, up, target, distance), bit for bit."""
+    return all(np.array_equal(np.asarray(x, float), np.asarray(y, float))
+               for x, y in zip(a, b, strict=True))
