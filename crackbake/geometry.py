@@ -242,15 +242,22 @@ class SurfaceIndex:
     lazy : bool
         Build the tree at the first query instead of now (a sim mesh read from the mesh cache:
         its proxy's surface is asked only where cracks move onto the asset).
+    ahead : bool
+        Build it now in a child process (:mod:`crackbake.closest_worker`), which answers the
+        first query: the build holds the GIL for seconds at a million faces, so on a thread it
+        would stall the caller instead of running beside it.  Later queries, or a first one the
+        worker failed, use a tree built here.
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, lazy: bool = False) -> None:
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, lazy: bool = False,
+                 ahead: bool = False) -> None:  # fmt: skip
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
         if not len(self.faces):
             raise ValueError("a surface index needs at least one face")
         self._tree = None
-        if not lazy:
+        self._worker = _TreeWorker.start(self.vertices, self.faces) if ahead else None
+        if not lazy and not ahead:
             self._build()
 
     def _build(self) -> None:
@@ -259,6 +266,12 @@ class SurfaceIndex:
         tree = igl.AABB()
         tree.init(self.vertices, self.faces)
         self._tree = tree
+
+    def stop_worker(self) -> None:
+        """Stop the ``ahead`` worker if no query has used it (a run that grew no cracks)."""
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.stop()
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The closest surface point to each of ``points`` (K, 3).
@@ -275,13 +288,103 @@ class SurfaceIndex:
         p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if not len(p):
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))
-        if self._tree is None:
-            self._build()
-        _, face, position = self._tree.squared_distance(self.vertices, self.faces, p)
+        answer = None
+        if self._worker is not None:  # the first query: the worker's tree, built meanwhile
+            worker, self._worker = self._worker, None
+            answer = worker.query(p)
+        if answer is None:
+            if self._tree is None:
+                self._build()
+            _, face, position = self._tree.squared_distance(self.vertices, self.faces, p)
+        else:
+            face, position = answer
         face = np.asarray(face, dtype=np.int64)
         bary = np.clip(barycentric(self.vertices[self.faces[face]], position), 0.0, None)
         bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
         return face, bary, np.asarray(position, dtype=np.float64)
+
+
+class _TreeWorker:
+    """A :mod:`crackbake.closest_worker` process building a surface's tree (see
+    :class:`SurfaceIndex`'s ``ahead``); killed when dropped or at the exit, it dies with us."""
+
+    def __init__(self, proc, feeding) -> None:
+        import weakref
+
+        self.proc, self.feeding = proc, feeding
+        self._stop = weakref.finalize(self, _stop_tree_worker, proc)
+
+    @classmethod
+    def start(cls, vertices: np.ndarray, faces: np.ndarray) -> _TreeWorker | None:
+        """The worker, fed the surface on a thread; None where it cannot start."""
+        import os
+        import subprocess
+        import sys
+        import threading
+
+        from crackbake.closest_worker import PARENT_ENV, send
+
+        try:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "crackbake.closest_worker"],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                env=dict(os.environ, **{PARENT_ENV: str(os.getpid())}),
+                start_new_session=True,  # own process group: Ctrl-C reaches us, we stop it
+            )  # fmt: skip
+        except OSError:
+            return None
+
+        def feed() -> None:
+            try:
+                send(proc.stdin, vertices)
+                send(proc.stdin, faces)
+                proc.stdin.flush()
+            except (OSError, ValueError):  # it died or was stopped: the query finds out
+                pass
+
+        feeding = threading.Thread(target=feed, name="crackbake-closest-feed", daemon=True)
+        feeding.start()
+        return cls(proc, feeding)
+
+    def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """libigl's closest faces (K,) and positions (K, 3) of ``points`` (K, 3), or None where
+        the worker failed; the worker is gone after."""
+        from crackbake.closest_worker import receive, send
+
+        try:
+            self.feeding.join()
+            send(self.proc.stdin, points)
+            self.proc.stdin.close()
+            face = receive(self.proc.stdout)
+            position = receive(self.proc.stdout)
+            ok = (self.proc.wait() == 0 and face.shape == (len(points),)
+                  and position.shape == (len(points), 3))  # fmt: skip
+        except (OSError, ValueError):  # a broken pipe, a truncated or garbled answer
+            ok = False
+        finally:
+            self.stop()
+        return (face, position) if ok else None
+
+    def stop(self) -> None:
+        """Kill the worker if it still runs and reap it; idempotent."""
+        self._stop()
+
+
+def _stop_tree_worker(proc) -> None:
+    import os
+    import signal
+
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    for pipe in (proc.stdin, proc.stdout):
+        try:
+            pipe.close()
+        except (OSError, ValueError):
+            pass
+    proc.wait()
 
 
 def edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:

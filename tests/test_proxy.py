@@ -179,3 +179,42 @@ def test_auto_uses_a_proxy_above_the_limit(tmp_path):
     assert 0 < params["sim_proxy_faces"] <= 21_000
     assert params["sim_faces_built"] < 30_000
     _assert_valid_network(dense, tmp_path / "out")
+
+
+def _sphere_surface():
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    return np.asarray(sphere.vertices, np.float64), np.asarray(sphere.faces, np.int64)
+
+
+def test_a_surface_built_ahead_answers_as_the_one_built_here():
+    # A cached proxy run builds the asset's AABB tree in a child process while it solves
+    # (crackbake.closest_worker): its one answer is libigl's, bit for bit, and it is gone after.
+    v, f = _sphere_surface()
+    here = SurfaceIndex(v, f)
+    ahead = SurfaceIndex(v, f, ahead=True)
+    proc = ahead._worker.proc
+    rng = np.random.default_rng(3)
+    for pts in (rng.normal(size=(500, 3)), rng.normal(size=(40, 3)) * 3):
+        for a, b in zip(ahead.closest(pts), here.closest(pts), strict=True):
+            assert np.array_equal(a, b)
+        assert proc.poll() == 0 and ahead._worker is None  # later queries: a tree built here
+    assert ahead._tree is not None
+
+
+def test_a_failed_or_unused_worker_leaves_no_process_and_the_same_answers():
+    import os
+    import signal
+
+    v, f = _sphere_surface()
+    pts = np.random.default_rng(4).normal(size=(100, 3))
+    expected = SurfaceIndex(v, f).closest(pts)
+    broken = SurfaceIndex(v, f, ahead=True)
+    proc = broken._worker.proc
+    os.killpg(proc.pid, signal.SIGKILL)  # dies before the query: the tree is built here
+    for a, b in zip(broken.closest(pts), expected, strict=True):
+        assert np.array_equal(a, b)
+    assert proc.poll() is not None
+    unused = SurfaceIndex(v, f, ahead=True)  # a run that grew no cracks
+    proc = unused._worker.proc
+    unused.stop_worker()
+    assert proc.poll() is not None and unused._worker is None

@@ -32,27 +32,14 @@ import sys
 
 # Environment variable naming the parent's pid, set by crackbake.bake.uv.unwrap.run_worker.
 PARENT_ENV = "CRACKBAKE_XATLAS_PARENT"
-_PR_SET_PDEATHSIG = 1
 
 
 def die_with_parent() -> None:
-    """SIGKILL this process when its parent exits (Linux); exit now if it already has.
+    """SIGKILL this process when its parent exits (Linux); exit now if it already has
+    (:func:`crackbake.child.die_with_parent` with :data:`PARENT_ENV`)."""
+    from crackbake.child import die_with_parent as die
 
-    The parent's pid comes from :data:`PARENT_ENV`; comparing it with ``getppid()`` after the
-    ``prctl`` call closes the race where the parent died before the request was made.
-    """
-    if sys.platform.startswith("linux"):
-        import ctypes
-        import signal
-
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
-        except (OSError, AttributeError):
-            pass
-    parent = os.environ.get(PARENT_ENV)
-    if parent and parent.isdigit() and os.getppid() != int(parent):
-        os._exit(3)
+    die(PARENT_ENV)
 
 
 if __name__ == "__main__":

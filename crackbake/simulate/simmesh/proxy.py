@@ -138,7 +138,10 @@ def onto_asset(paths: list, proxy: Proxy | None) -> list:
     ``paths`` are :class:`~crackbake.simulate.solver.CrackPath`; returned unchanged when
     ``proxy`` is None (a sim mesh inside the asset's own faces).
     """
-    if proxy is None or not paths:
+    if proxy is None:
+        return paths
+    if not paths:
+        proxy.surface.stop_worker()  # built ahead for a query that will not come
         return paths
     counts = [len(p.points) for p in paths]
     face, _, position = proxy.onto_asset(np.concatenate([p.points for p in paths]))
