@@ -478,7 +478,7 @@ def test_bad_input_is_one_clear_line(results, name, args, message):
     # Nothing but complete entries of the mesh cache (crackbake.bake.mesh_cache: what the run
     # measured of the asset before the error, kept for the corrected run), in its cache folder.
     left = [p for p in r["new"] if p != ".cache" and not re.fullmatch(
-        r"\.cache/(gutter|tangents|uvcheck|simmesh)-[0-9a-f]{64}\.npys", p)]  # fmt: skip
+        r"\.cache/(gutter|tangents|uvcheck|simmesh|up)-[0-9a-f]{64}\.npys", p)]  # fmt: skip
     assert left == [], f"left behind: {r['new']}"
 
 
