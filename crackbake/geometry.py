@@ -243,10 +243,7 @@ class SurfaceIndex:
         Build the tree at the first query instead of now (a sim mesh read from the mesh cache:
         its proxy's surface is asked only where cracks move onto the asset).
     ahead : bool
-        Build it now in a child process (:mod:`crackbake.closest_worker`), which answers the
-        first query: the build holds the GIL for seconds at a million faces, so on a thread it
-        would stall the caller instead of running beside it.  Later queries, or a first one the
-        worker failed, use a tree built here.
+        Build it now in a child process (:meth:`start_worker`).
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, lazy: bool = False,
@@ -256,9 +253,20 @@ class SurfaceIndex:
         if not len(self.faces):
             raise ValueError("a surface index needs at least one face")
         self._tree = None
-        self._worker = _TreeWorker.start(self.vertices, self.faces) if ahead else None
-        if not lazy and not ahead:
+        self._worker = None
+        if ahead:
+            self.start_worker()
+        elif not lazy:
             self._build()
+
+    def start_worker(self) -> None:
+        """Build the tree from now on in a child process (:mod:`crackbake.closest_worker`),
+        which answers the next query: the build holds the GIL for seconds at a million faces,
+        so on a thread it would stall the caller instead of running beside it.  Later queries,
+        or one the worker failed, use a tree built here.  Nothing to do once a tree or a
+        worker exists."""
+        if self._tree is None and self._worker is None:
+            self._worker = _TreeWorker.start(self.vertices, self.faces)
 
     def _build(self) -> None:
         import igl  # only the simulation proxy and its stress bake need it
@@ -268,7 +276,8 @@ class SurfaceIndex:
         self._tree = tree
 
     def stop_worker(self) -> None:
-        """Stop the ``ahead`` worker if no query has used it (a run that grew no cracks)."""
+        """Stop the worker (:meth:`start_worker`) if no query has used it (a run that grew no
+        cracks)."""
         worker, self._worker = self._worker, None
         if worker is not None:
             worker.stop()

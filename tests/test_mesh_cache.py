@@ -320,8 +320,8 @@ def test_sim_mesh_cached_equals_the_built_and_says_its_warnings_again(cache):
 
 def test_a_proxy_sim_mesh_is_cached_with_its_proxy_and_a_lazy_surface(cache):
     """A sim mesh refined in a decimated proxy: read back with the proxy's arrays and the
-    asset surface, whose AABB tree is built in a child process (crackbake.closest_worker) and
-    answers as the built one."""
+    asset surface, whose AABB tree is built when a solve starts, in a child process
+    (crackbake.closest_worker), and answers as the built one."""
     from crackbake.simulate.simmesh import build_simmesh
 
     mesh = plate_mesh(12, wobble=0.3, seed=4)
@@ -338,7 +338,8 @@ def test_a_proxy_sim_mesh_is_cached_with_its_proxy_and_a_lazy_surface(cache):
         for name in ("vertices", "faces"):
             assert np.array_equal(getattr(sim.proxy.surface, name),
                                   getattr(built.proxy.surface, name))
-    assert read.proxy.surface._tree is None  # built in the worker, not here
+    assert read.proxy.surface._tree is None  # not built until the solve starts
+    read.proxy.surface.start_worker()  # as a solving run does (crackbake.pipeline)
     points = np.random.default_rng(0).uniform(-0.1, 1.1, (200, 3)) * [1, 1, 0.1]
     for a, b in zip(read.proxy.onto_asset(points), built.proxy.onto_asset(points), strict=True):
         np.testing.assert_array_equal(a, b)

@@ -280,10 +280,9 @@ def build_simmesh(
         for category, message, filename, line in said:
             warnings.warn_explicit(message, category, filename, line)
         read_proxy = None
-        if parts is not None:  # the asset's AABB tree, asked for once the cracks are grown:
-            # built beside the run, in a child process
-            surface = SurfaceIndex(parts["surface_vertices"], parts["surface_faces"],
-                                   ahead=True)  # fmt: skip
+        if parts is not None:  # the asset's AABB tree is built when the solve starts
+            # (crackbake.pipeline, SurfaceIndex.start_worker) or at the first query
+            surface = SurfaceIndex(parts["surface_vertices"], parts["surface_faces"], lazy=True)
             read_proxy = Proxy(vertices=parts["proxy_vertices"], faces=parts["proxy_faces"],
                                surface=surface, rows=parts["proxy_rows"])  # fmt: skip
         return SimMesh(**arrays, edge_length=edge_length, proxy=read_proxy, local=local)
