@@ -9,7 +9,10 @@ code calls NRT and the helper library, registered with LLVM when the runtime ini
 :func:`light_cache_loads` makes numba's cache load the runtime only; a kernel that is not in
 the cache still compiles as before (numba's compiler refreshes the context itself).  About
 0.2-0.3 CPU-s of numba's 1 CPU-s start-up, on the critical path of every run, re-bake and
-batch job (docs/benchmarks.md).
+batch job (docs/benchmarks.md).  It also takes numba's ``numba:llvm_lock`` events off
+llvmlite's lock: numba broadcasts two events around each of the thousands of LLVM calls a load
+makes, only to time the lock for a compilation's metadata (nothing here reads it), about a
+fifth of a load's CPU time.
 
 The start-up's own kernels are not loaded ahead on a thread: the start-up is imports and loads
 that hold the GIL, so a thread gained little (docs/benchmarks.md).  The stages after the solver
@@ -46,7 +49,22 @@ def light_cache_loads() -> bool:
 
     load_overload._crackbake_light = True
     cache.load_overload = load_overload
+    _drop_llvm_lock_events()
     return True
+
+
+def _drop_llvm_lock_events() -> None:
+    """Unregister numba's ``numba:llvm_lock`` event callbacks from llvmlite's LLVM lock (called
+    around every LLVM call; their timings feed only numba's compile metadata).  Left as they
+    are where llvmlite keeps its callbacks elsewhere (another version)."""
+    try:
+        from llvmlite.binding import ffi
+
+        for acquire, release in list(ffi.lib._lock._cblist):
+            if getattr(acquire, "__module__", None) == "numba.core.base":
+                ffi.unregister_lock_callback(acquire, release)
+    except Exception:  # noqa: BLE001 - only a saving; numba works with them
+        pass
 
 
 def preload(dispatcher) -> int:

@@ -77,6 +77,22 @@ def test_light_cache_loads_is_idempotent():
     assert caching.Cache.load_overload is patched
 
 
+def test_light_loads_take_numbas_lock_events_off_and_numba_still_compiles():
+    # numba's two events around every LLVM call time the lock for compile metadata only
+    from llvmlite.binding import ffi
+    from numba import njit
+
+    assert jit.light_cache_loads()
+    assert not [cb for cb in ffi.lib._lock._cblist
+                if getattr(cb[0], "__module__", None) == "numba.core.base"]
+
+    @njit
+    def twice(x):
+        return 2 * x
+
+    assert twice(21) == 42  # a compilation, not a cache load: its timers simply read nothing
+
+
 # Preloads the kernel from the cache (no call), then calls it: what preload loaded, and
 # whether the call compiled or loaded anything more.
 _PRELOAD = """
