@@ -619,7 +619,12 @@ def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, flo
         # faces); started now, not with the cached sim mesh, so it does not slow the field.
         sim.proxy.surface.start_worker()
     t = time.perf_counter()
-    result = _grow(sim, field, sp)
+    try:
+        result = _grow(sim, field, sp)
+    except BaseException:
+        if sim.proxy is not None:  # no query will come: no worker left waiting for one
+            sim.proxy.surface.stop_worker()
+        raise
     timings["solve"] = time.perf_counter() - t
     logger.info(
         "%s cracks started, %d polylines, %s steps%s",
