@@ -38,27 +38,29 @@ def face_frame(f, X, F, nrm, per, fr):
     fr[0, 0] = e0 / le
     fr[0, 1] = e1 / le
     fr[0, 2] = e2 / le
-    n = nrm[f]
-    fr[1, 0] = n[1] * fr[0, 2] - n[2] * fr[0, 1]
-    fr[1, 1] = n[2] * fr[0, 0] - n[0] * fr[0, 2]
-    fr[1, 2] = n[0] * fr[0, 1] - n[1] * fr[0, 0]
+    n0, n1, n2 = nrm[f, 0], nrm[f, 1], nrm[f, 2]
+    fr[1, 0] = n1 * fr[0, 2] - n2 * fr[0, 1]
+    fr[1, 1] = n2 * fr[0, 0] - n0 * fr[0, 2]
+    fr[1, 2] = n0 * fr[0, 1] - n1 * fr[0, 0]
 
 
 @njit(cache=True)
-def _quad(s, x, y):
-    """x^T s y for 3-vectors."""
+def _quad(S, f, fr, i, j):
+    """x^T S[f] y for the frame rows x = fr[i], y = fr[j]."""
     acc = 0.0
-    for i in range(3):
-        acc += x[i] * (s[i, 0] * y[0] + s[i, 1] * y[1] + s[i, 2] * y[2])
+    for k in range(3):
+        acc += fr[i, k] * (S[f, k, 0] * fr[j, 0] + S[f, k, 1] * fr[j, 1]
+                           + S[f, k, 2] * fr[j, 2])
     return acc
 
 
 @njit(cache=True)
-def _quad6(r, x, y):
-    """x^T R y with R given as the six components xx xy xz yy yz zz."""
-    return (x[0] * (r[0] * y[0] + r[1] * y[1] + r[2] * y[2])
-            + x[1] * (r[1] * y[0] + r[3] * y[1] + r[4] * y[2])
-            + x[2] * (r[2] * y[0] + r[4] * y[1] + r[5] * y[2]))
+def _quad6(r, o, fr, i, j):
+    """x^T R y for the frame rows x = fr[i], y = fr[j], with R given as the six components
+    xx xy xz yy yz zz at ``r[o:o + 6]``."""
+    return (fr[i, 0] * (r[o] * fr[j, 0] + r[o + 1] * fr[j, 1] + r[o + 2] * fr[j, 2])
+            + fr[i, 1] * (r[o + 1] * fr[j, 0] + r[o + 3] * fr[j, 1] + r[o + 4] * fr[j, 2])
+            + fr[i, 2] * (r[o + 2] * fr[j, 0] + r[o + 4] * fr[j, 1] + r[o + 5] * fr[j, 2]))
 
 
 @njit(cache=True)
@@ -73,6 +75,7 @@ def face_update(s, f, fr, r6):
     scratch rows.
     """
     X, F, area, nrm, grad, pr, per = s.X, s.F, s.area, s.nrm, s.grad, s.pr, s.period
+    S, G, gp = s.S, s.G, s.gp
     i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
     e10 = wrap(X[i1, 0] - X[i0, 0], per)
     e11 = wrap(X[i1, 1] - X[i0, 1], per)
@@ -106,21 +109,17 @@ def face_update(s, f, fr, r6):
         grad[f, i, 0] = (n1 * d2 - n2 * d1) / ta
         grad[f, i, 1] = (n2 * d0 - n0 * d2) / ta
         grad[f, i, 2] = (n0 * d1 - n1 * d0) / ta
-    face_frame(f, X, F, nrm, per, fr)
-    u = fr[0]
-    w = fr[1]
-    sf = s.S[f]
-    a = _quad(sf, u, u)
-    b = 0.5 * (_quad(sf, u, w) + _quad(sf, w, u))
-    c = _quad(sf, w, w)
+    face_frame(f, X, F, nrm, per, fr)  # u = fr[0], w = fr[1]
+    a = _quad(S, f, fr, 0, 0)
+    b = 0.5 * (_quad(S, f, fr, 0, 1) + _quad(S, f, fr, 1, 0))
+    c = _quad(S, f, fr, 1, 1)
     l1r, l2r, th = _principal(a, b, c)
-    G = s.G
     if G.shape[0] >= 2:
-        face_shadow(f, X, F, G, s.gp, per, r6)
-        ra = _quad6(r6, u, u)
-        rc = _quad6(r6, w, w)
+        face_shadow(f, X, F, G, gp, per, r6)
+        ra = _quad6(r6, 0, fr, 0, 0)
+        rc = _quad6(r6, 0, fr, 1, 1)
         if ra != 0.0 or rc != 0.0:
-            l1, l2, th = _principal(a - ra, b - _quad6(r6, u, w), c - rc)
+            l1, l2, th = _principal(a - ra, b - _quad6(r6, 0, fr, 0, 1), c - rc)
             floor = min(0.0, l2r)
             l1r = max(l1, floor)
             l2r = max(l2, floor)
@@ -129,8 +128,8 @@ def face_update(s, f, fr, r6):
     pr[f, 0] = l1r
     pr[f, 1] = l2r
     for q in range(3):
-        pr[f, 2 + q] = ct * u[q] + st * w[q]
-        pr[f, 5 + q] = -st * u[q] + ct * w[q]
+        pr[f, 2 + q] = ct * fr[0, q] + st * fr[1, q]
+        pr[f, 5 + q] = -st * fr[0, q] + ct * fr[1, q]
 
 
 @njit(cache=True)
@@ -146,24 +145,21 @@ def tip_principal(s, f, n0, n1, n2, fr, out):
     instead of turning back into the raw hoop direction.  Clamped like :func:`face_update`.
     ``out`` needs 14 entries (8 to 13 are scratch).
     """
-    X, F, G = s.X, s.F, s.G
-    face_frame(f, X, F, s.nrm, s.period, fr)
-    u = fr[0]
-    w = fr[1]
-    sf = s.S[f]
-    a = _quad(sf, u, u)
-    b = 0.5 * (_quad(sf, u, w) + _quad(sf, w, u))
-    c = _quad(sf, w, w)
+    X, F, G, S = s.X, s.F, s.G, s.S
+    face_frame(f, X, F, s.nrm, s.period, fr)  # u = fr[0], w = fr[1]
+    a = _quad(S, f, fr, 0, 0)
+    b = 0.5 * (_quad(S, f, fr, 0, 1) + _quad(S, f, fr, 1, 0))
+    c = _quad(S, f, fr, 1, 1)
     l1, l2, th = _principal(a, b, c)
-    p0 = n0 * u[0] + n1 * u[1] + n2 * u[2]
-    p1 = n0 * w[0] + n1 * w[1] + n2 * w[2]
+    p0 = n0 * fr[0, 0] + n1 * fr[0, 1] + n2 * fr[0, 2]
+    p1 = n0 * fr[1, 0] + n1 * fr[1, 1] + n2 * fr[1, 2]
     lp = np.sqrt(p0 * p0 + p1 * p1)
     if G.shape[0] >= 2 and lp > 0.0:
         r6 = out[8:14]
         face_shadow(f, X, F, G, s.gp, s.period, r6)
-        ra = _quad6(r6, u, u)
-        rb = _quad6(r6, u, w)
-        rc = _quad6(r6, w, w)
+        ra = _quad6(r6, 0, fr, 0, 0)
+        rb = _quad6(r6, 0, fr, 0, 1)
+        rc = _quad6(r6, 0, fr, 1, 1)
         if ra != 0.0 or rc != 0.0:
             # In the face frame, P = I - p p^T with p the tip normal; P R P keeps only the
             # release along the tip's direction of travel q = (-p1, p0).
@@ -181,5 +177,5 @@ def tip_principal(s, f, n0, n1, n2, fr, out):
     out[0] = l1
     out[1] = l2
     for q in range(3):
-        out[2 + q] = ct * u[q] + st * w[q]
-        out[5 + q] = -st * u[q] + ct * w[q]
+        out[2 + q] = ct * fr[0, q] + st * fr[1, q]
+        out[5 + q] = -st * fr[0, q] + ct * fr[1, q]

@@ -102,7 +102,9 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
     casts over them does not stall them).  ``grain`` and ``seed`` are the grain's weight and
     seed; ``sc`` (14,), ``acc`` (2, 3, 3), ``ev`` (3, 3) are scratch.
     """
-    F, NF, NFc, area, nrm, grad, pr = s.F, s.NF, s.NFc, s.area, s.nrm, s.grad, s.pr
+    # Scalars rather than row views (pr[f], grad[f, k], rho[n]): a view in the loop costs an
+    # atomic incref and decref of its array (docs/solver.md, "Implementation notes").
+    F, NF, NFc, area, nrm, grad, pr, tipn = s.F, s.NF, s.NFc, s.area, s.nrm, s.grad, s.pr, s.tipn
     t = acc[0]
     u = acc[1]
     for i in range(3):
@@ -118,35 +120,33 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
         while F[f, k] != n:
             k += 1
         if raw:
-            tipn = s.tipn
             tip_principal(s, f, tipn[n, 0], tipn[n, 1], tipn[n, 2], ev, sc)
-            p = sc
+            l1, l2, p2, p3, p4, p5, p6, p7 = sc[0], sc[1], sc[2], sc[3], sc[4], sc[5], sc[6], sc[7]
         else:
-            p = pr[f]
-        g = grad[f, k]
+            l1, l2, p2, p3, p4 = pr[f, 0], pr[f, 1], pr[f, 2], pr[f, 3], pr[f, 4]
+            p5, p6, p7 = pr[f, 5], pr[f, 6], pr[f, 7]
+        g0, g1_, g2_ = grad[f, k, 0], grad[f, k, 1], grad[f, k, 2]
         A = area[f]
         vn0 += A * nrm[f, 0]
         vn1 += A * nrm[f, 1]
         vn2 += A * nrm[f, 2]
-        l1 = p[0]
-        l2 = p[1]
-        g1 = -A * l1 * (p[2] * g[0] + p[3] * g[1] + p[4] * g[2])
-        g2 = -A * l2 * (p[5] * g[0] + p[6] * g[1] + p[7] * g[2])
-        a0 = g1 * p[2]
-        a1 = g1 * p[3]
-        a2 = g1 * p[4]
-        b0 = g2 * p[5]
-        b1 = g2 * p[6]
-        b2 = g2 * p[7]
-        wc = A * np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+        g1 = -A * l1 * (p2 * g0 + p3 * g1_ + p4 * g2_)
+        g2 = -A * l2 * (p5 * g0 + p6 * g1_ + p7 * g2_)
+        a0 = g1 * p2
+        a1 = g1 * p3
+        a2 = g1 * p4
+        b0 = g2 * p5
+        b1 = g2 * p6
+        b2 = g2 * p7
+        wc = A * np.sqrt(g0 * g0 + g1_ * g1_ + g2_ * g2_)
         if l1 > 0 and l2 > 0:
             sp0 += a0 + b0
             sp1 += a1 + b1
             sp2 += a2 + b2
             add_m(t, a0 + b0, a1 + b1, a2 + b2, 1.0)
             e1, e2 = _iso_m(l1, l2)
-            add_dd(u, wc * e1, p[2], p[3], p[4])
-            add_dd(u, wc * e2, p[5], p[6], p[7])
+            add_dd(u, wc * e1, p2, p3, p4)
+            add_dd(u, wc * e2, p5, p6, p7)
         elif l1 > 0:
             sp0 += a0
             sp1 += a1
@@ -158,25 +158,25 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
             add_m(t, b0, b1, b2, -1.0)
             e1, _ = _iso_m(l1, 0.0)
             e2, _ = _iso_m(-l2, 0.0)
-            add_dd(u, wc * e1, p[2], p[3], p[4])
-            add_dd(u, -wc * e2, p[5], p[6], p[7])
+            add_dd(u, wc * e1, p2, p3, p4)
+            add_dd(u, -wc * e2, p5, p6, p7)
         else:
             sm0 += a0 + b0
             sm1 += a1 + b1
             sm2 += a2 + b2
             add_m(t, a0 + b0, a1 + b1, a2 + b2, -1.0)
             e1, e2 = _iso_m(-l1, -l2)
-            add_dd(u, -wc * e1, p[2], p[3], p[4])
-            add_dd(u, -wc * e2, p[5], p[6], p[7])
+            add_dd(u, -wc * e1, p2, p3, p4)
+            add_dd(u, -wc * e2, p5, p6, p7)
     add_m(t, sp0, sp1, sp2, -1.0)
     add_m(t, sm0, sm1, sm2, 1.0)
     add_m(u, sp0, sp1, sp2, -1.0)
     add_m(u, sm0, sm1, sm2, 1.0)
-    r = s.rho[n]
+    rho = s.rho
     for i in range(3):
         for j in range(i, 3):
-            t[i, j] = 0.5 * t[i, j] + r[i, j]
-            u[i, j] = 0.5 * u[i, j] + r[i, j]
+            t[i, j] = 0.5 * t[i, j] + rho[n, i, j]
+            u[i, j] = 0.5 * u[i, j] + rho[n, i, j]
     for i in range(3):
         for j in range(i, 3):
             t[i, j] = ISO_FAILURE * u[i, j] + (1.0 - ISO_FAILURE) * t[i, j]

@@ -134,6 +134,7 @@ class Work(NamedTuple):
     regf: I1  #: (Mcap,) faces of the event's region
     regn: I1  #: (Ncap,) nodes of the event's region
     disp: F2  #: (Ncap, 3) relaxation displacements (zero between events)
+    kinv: F2  #: (Ncap, 7) relaxation: inverse block stiffness per region node (relax.py)
     buf: I1  #: (W,) nodes made by a node split
     par: I1  #: (W,) union-find
     comp: I1  #: (W,) components
@@ -212,6 +213,7 @@ def work(s: State) -> Work:
     ncap, mcap, width = len(s.X), len(s.F), s.NF.shape[1]
     return Work(
         regf=np.empty(mcap, np.int64), regn=np.empty(ncap, np.int64), disp=np.zeros((ncap, 3)),
+        kinv=np.empty((ncap, 7)),
         buf=np.empty(width, np.int64), par=np.empty(width, np.int64),
         comp=np.empty(width, np.int64), fbuf=np.empty(width, np.int64),
         centers=np.empty(3 * width + 3, np.int64), sc=np.empty(14), acc=np.empty((2, 3, 3)),
