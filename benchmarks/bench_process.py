@@ -38,8 +38,11 @@ Usage::
 
 ``--repo`` runs every case against another checkout too (``git worktree add /tmp/old main``),
 interleaved run by run with this one so both see the same load, and adds its column and the
-ratio.  The numba cache (``NUMBA_CACHE_DIR``) must be warm for both trees
-(``python -m crackbake.precompile``): compilation is not what this measures.
+ratio.  ``--other-env NAME=VALUE`` (repeatable) sets variables for the other column only; without
+``--repo`` the other column is this tree under them: ``--other-env CRACKBAKE_SOLVE_BESIDE=0``
+compares the solve in a child process (crackbake.solve_beside) with the solve in turn.  The
+numba cache (``NUMBA_CACHE_DIR``) must be warm for both trees (``python -m
+crackbake.precompile``): compilation is not what this measures.
 """
 
 from __future__ import annotations
@@ -118,7 +121,8 @@ def textured_spot(folder: Path) -> Path:
     return folder / "spot.obj"
 
 
-def run(repo: Path, args: list[str], out: Path | None = None, cache: Path | None = None) -> dict:
+def run(repo: Path, args: list[str], out: Path | None = None, cache: Path | None = None,
+        extra_env: dict | None = None) -> dict:
     """One fresh process of ``python -m crackbake ARGS`` on ``repo``'s code: wall, CPU, stages.
 
     With ``--progress jsonl`` in ``args``, ``first`` is the time from the launch to the first
@@ -130,6 +134,7 @@ def run(repo: Path, args: list[str], out: Path | None = None, cache: Path | None
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo), *([extra] if extra else [])]))
     if cache is not None:
         env["CRACKBAKE_CACHE_DIR"] = str(cache)
+    env.update(extra_env or {})
     if out is not None and out.exists():
         shutil.rmtree(out)
     command = [sys.executable, *args] if args[0] == "-c" else [sys.executable, "-m", "crackbake",
@@ -215,10 +220,13 @@ def main() -> None:
     ap.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
     ap.add_argument("--repo", type=Path, help="another checkout to compare against (A/B)")
     ap.add_argument("--keep", type=Path, help="scratch folder to use and keep")
+    ap.add_argument("--other-env", action="append", default=[], metavar="NAME=VALUE",
+                    help="environment of the other column only (without --repo: this tree)")
     a = ap.parse_args()
+    envs = {"this": {}, "other": dict(item.split("=", 1) for item in a.other_env)}
     repos = {"this": ROOT}
-    if a.repo is not None:
-        repos = {"other": a.repo.resolve(), "this": ROOT}
+    if a.repo is not None or envs["other"]:
+        repos = {"other": (a.repo or ROOT).resolve(), "this": ROOT}
     sys.path.insert(0, str(ROOT))
     from crackbake.precompile import compile_bytecode
 
@@ -231,7 +239,7 @@ def main() -> None:
     for tag, repo in repos.items():
         if {"rebake", "rebake_cold", "inspect"} & set(a.cases):
             args, out = case_args("bake", scratch, tag)
-            run(repo, args, out, scratch / f"cache_{tag}")
+            run(repo, args, out, scratch / f"cache_{tag}", envs[tag])
             shutil.copy(out / "cracks.json", scratch / f"{tag}_cracks.json")
             shutil.copy(out / "spot_cracks.exr", scratch / f"{tag}_cracks.exr")
     rows: dict[tuple[str, str], list[dict]] = {}
@@ -243,7 +251,7 @@ def main() -> None:
                 if case in ("bake_cold", "rebake_cold"):
                     cache = scratch / f"cold_{tag}"
                     shutil.rmtree(cache, ignore_errors=True)
-                rows.setdefault((case, tag), []).append(run(repo, args, out, cache))
+                rows.setdefault((case, tag), []).append(run(repo, args, out, cache, envs[tag]))
                 print(".", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
     load = os.getloadavg()[0]

@@ -259,6 +259,14 @@ class SurfaceIndex:
         elif not lazy:
             self._build()
 
+    def __getstate__(self) -> dict:
+        # A copy in another process (the solve's child sends its result back: solve_beside.py)
+        # builds its tree at its first query: libigl's tree does not pickle, and a worker
+        # belongs to the process that started it.
+        state = dict(self.__dict__)
+        state["_tree"] = state["_worker"] = None
+        return state
+
     def start_worker(self) -> None:
         """Build the tree from now on in a child process (:mod:`crackbake.closest_worker`),
         which answers the next query: the build holds the GIL for seconds at a million faces,

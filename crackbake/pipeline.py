@@ -94,7 +94,8 @@ class RunResult:
         }
 
 
-def run(params: RunParams, *, manifest_extra: dict | None = None) -> RunResult:
+def run(params: RunParams, *, manifest_extra: dict | None = None,
+        solve_beside: bool | None = False) -> RunResult:
     """Run crackbake end to end and write the output folder.
 
     The output folder is checked and locked before anything else (see :class:`OutputStage`),
@@ -109,6 +110,11 @@ def run(params: RunParams, *, manifest_extra: dict | None = None) -> RunResult:
     manifest_extra : dict, optional
         Top-level keys added to ``manifest.json`` (a batch records its job there); the other
         files are unchanged.
+    solve_beside : bool or None
+        Solve in a forked child process while this one makes the GL context and prepares the
+        UVs (:mod:`crackbake.solve_beside`: the same outputs, sooner on 4 cores and more).  None
+        decides by the machine (:func:`crackbake.solve_beside.wanted`), as the CLI does; the
+        default, False, keeps a host process (Blender, a Ray worker) free of forks.
 
     Returns
     -------
@@ -124,10 +130,11 @@ def run(params: RunParams, *, manifest_extra: dict | None = None) -> RunResult:
     """
     params.validate()
     stage = OutputStage(params.out_dir)
-    return run_staged(stage, lambda: _run(params, stage, manifest_extra or {}))
+    return run_staged(stage, lambda: _run(params, stage, manifest_extra or {}, solve_beside))
 
 
-def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResult:
+def _run(params: RunParams, stage: OutputStage, manifest_extra: dict,
+         solve_beside: bool | None = False) -> RunResult:
     """The stages in order, cheap checks first, writing into the open ``stage``."""
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
@@ -167,6 +174,16 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         params, relative = params.resolved()
         sources = stress_sources(params, mesh, relative)  # weight maps, impacts: checked here
 
+    # The inputs are checked: the solve starts in a child process now, before any thread or
+    # GL context, and runs beside the context, the UV stage and the bake's set-up
+    # (crackbake.solve_beside; None where no fork is made: the run solves in turn below).
+    beside = None
+    if params.cracks is None:
+        from crackbake import solve_beside as _beside
+
+        if _beside.wanted(solve_beside):
+            beside = _beside.start(_solve_here, mesh, params, relative, sources)
+
     from crackbake.bake.context import create_context, renderer_info
 
     # The inputs are checked: the bake's readback images are made now, on a thread, while the
@@ -178,8 +195,9 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
     try:
         ctx = create_context()
     except BaseException:
-        if images is not None:
-            images.close()
+        for ahead in (images, beside):
+            if ahead is not None:
+                ahead.close()
         raise
     targets = gutter = stress_ahead = preview_ahead = None
     try:
@@ -196,7 +214,10 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         preview_ahead = _preview_ahead(mesh, uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
-        if params.cracks is None:
+        if params.cracks is None and beside is not None:
+            later = _later_kernels(params, uvmesh)
+            network, solver_stats, solved = beside.result(timings, lambda: _load(later))
+        elif params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
                                                   later=_later_kernels(params, uvmesh))
         # The stress bake's rows (closest asset points, nodal values: CPU only) are computed on
@@ -228,8 +249,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
-        for ahead in (images, targets, gutter, stress_ahead, preview_ahead):  # threads end first
-            if ahead is not None:
+        for ahead in (images, targets, gutter, stress_ahead, preview_ahead, beside):
+            if ahead is not None:  # threads (and the solve's child) end first
                 ahead.close()
         ctx.release()
     return RunResult(
@@ -527,6 +548,27 @@ def solve(
         from crackbake.geometry import forget
 
         forget()  # the sim mesh's memoised edges, shells and patches: this run's only
+
+
+def _solve_here(mesh: Mesh, params: RunParams, relative: dict, sources: list, *,
+                timings: dict[str, float]) -> tuple[CrackNetwork, dict, Solved]:
+    """:func:`solve` as :mod:`crackbake.solve_beside` calls it (in the child, or here where the
+    child sent no result)."""
+    return solve(mesh, params, relative, timings, sources)
+
+
+def _load(later: tuple) -> None:
+    """Load (or import) ``later`` (:func:`_later_kernels`) on this thread: the run's work while
+    the solve's child runs."""
+    from importlib import import_module
+
+    from crackbake.jit import preload
+
+    for item in later:
+        if isinstance(item, str):
+            import_module(item)
+        else:
+            preload(item)
 
 
 def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
