@@ -215,7 +215,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict,
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
         if params.cracks is None and beside is not None:
-            later = _later_kernels(params, uvmesh)
+            later = _later_kernels(params, uvmesh, solve_end=False)  # the child loads those
             network, solver_stats, solved = beside.result(timings, lambda: _load(later))
         elif params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
@@ -553,8 +553,9 @@ def solve(
 def _solve_here(mesh: Mesh, params: RunParams, relative: dict, sources: list, *,
                 timings: dict[str, float]) -> tuple[CrackNetwork, dict, Solved]:
     """:func:`solve` as :mod:`crackbake.solve_beside` calls it (in the child, or here where the
-    child sent no result)."""
-    return solve(mesh, params, relative, timings, sources)
+    child sent no result): the solve's own end's kernels load during the solve, the bake's are
+    the parent's to load."""
+    return solve(mesh, params, relative, timings, sources, later=_solve_end_kernels())
 
 
 def _load(later: tuple) -> None:
@@ -571,21 +572,28 @@ def _load(later: tuple) -> None:
             preload(item)
 
 
-def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
+def _solve_end_kernels() -> tuple:
+    """The numba kernels the solve calls after its loop (the arrival times, the star check)."""
+    from crackbake import nearest
+    from crackbake.simulate import timing
+
+    return timing._arrival, nearest._grid, nearest._query
+
+
+def _later_kernels(params: RunParams, uvmesh: UVMesh, solve_end: bool = True) -> tuple:
     """The numba kernels a UV-placed bake of ``params`` calls after the solver, for the warm-up
     thread to load from the cache while the solver runs: the bake's and the stress bake's
     (on the run's thread), the encoders' (the write threads, whose first calls each loaded under
     numba's one compiler lock, 0.4 s serialised); then the writer's modules by name, to import.
-    Empty for UDIM pages and projected decals (other kernels)."""
+    Empty for UDIM pages and projected decals (other kernels).  ``solve_end``: the solve's own
+    end's first (:func:`_solve_end_kernels`; False where a child process solves)."""
     if uvmesh.udim is not None or params.decal is not None:
         return ()
-    from crackbake import nearest
     from crackbake.bake import dilation, grid, normal_map, stress, stress_fields
     from crackbake.geometry_kernels import facing_sum_kernel
-    from crackbake.simulate import timing
 
     # the solve's end (the arrival times, the star check) first, then the bake's
-    later = [timing._arrival, nearest._grid, nearest._query, grid._bin_candidates,
+    later = [*(_solve_end_kernels() if solve_end else ()), grid._bin_candidates,
              grid.slice_members, normal_map.crack_texels, dilation._gather]  # fmt: skip
     formats = set(params.formats)
     if "stress" in formats:
