@@ -27,7 +27,7 @@ from crackbake.simulate.solver.fem import (
 )
 from crackbake.simulate.solver.iben import solve_iben
 from crackbake.simulate.solver.iben.calibration import flaw
-from crackbake.simulate.solver.iben.eigen import eig_max_into
+from crackbake.simulate.solver.iben.eigen import eig_max_into, eig_max_value
 from crackbake.simulate.solver.iben.separation import ISO_FAILURE
 
 PARAMS = SolverParams(toughness=0.7, relax_steps=10, relax_rate=0.6, max_cracks=5000)
@@ -89,6 +89,7 @@ def test_jacobi_eigen_matches_numpy():
         m, v = a.copy(), np.empty((3, 3))
         val = eig_max_into(m, v)
         vec = v[:, 0]
+        assert eig_max_value(a.copy()) == val  # the value-only variant, bit for bit
         w, v = np.linalg.eigh(a)
         assert val == pytest.approx(w[-1], abs=1e-10)
         assert np.allclose(a @ vec, val * vec, atol=1e-9)

@@ -59,6 +59,42 @@ def eig_max_into(m, v):
 
 
 @njit(cache=True)
+def eig_max_value(m):
+    """Largest eigenvalue of the symmetric 3x3 ``m`` (destroyed): :func:`eig_max_into`'s, bit
+    for bit (the same rotations of ``m``), without accumulating the eigenvectors."""
+    scale = abs(m[0, 0]) + abs(m[1, 1]) + abs(m[2, 2]) + abs(m[0, 1]) + abs(m[0, 2]) + abs(m[1, 2])
+    for _sweep in range(16):
+        off = abs(m[0, 1]) + abs(m[0, 2]) + abs(m[1, 2])
+        if off <= 1e-15 * scale or off == 0.0:
+            break
+        for r in range(3):
+            p = 0 if r < 2 else 1
+            q = 1 if r == 0 else 2
+            apq = m[p, q]
+            if apq == 0.0:
+                continue
+            theta = (m[q, q] - m[p, p]) / (2.0 * apq)
+            t = (1.0 if theta >= 0 else -1.0) / (abs(theta) + np.sqrt(theta * theta + 1.0))
+            c = 1.0 / np.sqrt(t * t + 1.0)
+            s = t * c
+            for k in range(3):
+                mkp = m[k, p]
+                mkq = m[k, q]
+                m[k, p] = c * mkp - s * mkq
+                m[k, q] = s * mkp + c * mkq
+            for k in range(3):
+                mpk = m[p, k]
+                mqk = m[q, k]
+                m[p, k] = c * mpk - s * mqk
+                m[q, k] = s * mpk + c * mqk
+    best = 0
+    for k in range(1, 3):
+        if m[k, k] > m[best, best]:
+            best = k
+    return m[best, best]
+
+
+@njit(cache=True)
 def add_m(acc, f0, f1, f2, sign):
     """acc += sign * f f^T / |f| (the paper's m(f); m(0) = 0), upper triangle only."""
     n = np.sqrt(f0 * f0 + f1 * f1 + f2 * f2)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from crackbake.simulate.solver.iben.eigen import add_dd, add_m, eig_max_into
+from crackbake.simulate.solver.iben.eigen import add_dd, add_m, eig_max_into, eig_max_value
 from crackbake.simulate.solver.iben.element import tip_principal
 
 _QN = 8
@@ -184,7 +184,7 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
         for j in range(i):
             t[i, j] = t[j, i]
             u[i, j] = u[j, i]
-    v = eig_max_into(t, ev)
+    v = eig_max_value(t)  # the failure value only: its vector is u's
     s.val[n] = v
     lvn = np.sqrt(vn0 * vn0 + vn1 * vn1 + vn2 * vn2)
     if grain > 0.0 and v > 0.0 and lvn > 0.0:
@@ -206,7 +206,8 @@ def node_update(s, n, raw, grain, seed, sc, acc, ev):
         y0 = vn1 * x2 - vn2 * x1
         y1 = vn2 * x0 - vn0 * x2
         y2 = vn0 * x1 - vn1 * x0
-        th = grain_angle(seed, n, s.gn0, s.X[n, 0], s.X[n, 1], s.X[n, 2], s.gq)
+        X = s.X
+        th = grain_angle(seed, n, s.gn0, X[n, 0], X[n, 1], X[n, 2], s.gq)
         ct = np.cos(th)
         st = np.sin(th)
         d0 = ct * x0 + st * y0
