@@ -39,8 +39,8 @@ Usage::
 ``--repo`` runs every case against another checkout too (``git worktree add /tmp/old main``),
 interleaved run by run with this one so both see the same load, and adds its column and the
 ratio.  ``--other-env NAME=VALUE`` (repeatable) sets variables for the other column only; without
-``--repo`` the other column is this tree under them: ``--other-env CRACKBAKE_SOLVE_BESIDE=0``
-compares the solve in a child process (crackbake.solve_beside) with the solve in turn.  The
+``--repo`` the other column is this tree under them: ``--other-env OPENBLAS_NUM_THREADS=16``
+compares OpenBLAS's threads with the one thread crackbake starts it with.  The
 numba cache (``NUMBA_CACHE_DIR``) must be warm for both trees (``python -m
 crackbake.precompile``): compilation is not what this measures.
 """

@@ -260,7 +260,7 @@ class SurfaceIndex:
             self._build()
 
     def __getstate__(self) -> dict:
-        # A copy in another process (the solve's child sends its result back: solve_beside.py)
+        # A copy in another process (a pickled result: a batch worker's, multiprocessing's)
         # builds its tree at its first query: libigl's tree does not pickle, and a worker
         # belongs to the process that started it.
         state = dict(self.__dict__)

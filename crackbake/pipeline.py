@@ -94,8 +94,7 @@ class RunResult:
         }
 
 
-def run(params: RunParams, *, manifest_extra: dict | None = None,
-        solve_beside: bool | None = False) -> RunResult:
+def run(params: RunParams, *, manifest_extra: dict | None = None) -> RunResult:
     """Run crackbake end to end and write the output folder.
 
     The output folder is checked and locked before anything else (see :class:`OutputStage`),
@@ -110,11 +109,6 @@ def run(params: RunParams, *, manifest_extra: dict | None = None,
     manifest_extra : dict, optional
         Top-level keys added to ``manifest.json`` (a batch records its job there); the other
         files are unchanged.
-    solve_beside : bool or None
-        Solve in a forked child process while this one makes the GL context and prepares the
-        UVs (:mod:`crackbake.solve_beside`: the same outputs, sooner on 4 cores and more).  None
-        decides by the machine (:func:`crackbake.solve_beside.wanted`), as the CLI does; the
-        default, False, keeps a host process (Blender, a Ray worker) free of forks.
 
     Returns
     -------
@@ -130,11 +124,10 @@ def run(params: RunParams, *, manifest_extra: dict | None = None,
     """
     params.validate()
     stage = OutputStage(params.out_dir)
-    return run_staged(stage, lambda: _run(params, stage, manifest_extra or {}, solve_beside))
+    return run_staged(stage, lambda: _run(params, stage, manifest_extra or {}))
 
 
-def _run(params: RunParams, stage: OutputStage, manifest_extra: dict,
-         solve_beside: bool | None = False) -> RunResult:
+def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResult:
     """The stages in order, cheap checks first, writing into the open ``stage``."""
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
@@ -174,16 +167,6 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict,
         params, relative = params.resolved()
         sources = stress_sources(params, mesh, relative)  # weight maps, impacts: checked here
 
-    # The inputs are checked: the solve starts in a child process now, before any thread or
-    # GL context, and runs beside the context, the UV stage and the bake's set-up
-    # (crackbake.solve_beside; None where no fork is made: the run solves in turn below).
-    beside = None
-    if params.cracks is None:
-        from crackbake import solve_beside as _beside
-
-        if _beside.wanted(solve_beside):
-            beside = _beside.start(_solve_here, mesh, params, relative, sources)
-
     from crackbake.bake.context import create_context, renderer_info
 
     # The inputs are checked: the bake's readback images are made now, on a thread, while the
@@ -195,9 +178,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict,
     try:
         ctx = create_context()
     except BaseException:
-        for ahead in (images, beside):
-            if ahead is not None:
-                ahead.close()
+        if images is not None:
+            images.close()
         raise
     targets = gutter = stress_ahead = preview_ahead = None
     try:
@@ -214,10 +196,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict,
         preview_ahead = _preview_ahead(mesh, uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
-        if params.cracks is None and beside is not None:
-            later = _later_kernels(params, uvmesh, solve_end=False)  # the child loads those
-            network, solver_stats, solved = beside.result(timings, lambda: _load(later))
-        elif params.cracks is None:
+        if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
                                                   later=_later_kernels(params, uvmesh))
         # The stress bake's rows (closest asset points, nodal values: CPU only) are computed on
@@ -249,8 +228,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict,
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
-        for ahead in (images, targets, gutter, stress_ahead, preview_ahead, beside):
-            if ahead is not None:  # threads (and the solve's child) end first
+        for ahead in (images, targets, gutter, stress_ahead, preview_ahead):  # threads end first
+            if ahead is not None:
                 ahead.close()
         ctx.release()
     return RunResult(
@@ -550,50 +529,21 @@ def solve(
         forget()  # the sim mesh's memoised edges, shells and patches: this run's only
 
 
-def _solve_here(mesh: Mesh, params: RunParams, relative: dict, sources: list, *,
-                timings: dict[str, float]) -> tuple[CrackNetwork, dict, Solved]:
-    """:func:`solve` as :mod:`crackbake.solve_beside` calls it (in the child, or here where the
-    child sent no result): the solve's own end's kernels load during the solve, the bake's are
-    the parent's to load."""
-    return solve(mesh, params, relative, timings, sources, later=_solve_end_kernels())
-
-
-def _load(later: tuple) -> None:
-    """Load (or import) ``later`` (:func:`_later_kernels`) on this thread: the run's work while
-    the solve's child runs."""
-    from importlib import import_module
-
-    from crackbake.jit import preload
-
-    for item in later:
-        if isinstance(item, str):
-            import_module(item)
-        else:
-            preload(item)
-
-
-def _solve_end_kernels() -> tuple:
-    """The numba kernels the solve calls after its loop (the arrival times, the star check)."""
-    from crackbake import nearest
-    from crackbake.simulate import timing
-
-    return timing._arrival, nearest._grid, nearest._query
-
-
-def _later_kernels(params: RunParams, uvmesh: UVMesh, solve_end: bool = True) -> tuple:
+def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
     """The numba kernels a UV-placed bake of ``params`` calls after the solver, for the warm-up
     thread to load from the cache while the solver runs: the bake's and the stress bake's
     (on the run's thread), the encoders' (the write threads, whose first calls each loaded under
     numba's one compiler lock, 0.4 s serialised); then the writer's modules by name, to import.
-    Empty for UDIM pages and projected decals (other kernels).  ``solve_end``: the solve's own
-    end's first (:func:`_solve_end_kernels`; False where a child process solves)."""
+    Empty for UDIM pages and projected decals (other kernels)."""
     if uvmesh.udim is not None or params.decal is not None:
         return ()
+    from crackbake import nearest
     from crackbake.bake import dilation, grid, normal_map, stress, stress_fields
     from crackbake.geometry_kernels import facing_sum_kernel
+    from crackbake.simulate import timing
 
     # the solve's end (the arrival times, the star check) first, then the bake's
-    later = [*(_solve_end_kernels() if solve_end else ()), grid._bin_candidates,
+    later = [timing._arrival, nearest._grid, nearest._query, grid._bin_candidates,
              grid.slice_members, normal_map.crack_texels, dilation._gather]  # fmt: skip
     formats = set(params.formats)
     if "stress" in formats:

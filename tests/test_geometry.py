@@ -5,11 +5,14 @@ array's contents change."""
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
 from crackbake import geometry
 from crackbake.geometry import (
+    SurfaceIndex,
     content_key,
     corner_mean,
     edges,
@@ -183,3 +186,16 @@ def test_forget_empties_the_memo_and_a_run_leaves_nothing(tmp_path):
     assert geometry._memo
     geometry.forget()
     assert not geometry._memo
+
+
+def test_a_pickled_surface_index_answers_the_same_without_its_tree():
+    rng = np.random.default_rng(1)
+    vertices = rng.normal(size=(200, 3))
+    faces = rng.integers(0, 200, (300, 3))
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+                  & (faces[:, 0] != faces[:, 2])]
+    index = SurfaceIndex(vertices, faces)
+    copy = pickle.loads(pickle.dumps(index))
+    points = rng.normal(size=(50, 3))
+    for a, b in zip(index.closest(points), copy.closest(points), strict=True):
+        assert np.array_equal(a, b)

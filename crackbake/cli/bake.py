@@ -453,7 +453,7 @@ def bake(mesh: Path, quiet: bool, verbose: bool, as_json: bool, progress: str | 
         with warnings.catch_warnings(), display, events:
             warnings.simplefilter("always", CrackbakeWarning)
             warnings.showwarning = show
-            result = run(params, solve_beside=None)  # forks on 4+ cores
+            result = run(params)
     except CrackbakeError as exc:
         fail(f"error: {exc}", exc.exit_code, cancelled=isinstance(exc, RunInterrupted))
     except KeyboardInterrupt:
