@@ -24,7 +24,8 @@ wall time on an idle one).  The numba cache must be warm (``python -m crackbake.
 ``--writers crackbake bindings`` runs each repeat with crackbake's EXR encoder and with the
 OpenEXR bindings (what wrote ZIP EXRs before it) in turn, so both see the same load;
 ``--writers crackbake nostats`` prices the ``crackbake:stats`` record (each plane's statistics
-for ``crackbake inspect``, taken on the encoder's threads).
+for ``crackbake inspect``, taken on the encoder's threads); ``--writers crackbake@6x4
+crackbake@8x8`` compares the encoder pool's sizes (``WRITE_THREADS`` x ``EXR_THREADS``).
 
 Usage::
 
@@ -46,6 +47,7 @@ import argparse
 import json
 import os
 import pickle
+import re
 import sys
 import tempfile
 import time
@@ -216,10 +218,18 @@ def use_writer(name: str) -> None:
     """``crackbake``: ZIP/ZIPS EXRs by crackbake's encoder (the default); ``nostats``: the same
     without the ``crackbake:stats`` record (what the record costs the write); ``bindings``: by
     the OpenEXR bindings, as before it (the same pixels and header), for an A/B in one
-    process."""
+    process.  A suffix ``@WxE`` sets the encoder pool's threads (``WRITE_THREADS``) and the
+    EXR encoders' workers (``EXR_THREADS``) for that writer: ``crackbake@6x8``."""
     import OpenEXR
 
+    import crackbake.exchange.bundle as b
     import crackbake.exchange.exrzip as ez
+
+    if not hasattr(b, "_own_threads"):
+        b._own_threads = (b.WRITE_THREADS, b.EXR_THREADS)
+    name, _, pools = name.partition("@")
+    b.WRITE_THREADS, b.EXR_THREADS = (tuple(int(n) for n in pools.split("x")) if pools
+                                      else b._own_threads)  # fmt: skip
 
     if not hasattr(ez, "_own_write_scanline"):
         ez._own_write_scanline = ez.write_scanline
@@ -234,6 +244,15 @@ def use_writer(name: str) -> None:
 
     ez.write_scanline = {"crackbake": ez._own_write_scanline, "nostats": nostats}.get(
         name, bindings)
+
+
+def _writer(name: str) -> str:
+    """A ``--writers`` entry, checked: a writer and an optional ``@WxE``."""
+    writer, _, pools = name.partition("@")
+    if writer not in ("crackbake", "nostats", "bindings") or (
+            pools and not re.fullmatch(r"[1-9][0-9]*x[1-9][0-9]*", pools)):
+        raise argparse.ArgumentTypeError(f"{name!r}: crackbake, nostats or bindings[@WxE]")
+    return name
 
 
 def per_file(s: dict, ctx, out: Path, compression: str,
@@ -440,11 +459,12 @@ def main() -> None:
     ap.add_argument("--exr-compression", default=None,
                     help="override the run's EXR compression (both EXRs)")  # fmt: skip
     ap.add_argument("--no-per-file", action="store_true", help="only the concurrent write")
-    ap.add_argument("--writers", nargs="+", default=["crackbake"],
-                    choices=("crackbake", "nostats", "bindings"),
-                    help="EXR ZIP encoders to compare, run by run in turn (nostats: "
-                         "crackbake's without the crackbake:stats record; bindings: the "
-                         "OpenEXR bindings, as before crackbake's encoder)")  # fmt: skip
+    ap.add_argument("--writers", nargs="+", default=["crackbake"], type=_writer,
+                    help="crackbake, nostats or bindings, each with an optional @WxE: the "
+                         "encoder pool's threads and the EXR workers (crackbake@6x8); run by "
+                         "run in turn (nostats: crackbake's encoder without the crackbake:stats "
+                         "record; bindings: the OpenEXR bindings, as before crackbake's "
+                         "encoder)")  # fmt: skip
     ap.add_argument("--keep", type=Path, help="commit the last write into KEEP")
     ap.add_argument("--per-file-repeat", type=int, default=3,
                     help="runs of each job alone; the table keeps the least")  # fmt: skip

@@ -35,6 +35,12 @@ def main() -> None:
         return
     huge_pages()
     quiet_blas()
+    numba_skips_coverage()
+    if bakes(sys.argv[1:]):
+        # the GL driver starts on a thread while the command's modules import
+        from crackbake.bake.egl_ahead import start
+
+        start()
     from crackbake.cli import main as command
 
     try:
@@ -76,8 +82,7 @@ def huge_pages() -> None:
     """
     tunables = os.environ.get("GLIBC_TUNABLES", "")
     argv = sys.argv[1:]
-    if ("glibc.malloc.hugetlb" in tunables or not argv or not sys.executable
-            or argv[0] in SUBCOMMANDS or not _NO_RUN.isdisjoint(argv)
+    if ("glibc.malloc.hugetlb" in tunables or not bakes(argv) or not sys.executable
             or _res(argv) < HUGE_PAGES_RES or not _is_command() or gpu_present()):
         return
     try:
@@ -92,6 +97,12 @@ def huge_pages() -> None:
         os.execv(sys.executable, [sys.executable, *sys.orig_argv[1:]])
     except OSError:  # no restart: the run goes on in 4 KiB pages
         pass
+
+
+def bakes(argv: list[str]) -> bool:
+    """True when ``argv`` runs the default command (a bake or re-bake), not a named command, a
+    help or a version call: the runs that open a GL context at once."""
+    return bool(argv) and argv[0] not in SUBCOMMANDS and _NO_RUN.isdisjoint(argv)
 
 
 def gpu_present(dev: str = "/dev") -> bool:
@@ -154,6 +165,38 @@ def quiet_blas(environ: dict | None = None) -> None:
     env = os.environ if environ is None else environ
     if not any(k in env for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")):
         env["OPENBLAS_NUM_THREADS"] = "1"
+
+
+class _NumbaCoverageFinder:
+    """A ``sys.meta_path`` entry that refuses ``coverage`` to numba's coverage hook only."""
+
+    def find_spec(self, name: str, path=None, target=None):
+        if name != "coverage":
+            return None
+        frame = sys._getframe(1)
+        while frame is not None:
+            if frame.f_globals.get("__name__") == "numba.misc.coverage_support":
+                raise ModuleNotFoundError("crackbake: coverage is not running", name=name)
+            frame = frame.f_back
+        return None
+
+
+def numba_skips_coverage(environ: dict | None = None) -> bool:
+    """Keep numba's import from importing coverage.py where that can serve nothing; True when set.
+
+    numba imports ``coverage`` whenever it is installed (``numba.misc.coverage_support``), for
+    a hook that reports compiled lines only with ``NUMBA_JIT_COVERAGE=1`` and only to a
+    coverage run started before it: 0.09 s of every run's start-up on a machine that has it (a
+    developer's, a CI image, the GPU VMs).  A run under coverage (already imported) or with
+    ``NUMBA_JIT_COVERAGE`` set keeps numba's own behaviour, and any other module that imports
+    coverage gets it.
+    """
+    env = os.environ if environ is None else environ
+    if "coverage" in sys.modules or env.get("NUMBA_JIT_COVERAGE", "0").strip() not in ("", "0"):
+        return False
+    if not any(isinstance(f, _NumbaCoverageFinder) for f in sys.meta_path):
+        sys.meta_path.insert(0, _NumbaCoverageFinder())
+    return True
 
 
 def leave(code: object) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from crackbake.entry import platform_error, quiet_blas
+from crackbake.entry import bakes, numba_skips_coverage, platform_error, quiet_blas
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -102,6 +102,54 @@ def test_numpy_after_quiet_blas_starts_no_blas_threads():
 
     assert threads("quiet") == 1
     assert threads() > 1
+
+
+def _numba_and_coverage(tmp_path: Path, skip: bool, env: dict | None = None) -> list[str]:
+    """In a fresh interpreter with a package named ``coverage`` on its path (a stand-in for
+    coverage.py, which this environment may not have): numba's view of it, then whether any
+    other import still gets it."""
+    package = tmp_path / "coverage"
+    package.mkdir(exist_ok=True)
+    # what numba's hook reads of it: Coverage.current(), and coverage.types for its annotations
+    (package / "__init__.py").write_text(
+        "from . import types\nclass Coverage:\n    current = staticmethod(lambda: None)\n")
+    (package / "types.py").write_text("class Tracer:\n    pass\ndef __getattr__(name):\n"
+                                      "    return object\n")
+    code = ("import sys; from crackbake.entry import numba_skips_coverage; "
+            f"print(numba_skips_coverage() if {skip} else 'not asked'); "
+            "import numba.misc.coverage_support as c; print(c.coverage_available); "
+            "print('coverage' in sys.modules); import coverage; print(coverage.__file__)")
+    base = {k: v for k, v in os.environ.items() if k != "NUMBA_JIT_COVERAGE"}
+    run_env = {**base, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}", **(env or {})}
+    out = subprocess.run([sys.executable, "-c", code], env=run_env, text=True,
+                         capture_output=True, check=True).stdout
+    return out.split()
+
+
+def test_numba_skips_coverage_but_other_imports_get_it(tmp_path):
+    stand_in = str(tmp_path / "coverage" / "__init__.py")
+    # numba alone imports whatever module is called coverage
+    assert _numba_and_coverage(tmp_path, skip=False) == ["not", "asked", "True", "True", stand_in]
+    # the CLI's finder refuses it to numba's hook only
+    assert _numba_and_coverage(tmp_path, skip=True) == ["True", "False", "False", stand_in]
+    # NUMBA_JIT_COVERAGE asks numba for its coverage report: left as numba has it
+    assert _numba_and_coverage(tmp_path, skip=True, env={"NUMBA_JIT_COVERAGE": "1"}) == [
+        "False", "True", "True", stand_in]
+
+
+def test_only_the_bake_command_starts_the_display_ahead():
+    assert bakes(["mesh.obj", "--impact", "0,0,0"])
+    assert bakes(["mesh.obj", "--cracks", "cracks.json"])
+    for argv in ([], ["--help"], ["mesh.obj", "-h"], ["--version"], ["inspect", "a.exr"],
+                 ["batch", "jobs.json"]):
+        assert not bakes(argv), argv
+
+
+def test_numba_skips_coverage_is_not_set_under_a_running_coverage(monkeypatch):
+    monkeypatch.setitem(sys.modules, "coverage", sys)  # a coverage already imported
+    before = list(sys.meta_path)
+    assert numba_skips_coverage({}) is False
+    assert sys.meta_path == before
 
 
 def _starts(args: list[str], env: dict | None = None) -> tuple[subprocess.CompletedProcess, int]:

@@ -21,7 +21,10 @@ from crackbake.bake.context import (
 )
 
 PROBE = (
+    "import sys\n"
     "from crackbake.bake.context import create_context\n"
+    "from crackbake.bake.egl_ahead import start\n"
+    "sys.argv[1:] == ['ahead'] and start()\n"
     "from crackbake.errors import CrackbakeError\n"
     "try:\n"
     "    create_context()\n"
@@ -30,8 +33,8 @@ PROBE = (
 )
 
 
-def probe(**env: str) -> str:
-    r = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
+def probe(*args: str, **env: str) -> str:
+    r = subprocess.run([sys.executable, "-c", PROBE, *args], capture_output=True, text=True,
                        env={**os.environ, **env}, timeout=60)
     return r.stdout.strip()
 
@@ -63,14 +66,47 @@ def test_context_is_opengl_43_or_later():
         ({"LIBGL_DRIVERS_PATH": "/nonexistent"}, "libgl1-mesa-dri"),
     ],
 )
-def test_missing_libraries_name_the_package_and_the_install_line(env, names):
+@pytest.mark.parametrize("ahead", [False, True], ids=["alone", "display-ahead"])
+def test_missing_libraries_name_the_package_and_the_install_line(env, names, ahead):
     if "LIBGL_DRIVERS_PATH" in env and not _renderer_is_mesa():
         # Mesa's own override: a GPU vendor's EGL (NVIDIA's) never reads it, so the context opens
         pytest.skip("the renderer is not Mesa: LIBGL_DRIVERS_PATH does not apply")
-    msg = probe(**env)
+    # the command's display thread (egl_ahead) fails silently: the context says the same
+    msg = probe(*(["ahead"] if ahead else []), **env)
     assert f"(package {names}" in msg
     assert "apt-get install -y libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri libgbm1" in msg
     assert "\n" not in msg
+
+
+def test_the_display_ahead_initialises_the_display_the_context_then_opens():
+    code = (
+        "import time\n"
+        "from crackbake.bake import egl_ahead\n"
+        "from crackbake.bake.context import create_context\n"
+        "thread = egl_ahead.start()\n"
+        "print(egl_ahead.start() is None)\n"  # one thread a process
+        "ctx = create_context()\n"
+        "print(thread.is_alive(), ctx.version_code >= 430)\n"
+        "t = time.perf_counter(); ok = egl_ahead.initialize_display()\n"
+        "print(ok, time.perf_counter() - t < 0.5)\n"  # initialised: no driver start again
+        "ctx.release()\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60, check=True).stdout.split()
+    assert out == ["True", "False", "True", "True", "True"]
+
+
+def test_the_display_ahead_follows_the_runs_device_and_library():
+    from crackbake.bake.egl_ahead import device_index, initialize_display, start
+
+    assert device_index({}) == 0
+    assert device_index({"GLCONTEXT_DEVICE_INDEX": "2"}) == 2
+    assert device_index({"CRACKBAKE_EGL_DEVICE": " 1 ", "GLCONTEXT_DEVICE_INDEX": "2"}) == 1
+    assert device_index({"CRACKBAKE_EGL_DEVICE": "gpu"}) is None
+    assert start({"CRACKBAKE_EGL_DEVICE": "gpu"}) is None  # create_context refuses it itself
+    assert start({"CRACKBAKE_EGL_AHEAD": "0"}) is None  # turned off
+    assert initialize_display(index=99) is False  # no such device: nothing raised
+    assert initialize_display("/nonexistent/libEGL.so.1") is False
 
 
 def test_shaders_are_found():

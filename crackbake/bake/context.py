@@ -47,6 +47,9 @@ def create_context():
             )
     if "CRACKBAKE_EGL_DEVICE" in os.environ:
         os.environ["GLCONTEXT_DEVICE_INDEX"] = os.environ["CRACKBAKE_EGL_DEVICE"].strip()
+    from crackbake.bake.egl_ahead import wait
+
+    wait()  # the command's thread may still be initialising the display (egl_ahead)
     try:
         ctx = moderngl.create_standalone_context(backend="egl", require=430)
     except Exception as exc:
