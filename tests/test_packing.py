@@ -6,6 +6,7 @@ the path defines it) and unit normals along the axes (the truncation edges 0.5 a
 
 from __future__ import annotations
 
+import zlib
 from types import SimpleNamespace
 
 import numpy as np
@@ -221,6 +222,43 @@ def test_data_rows_band_by_band_are_the_same_rows_and_file():
     streamed = png_bands(data16_bands(*args, band_bytes=3 * line), RES, RES, 16, 4,
                          compressor=data_compressor())  # fmt: skip
     assert streamed == whole
+
+
+def test_data_segments_give_the_rows_and_pixels_whatever_the_threads(tmp_path):
+    # The write stage deflates the data map in row segments, each from an empty window, on
+    # worker threads: the same scanlines (each segment's first row filtered against the row
+    # above it), one valid zlib stream (zlib checks the Adler-32), the same file for any
+    # thread count, and read back as the very pixels by OpenImageIO.
+    import OpenImageIO as oiio
+
+    from crackbake.exchange.pngenc import png_segments
+
+    rng = np.random.default_rng(15)
+    m = SimpleNamespace(
+        mask=_halves(rng), width=(rng.random((RES, RES)) * 0.01).astype(np.float32),
+        time=_halves(rng), depth=(rng.random((RES, RES)) * 0.02).astype(np.float32),
+        occlusion=None,
+    )  # fmt: skip
+    rows = targets.data16_filtered(m, bands=False)
+    for seg_rows in (1, 7, RES - 1, RES):
+        segments = targets.data16_segments(m, rows=seg_rows)
+        assert len(segments) == -(-RES // seg_rows)
+        got = np.concatenate([b.copy() for seg in segments for b in seg()])
+        assert np.array_equal(got, rows), seg_rows
+    segments = targets.data16_segments(m, rows=7)
+    files = {png_segments(segments, RES, RES, 16, 4, threads=t) for t in (0, 1, 3, 8)}
+    assert len(files) == 1
+    data = files.pop()
+    idat = data[data.index(b"IDAT") + 4: data.index(b"IEND") - 8]
+    assert zlib.decompress(idat) == rows.tobytes()
+    path = tmp_path / "data.png"
+    path.write_bytes(data)
+    cfg = oiio.ImageSpec()
+    cfg.attribute("oiio:UnassociatedAlpha", 1)  # the samples as stored (alpha is time)
+    inp = oiio.ImageInput.open(str(path), cfg)
+    px = inp.read_image(0, 0, 0, 4, oiio.UINT16)
+    inp.close()
+    assert np.array_equal(px, targets.pack("data", m, 16))
 
 
 def test_fused_data_texture_equals_numpy_quantise():

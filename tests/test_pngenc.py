@@ -189,3 +189,24 @@ def test_bands_give_the_file_of_all_rows_at_once(monkeypatch, shape, dtype):
             assert enc.png_bytes(img, level=level) == want
     raw = np.frombuffer(zlib.decompress(whole[1][whole[1].index(b"IDAT") + 4 : -16]), np.uint8)
     assert raw.size == img.shape[0] * line
+
+
+def test_adler32_combine_equals_adler32_of_the_whole():
+    from crackbake.exchange.pngenc import adler32_combine
+
+    rng = np.random.default_rng(3)
+    for a_len, b_len in ((0, 0), (1, 0), (0, 5), (65521, 3), (100_000, 70_001), (7, 5_552)):
+        a, b = rng.bytes(a_len), rng.bytes(b_len)
+        assert adler32_combine(zlib.adler32(a), zlib.adler32(b), len(b)) == zlib.adler32(a + b)
+
+
+def test_one_segment_is_the_data_streams_file():
+    from crackbake.exchange.pngenc import data_compressor, png_bands, png_segments
+
+    rows = _image((13, 1 + 8 * 9), np.uint8)
+    rows[:, 0] = 2
+    whole = png_bands([rows], 9, 13, 16, 4, compressor=data_compressor())
+    assert png_segments([lambda: [rows]], 9, 13, 16, 4, threads=2) == whole
+    halves = png_segments([lambda: [rows[:6]], lambda: [rows[6:]]], 9, 13, 16, 4)
+    assert halves != whole
+    assert zlib.decompress(halves[halves.index(b"IDAT") + 4: -16]) == rows.tobytes()

@@ -40,10 +40,10 @@ from crackbake.exchange.materials import (
     base_color_table,
     downsample,
 )
-from crackbake.exchange.pngenc import data_compressor, png_bands, png_bytes, write_bytes
+from crackbake.exchange.pngenc import png_bytes, png_segments, write_bytes
 from crackbake.exchange.targets import (
     TARGETS,
-    data16_filtered,
+    data16_segments,
     data_scales,
     normal_convention,
     pack,
@@ -73,6 +73,7 @@ WRITE_THREADS = max(3, min(6, os.cpu_count() or 1))
 #: thread compresses alone).  The master is the longest job; with workers it takes the cores
 #: the texture jobs leave when they finish instead of ending alone on one (warm write at 4096²
 #: on 2 cores: best 1.6 s against 2.0 s, the same CPU seconds, with the bindings' encoder).
+#: The 16-bit data PNG's segments take as many (:func:`~crackbake.exchange.pngenc.png_segments`).
 EXR_THREADS = max(2, min(4, os.cpu_count() or 1))
 #: Nice levels the encoder threads take below the thread that starts them (Linux, where each
 #: thread has its own; the EXR's chunk threads inherit it).  The pool starts before the stress
@@ -154,10 +155,10 @@ class _Encoder:
     def _job(self, key: tuple, paths: list, keep: bool) -> bytes | None:
         content, bits, normal_y, size = key
         maps = _smaller(self.maps, size)
-        bands = data16_filtered(maps) if (content, bits) == ("data", 16) else None
-        if bands is not None:  # packed straight into filtered scanlines, band by band
+        segments = data16_segments(maps) if (content, bits) == ("data", 16) else None
+        if segments is not None:  # packed straight into filtered scanlines, band by band
             h, w = maps.mask.shape
-            data = png_bands(bands, w, h, 16, 4, compressor=data_compressor())
+            data = png_segments(segments, w, h, 16, 4, threads=EXR_THREADS)
         else:
             pixels = pack(content, maps, bits, normal_y, base=lambda: self._base(maps, size))
             data = png_bytes(pixels, srgb=content == "base_color")

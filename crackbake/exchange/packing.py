@@ -91,19 +91,23 @@ def data16_rows(mask, width, time, depth, luts, width_scale: float,
 
 
 def data16_bands(mask, width, time, depth, luts, width_scale: float, depth_scale: float,
-                 band_bytes: int = 1 << 20):
+                 band_bytes: int = 1 << 20, start: int = 0, stop: int | None = None):
     """:func:`data16_rows`' scanlines in bands of rows, each (k, 1 + 8 W) uint8 of about
     ``band_bytes``, from one buffer that the next band overwrites: consume each before asking
     for the next (:func:`~crackbake.exchange.pngenc.png_bands` deflates it at once).  The same
     bytes as :func:`data16_rows`, without its image-sized array (128 MB of fresh pages at 4096²,
-    written once and read once)."""
+    written once and read once).  ``start``, ``stop``: only those rows (the first filtered
+    against row ``start - 1``, as in the whole image), for segments encoded apart."""
     h, w = mask.shape
+    stop = h if stop is None else min(int(stop), h)
     inputs = _data16_inputs(mask, width, time, depth, luts, width_scale, depth_scale)
     k = max(1, min(h, band_bytes // (1 + 8 * w)))
     band = np.empty((k, 1 + 8 * w), np.uint8)
     prev = np.zeros(8 * w, np.uint8)
-    for y0 in range(0, h, k):
-        rows = band[: min(k, h - y0)]
+    if start > 0:  # prev <- row start - 1, unfiltered (the scanline written here is dropped)
+        _data16_band(*inputs, start - 1, prev, band[:1])
+    for y0 in range(start, stop, k):
+        rows = band[: min(k, stop - y0)]
         _data16_band(*inputs, y0, prev, rows)
         yield rows
 
