@@ -491,7 +491,7 @@ def solve(
     Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).  ``sources``
     are the run's :func:`~crackbake.simulate.setup.stress_sources` when the caller built them.
     ``later``: numba kernels of the stages after it, loaded from the cache on the solver's
-    warm-up thread once the solver's loop runs (:func:`crackbake.simulate.warm.start`).
+    warm-up thread once it is done (:func:`crackbake.simulate.warm.start`).
 
     Returns
     -------
@@ -512,15 +512,14 @@ def solve(
 
     warming = None
     stop = threading.Event()
-    loop = threading.Event()
     if (params.method or "iben") == "iben":
         from crackbake.simulate import warm
 
         # The solver's kernels load on a thread while the sim mesh and the field are built,
-        # then the later stages' once the solver's loop runs (without the GIL).
-        warming = warm.start(later, stop, loop)
+        # then the later stages' while it solves.
+        warming = warm.start(later, stop)
     try:
-        return _solve(mesh, params, relative, timings, sources, on_loop=loop.set)
+        return _solve(mesh, params, relative, timings, sources)
     finally:
         if warming is not None:  # no numba load left running past the run (or its error)
             stop.set()
@@ -570,9 +569,8 @@ def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
 
 
 def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, float],
-           sources: list, on_loop=None) -> tuple[CrackNetwork, dict, Solved]:
-    """:func:`solve` once the sources are built and the solver's kernels are loading;
-    ``on_loop`` is called when the I&O solver's loop starts."""
+           sources: list) -> tuple[CrackNetwork, dict, Solved]:
+    """:func:`solve` once the sources are built and the solver's kernels are loading."""
     from crackbake.io.sidecar import jsonable
     from crackbake.network import from_solver
     from crackbake.simulate.setup import sidecar_params, solver_params, with_spacing
@@ -622,7 +620,7 @@ def _solve(mesh: Mesh, params: RunParams, relative: dict, timings: dict[str, flo
         sim.proxy.surface.start_worker()
     t = time.perf_counter()
     try:
-        result = _grow(sim, field, sp, on_loop)
+        result = _grow(sim, field, sp)
     except BaseException:
         if sim.proxy is not None:  # no query will come: no worker left waiting for one
             sim.proxy.surface.stop_worker()
@@ -823,16 +821,15 @@ def _round_up(n: float) -> int:
     return int(np.ceil(n / step) * step)
 
 
-def _grow(sim, field, sp, on_loop=None):
-    """Run the solver ``sp.method`` names; warn when iben stopped at its step limit.
-    ``on_loop``: called when iben's loop starts (:func:`solve_iben`)."""
+def _grow(sim, field, sp):
+    """Run the solver ``sp.method`` names; warn when iben stopped at its step limit."""
     if sp.method == "thesis":
         from crackbake.simulate.solver.thesis import solve_thesis
 
         return solve_thesis(sim, field, sp)
     from crackbake.simulate.solver.iben import solve_iben
 
-    result = solve_iben(sim, field, sp, on_loop=on_loop)
+    result = solve_iben(sim, field, sp)
     if result.stats.get("stopped") == "max steps":
         warnings.warn(
             f"the solver stopped at --max-steps {sp.max_steps} with cracks still growing; "

@@ -79,31 +79,3 @@ def test_named_modules_are_imported_on_the_thread_and_a_bad_name_is_ignored():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=180, check=True)  # fmt: skip
     assert out.stdout.split() == ["True", "False"], out.stderr
-
-
-def test_the_later_loads_wait_for_the_solvers_loop():
-    # Before the loop they took the GIL from the field's numpy calls; the loop holds none.
-    import subprocess
-    import sys
-
-    code = (
-        "import sys, threading, time\n"
-        "from crackbake.simulate import warm\n"
-        "stop, loop = threading.Event(), threading.Event()\n"
-        "t = warm.start(['crackbake.exchange.manifest'], stop, loop)\n"
-        "time.sleep(0.5)\n"
-        "while t.is_alive() and not sys.modules.get('crackbake.simulate.solver.iben.solve'):\n"
-        "    time.sleep(0.05)\n"
-        "t.join(5)\n"  # the plate solved: waiting for the loop, the module not imported
-        "print(t.is_alive(), 'crackbake.exchange.manifest' in sys.modules)\n"
-        "loop.set()\n"
-        "t.join(120)\n"
-        "print(t.is_alive(), 'crackbake.exchange.manifest' in sys.modules)\n"
-        "t = warm.start(['crackbake.exchange.frames'], stop, threading.Event())\n"
-        "stop.set()\n"  # the solve ended without a loop: the thread ends, nothing loaded
-        "t.join(120)\n"
-        "print(t.is_alive(), 'crackbake.exchange.frames' in sys.modules)\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=180, check=True)  # fmt: skip
-    assert out.stdout.split() == ["True", "False", "False", "True", "False", "False"], out.stderr

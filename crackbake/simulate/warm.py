@@ -53,33 +53,26 @@ def warm() -> None:
     solve_iben(sim, field, SolverParams(max_steps=50, max_cracks=4))
 
 
-def start(later: Sequence = (), stop: threading.Event | None = None,
-          loop: threading.Event | None = None) -> threading.Thread:
+def start(later: Sequence = (), stop: threading.Event | None = None) -> threading.Thread:
     """:func:`warm` on a daemon thread, started; join it or let it run out.
 
     ``later``: numba dispatchers of the stages after the solve (the bake's, the stress bake's,
-    the writers'), loaded from the disk cache next (:func:`crackbake.jit.preload`), until
-    ``stop`` is set (before the join); a string is a module's name, imported there (the
-    writers' modules).  With ``loop``, they wait until it is set (the solver's loop has
-    started, :func:`~crackbake.simulate.solver.iben.solve_iben`'s ``on_loop``) or ``stop``
-    is: a load holds the GIL for most of its Python, which the
-    field's many short numpy calls then waited for, and the loop holds none."""
-    thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop, loop),
+    the writers'), loaded from the disk cache next (:func:`crackbake.jit.preload`) while the
+    run's thread builds the field and solves, until ``stop`` is set (before the join); a
+    string is a module's name, imported there (the writers' modules: the solver's loop runs
+    without the GIL, so an import beside it is not on the run's path)."""
+    thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop),
                               name="crackbake-iben-warm", daemon=True)  # fmt: skip
     thread.start()
     return thread
 
 
-def _quiet_warm(later: tuple = (), stop: threading.Event | None = None,
-                loop: threading.Event | None = None) -> None:
+def _quiet_warm(later: tuple = (), stop: threading.Event | None = None) -> None:
     # Only a head start: a failure here is the real solve's to report, with its own inputs.
     try:
         warm()
     except Exception:  # noqa: BLE001
         pass
-    if later and loop is not None:
-        while not loop.wait(0.05) and not (stop is not None and stop.is_set()):
-            pass
     if later:
         from importlib import import_module
 

@@ -57,7 +57,7 @@ from crackbake.simulate.solver.iben.update import incidence, rebuild, requeue_al
 logger = logging.getLogger(__name__)
 
 
-def solve_iben(sim, field, params: SolverParams, *, on_loop=None) -> SolverResult:
+def solve_iben(sim, field, params: SolverParams) -> SolverResult:
     """Grow cracks with the Iben & O'Brien hybrid method (docs/solver.md).
 
     Parameters
@@ -70,10 +70,6 @@ def solve_iben(sim, field, params: SolverParams, *, on_loop=None) -> SolverResul
         ``(M, 3, 3)`` or None, added per quasi-static growth step.
     params : SolverParams
         ``max_cracks`` bounds the distinct cracks started, ``max_steps`` the solver steps.
-    on_loop : callable, optional
-        Called with no argument when the compiled crack loop starts (after the set-up): from
-        there the loop holds no GIL, so another thread's Python runs beside it unhindered
-        (:func:`crackbake.simulate.warm.start` loads the later stages' kernels then).
 
     Returns
     -------
@@ -101,8 +97,6 @@ def solve_iben(sim, field, params: SolverParams, *, on_loop=None) -> SolverResul
     p = _loop_params(s, mesh, cal, params)
     t_loop = time.perf_counter()
     mesh.landed = [0] if stages else []
-    if on_loop is not None:
-        on_loop()
     s = _run_chunks(s, p, mesh.has_growth, stages, mesh.landed) if cal.tau > 0 else s
     loop_seconds = time.perf_counter() - t_loop
     return _result(s, mesh, cal, params, loop_seconds, t0)
