@@ -35,6 +35,7 @@ Cases (floors from issue 25):
 Usage::
 
     python benchmarks/bench_process.py [-n 3] [--cases bake rebake ...] [--repo OTHER_CHECKOUT]
+                                       [--other-env NAME=VALUE] [--compile-deps]
 
 ``--repo`` runs every case against another checkout too (``git worktree add /tmp/old main``),
 interleaved run by run with this one so both see the same load, and adds its column and the
@@ -42,7 +43,11 @@ ratio.  ``--other-env NAME=VALUE`` (repeatable) sets variables for the other col
 ``--repo`` the other column is this tree under them: ``--other-env OPENBLAS_NUM_THREADS=16``
 compares OpenBLAS's threads with the one thread crackbake starts it with.  The
 numba cache (``NUMBA_CACHE_DIR``) must be warm for both trees (``python -m
-crackbake.precompile``): compilation is not what this measures.
+crackbake.precompile``): compilation is not what this measures.  Nor is the compiling of
+modules from source: where Python writes no bytecode (``PYTHONDONTWRITEBYTECODE``) and a
+dependency was installed without it (the H200 hosts' numpy), every process compiled 130 of
+numpy's modules again (``import numpy`` 0.33-0.41 s there).  The script says so, one line per
+package, and ``--compile-deps`` byte-compiles them first, as ``pip install`` would have.
 """
 
 from __future__ import annotations
@@ -214,6 +219,32 @@ STAGES = {
 }  # fmt: skip
 
 
+#: The packages a bake imports from Python source (their modules' bytecode matters).
+DEPENDENCIES = ("numpy", "numba", "llvmlite", "trimesh", "moderngl", "glcontext", "click",
+                "zlib_ng", "yaml")  # fmt: skip
+
+
+def without_bytecode(packages) -> list[tuple[str, Path, int]]:
+    """``(name, folder, count)`` of each installed package among ``packages`` with modules that
+    have no ``.pyc``, where this Python writes none itself (``PYTHONDONTWRITEBYTECODE``); empty
+    elsewhere (the first process writes them).  Test folders are not counted."""
+    import importlib.util
+
+    if not sys.dont_write_bytecode:
+        return []
+    out = []
+    for name in packages:
+        spec = importlib.util.find_spec(name)
+        if spec is None or not spec.submodule_search_locations:
+            continue
+        folder = Path(list(spec.submodule_search_locations)[0])
+        missing = sum(1 for f in folder.rglob("*.py") if "tests" not in f.parts
+                      and not Path(importlib.util.cache_from_source(str(f))).exists())  # fmt: skip
+        if missing:
+            out.append((name, folder, missing))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("-n", type=int, default=3, help="runs per case (median) [3]")
@@ -222,6 +253,9 @@ def main() -> None:
     ap.add_argument("--keep", type=Path, help="scratch folder to use and keep")
     ap.add_argument("--other-env", action="append", default=[], metavar="NAME=VALUE",
                     help="environment of the other column only (without --repo: this tree)")
+    ap.add_argument("--compile-deps", action="store_true",
+                    help="byte-compile the dependencies' modules that have no bytecode (as pip "
+                         "would have) where this Python writes none")  # fmt: skip
     a = ap.parse_args()
     envs = {"this": {}, "other": dict(item.split("=", 1) for item in a.other_env)}
     repos = {"this": ROOT}
@@ -232,6 +266,14 @@ def main() -> None:
 
     for repo in repos.values():  # as `make setup` leaves them (PYTHONDONTWRITEBYTECODE)
         compile_bytecode(repo / "crackbake")
+    for name, folder, missing in without_bytecode(DEPENDENCIES):
+        if a.compile_deps:
+            compile_bytecode(folder)
+        else:
+            print(f"bench_process: {missing} of {name}'s modules have no bytecode and this Python "
+                  f"writes none, so every process compiles them (the H200 host's numpy: 0.1 s of "
+                  f"start-up); add --compile-deps, or run python -m compileall {folder}",
+                  file=sys.stderr)  # fmt: skip
     scratch = Path(a.keep or tempfile.mkdtemp(prefix="bench_process_"))
     scratch.mkdir(parents=True, exist_ok=True)
     textured_spot(scratch / "textured")
