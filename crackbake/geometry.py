@@ -489,6 +489,58 @@ def shared_edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.nda
     return memo("edges", lambda: edges(faces, n_vertices), faces, int(n_vertices))
 
 
+def shared_shells(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Connected piece (shell) of each of ``n_vertices`` nodes over the faces' edges, (N,)
+    int32, computed once per face array (:func:`memo`): the stress field (twice), the star
+    check and the solver's mates ask."""
+    def compute():
+        from crackbake.nearest import components
+
+        return (components(n_vertices, shared_edges(faces, n_vertices)[0]),)
+
+    return memo("shells", compute, faces, int(n_vertices))[0]
+
+
+def shared_centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
+    """Face centroids (M, 3) and the largest centroid-to-corner distance, computed once per
+    mesh (:func:`memo`): the stress field and the star check snap on the same sim mesh."""
+
+    def compute():
+        tri = vertices[faces]
+        centroid = corner_mean(tri)
+        off = tri - centroid[:, None]
+        return centroid, float(np.sqrt(np.einsum("eka,eka->ek", off, off)).max())
+
+    return memo("centroids", compute, vertices, faces)
+
+
+#: What :func:`mesh_derived` gives, in order (arrays; the centroids' reach is a float apart).
+DERIVED_ARRAYS = ("edges", "edge_uses", "shells", "centroids")
+
+
+def mesh_derived(vertices: np.ndarray, faces: np.ndarray) -> tuple[list[np.ndarray], float]:
+    """A sim mesh's :data:`DERIVED_ARRAYS` and its centroids' reach, from (and into) the
+    memo: what :func:`remember_derived` puts back for a sim mesh read from the cache.
+    ``vertices`` (N, 3) float64, ``faces`` (M, 3) int64."""
+    e, uses = shared_edges(faces, len(vertices))
+    shells = shared_shells(faces, len(vertices))
+    centroids, reach = shared_centroids(vertices, faces)
+    return [e, uses, shells, centroids], reach
+
+
+def remember_derived(vertices: np.ndarray, faces: np.ndarray, derived: list[np.ndarray],
+                     reach: float) -> None:
+    """Put :func:`mesh_derived`'s arrays of this mesh into the memo, as the calls that compute
+    them would have: their first callers in a run (the stress field, the star check, the
+    solver's set-up: 0.05 CPU-s of the README bake on 2 cores) then find them."""
+    e, uses, shells, centroids = derived
+    n = int(len(vertices))
+    fk, vk = content_key(faces), content_key(vertices)
+    remember(("edges", fk, n), (e, uses))
+    remember(("shells", fk, n), (shells,))
+    remember(("centroids", vk, fk), (centroids, float(reach)))
+
+
 def boundary_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Per-vertex flag (V,) bool: the vertex lies on an edge used by exactly one face."""
     e, counts = edges(faces, n_vertices)

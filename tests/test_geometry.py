@@ -21,10 +21,11 @@ from crackbake.geometry import (
     memo,
     position_groups,
     shared_edges,
+    shared_shells,
     weld_by_position,
     welded_vertex_normals,
 )
-from crackbake.simulate.stress.geodesic import _shells, _snap
+from crackbake.simulate.stress.geodesic import _snap
 
 
 @pytest.mark.parametrize("shape", [(3000, 3), (3000, 3, 2), (2000, 3, 3), (0, 3)])
@@ -120,12 +121,12 @@ def test_shared_edges_equal_edges_read_only_and_computed_once():
 def test_memo_recomputes_for_changed_contents_and_stays_bounded():
     _, faces = _grid()
     n = int(faces.max()) + 1
-    before = _shells(faces, n)
+    before = shared_shells(faces, n)
     assert before.max() == 0  # one piece
     # Two separate grids: the cached answer for the first mesh must not be reused.
     v2, f2 = _grid(shift=100.0)
     both = np.concatenate([faces, f2 + n])
-    shells = _shells(both, 2 * n)
+    shells = shared_shells(both, 2 * n)
     assert shells.max() == 1
     assert (shells[:n] != shells[n:2 * n]).all()
     for k in range(geometry.MEMO_SIZE + 3):

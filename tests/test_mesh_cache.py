@@ -318,6 +318,51 @@ def test_sim_mesh_cached_equals_the_built_and_says_its_warnings_again(cache):
     assert _same_sim(plain, again) and said_again == said
 
 
+def test_a_cached_sim_mesh_brings_its_edges_shells_and_centroids(cache):
+    """Read from the cache, the sim mesh's edges, shells and centroids are in the memo as the
+    stress field, the star check and the solver ask for them (computed once, at its build),
+    equal to computing them afresh; a file with wrong ones is built again."""
+    from crackbake import geometry
+    from crackbake.geometry import (
+        DERIVED_ARRAYS,
+        forget,
+        recall,
+        shared_centroids,
+        shared_edges,
+        shared_shells,
+    )
+    from crackbake.simulate.simmesh import build_simmesh
+
+    mesh = plate_mesh(6, wobble=0.4, seed=3)
+    build_simmesh(mesh, target_faces=400, cache=True)
+    forget()
+    sim = build_simmesh(mesh, target_faces=400, cache=True)  # read
+    v, f, n = np.asarray(sim.vertices), np.asarray(sim.faces), len(sim.vertices)
+    fk, vk = geometry.content_key(f), geometry.content_key(v)
+    held = {name: recall(key) for name, key in (("edges", ("edges", fk, n)),
+                                                  ("shells", ("shells", fk, n)),
+                                                  ("centroids", ("centroids", vk, fk)))}
+    assert all(value is not None for value in held.values())
+    forget()
+    edges, uses = shared_edges(f, n)
+    centroids, reach = shared_centroids(v, f)
+    assert np.array_equal(held["edges"][0], edges) and np.array_equal(held["edges"][1], uses)
+    assert np.array_equal(held["shells"][0], shared_shells(f, n))
+    assert np.array_equal(held["centroids"][0], centroids) and held["centroids"][1] == reach
+    # wrong derived arrays (an edge past the last node): the file is not used
+    (path,) = cache.glob("simmesh-*.npys")
+    with open(path, "rb") as fh:
+        parts = [np.load(fh) for _ in range(6 + 5 + len(DERIVED_ARRAYS) + 2)]
+    parts[1 + 6 + 5] = parts[1 + 6 + 5] + n
+    with open(path, "wb") as fh:
+        for a in parts:
+            np.save(fh, a)
+    forget()
+    again = build_simmesh(mesh, target_faces=400, cache=True)
+    assert _same_sim(sim, again)
+    assert np.array_equal(recall(("edges", fk, n))[0], edges)  # built, and computed again
+
+
 def test_a_proxy_sim_mesh_is_cached_with_its_proxy_and_a_lazy_surface(cache):
     """A sim mesh refined in a decimated proxy: read back with the proxy's arrays and the
     asset surface, whose AABB tree is built when a solve starts, in a child process

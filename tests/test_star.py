@@ -126,11 +126,11 @@ def test_nearest_centroid_within_the_patch_equals_the_whole_tree():
     a KD-tree of every centroid gives, for points inside the ball, near its rim and far out."""
     from scipy.spatial import cKDTree
 
+    from crackbake.geometry import shared_centroids
     from crackbake.metrics.star import _nearest_centroid
-    from crackbake.simulate.stress.geodesic import _centroids
 
     sim = sim_plate(45)
-    centroid, corner_reach = _centroids(np.asarray(sim.vertices), np.asarray(sim.faces))
+    centroid, corner_reach = shared_centroids(np.asarray(sim.vertices), np.asarray(sim.faces))
     rng = np.random.default_rng(2)
     snapped = centroid[len(centroid) // 2]
     pts = np.column_stack([rng.uniform(0, 1, 3000), rng.uniform(0, 1, 3000), np.zeros(3000)])

@@ -368,6 +368,9 @@ _SIMMESH_MODULES = ("crackbake.simulate.simmesh.build", "crackbake.simulate.simm
                     "crackbake.simulate.simmesh.collapse_kernels", "crackbake.geometry",
                     "crackbake.geometry_kernels")  # fmt: skip
 _SIMMESH_ARRAYS = ("vertices", "faces", "asset_face", "node_face", "node_bary", "boundary")
+#: The sim mesh file's layout (in its key): 2 added the derived arrays
+#: (:data:`crackbake.geometry.DERIVED_ARRAYS`) and their reach.
+SIMMESH_LAYOUT = 2
 
 
 @cache
@@ -402,7 +405,7 @@ def simmesh_key(vertices, faces, settings: dict, local=None) -> str:
     import json
 
     h = _hasher("simmesh", *_SIMMESH_MODULES)
-    h.update(f"{_versions()}:{json.dumps(settings, sort_keys=True)}:".encode())
+    h.update(f"{SIMMESH_LAYOUT}:{_versions()}:{json.dumps(settings, sort_keys=True)}:".encode())
     parts = [("vertices", vertices, np.float64), ("faces", faces, np.int64)]
     if local is not None:
         parts += [("centres", local.centres, np.float64), ("radii", local.radii, np.float64),
@@ -419,24 +422,29 @@ _PROXY_ARRAYS = ("proxy_vertices", "proxy_faces", "proxy_rows", "surface_vertice
 
 
 def read_simmesh(key: str, n_asset_faces: int):
-    """``(arrays, edge_length, warnings, proxy)`` of the sim mesh keyed ``key``: its six arrays
-    by name, its edge length, the warnings its build gave (category, message, filename,
-    line) and, for a mesh refined in a proxy, the proxy's arrays by name (its vertices, faces
-    and asset rows, and the welded asset surface its closest points are found on), else None;
-    or None (missing, unreadable, or arrays that do not fit together or the asset)."""
+    """``(arrays, edge_length, warnings, proxy, derived)`` of the sim mesh keyed ``key``: its
+    six arrays by name, its edge length, the warnings its build gave (category, message,
+    filename, line), for a mesh refined in a proxy the proxy's arrays by name (its vertices,
+    faces and asset rows, and the welded asset surface its closest points are found on), else
+    None, and ``(arrays, reach)`` of :func:`crackbake.geometry.mesh_derived`; or None (missing,
+    unreadable, or arrays that do not fit together or the asset)."""
     import json
 
     from crackbake.errors import CrackbakeWarning
+    from crackbake.geometry import DERIVED_ARRAYS
 
-    loaded = _load("simmesh", key, len(_SIMMESH_ARRAYS) + len(_PROXY_ARRAYS) + 1)
+    first = len(_SIMMESH_ARRAYS) + len(_PROXY_ARRAYS)
+    loaded = _load("simmesh", key, first + len(DERIVED_ARRAYS) + 1)
     if loaded is None:
         return None
     arrays = dict(zip(_SIMMESH_ARRAYS, loaded, strict=False))
     parts = dict(zip(_PROXY_ARRAYS, loaded[len(_SIMMESH_ARRAYS):], strict=False))
+    e, uses, shells, centroids = loaded[first:first + len(DERIVED_ARRAYS)]
     try:
         extra = json.loads(str(loaded[-1]))
         edge_length = float(extra["edge_length"])
         has_proxy = bool(extra["proxy"])
+        reach = float(extra["reach"])
         said = []
         for category, message, filename, line in extra["warnings"]:
             kind = {"CrackbakeWarning": CrackbakeWarning}.get(category)
@@ -462,10 +470,17 @@ def read_simmesh(key: str, n_asset_faces: int):
         and rows_ok(arrays["node_face"], n)
         and arrays["node_bary"].dtype == np.float64 and arrays["node_bary"].shape == (n, 3)
         and arrays["boundary"].dtype == np.bool_ and arrays["boundary"].shape == (n,)
+        and e.dtype == np.int64 and e.ndim == 2 and e.shape[1:] == (2,)
+        and not (e.size and (e.min() < 0 or e.max() >= n))
+        and uses.dtype == np.int64 and uses.shape == (len(e),)
+        and shells.dtype == np.int32 and shells.shape == (n,)
+        and centroids.dtype == np.float64 and centroids.shape == (len(f), 3)
+        and np.isfinite(reach)
     ):  # fmt: skip
         return None
+    derived = ([e, uses, shells, centroids], reach)
     if not has_proxy:
-        return arrays, edge_length, said, None
+        return arrays, edge_length, said, None, derived
     sf = parts["surface_faces"]
     if not (
         mesh_ok(parts["proxy_vertices"], parts["proxy_faces"]) and len(parts["proxy_faces"])
@@ -473,13 +488,14 @@ def read_simmesh(key: str, n_asset_faces: int):
         and rows_ok(parts["proxy_rows"], len(sf))
     ):  # fmt: skip
         return None
-    return arrays, edge_length, said, parts
+    return arrays, edge_length, said, parts, derived
 
 
-def write_simmesh(key: str, sim, said: list) -> None:
-    """Store the sim mesh ``sim`` (with its proxy's arrays and surface when it has one) and its
-    build's warnings ``said`` (``warnings.WarningMessage``) under ``key``
-    (:func:`simmesh_key`); nothing is stored when a warning is not crackbake's own."""
+def write_simmesh(key: str, sim, said: list, derived: tuple[list, float]) -> None:
+    """Store the sim mesh ``sim`` (with its proxy's arrays and surface when it has one), its
+    build's warnings ``said`` (``warnings.WarningMessage``) and its ``derived`` arrays and
+    reach (:func:`crackbake.geometry.mesh_derived`) under ``key`` (:func:`simmesh_key`);
+    nothing is stored when a warning is not crackbake's own."""
     import json
 
     rows = []
@@ -497,6 +513,6 @@ def write_simmesh(key: str, sim, said: list) -> None:
                  np.asarray(proxy.rows, np.int64), proxy.surface.vertices,
                  proxy.surface.faces]  # fmt: skip
     text = json.dumps({"edge_length": float(sim.edge_length), "warnings": rows,
-                       "proxy": proxy is not None})  # fmt: skip
+                       "proxy": proxy is not None, "reach": float(derived[1])})  # fmt: skip
     _store("simmesh", key, [np.asarray(getattr(sim, name)) for name in _SIMMESH_ARRAYS]
-           + parts + [np.array(text)])  # fmt: skip
+           + parts + list(derived[0]) + [np.array(text)])  # fmt: skip

@@ -236,14 +236,15 @@ def surface_distance(
     straight = np.linalg.norm(pts - imp, axis=1)
     if vertices is None or faces is None or len(pts) == 0:
         return straight
-    from crackbake.simulate.stress.geodesic import _centroids, impact_distance
+    from crackbake.geometry import shared_centroids
+    from crackbake.simulate.stress.geodesic import impact_distance
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     link = mean_edge(v, f) if link is None else float(link)
     node, snapped, _ = impact_distance(SimpleNamespace(vertices=v, faces=f, edge_length=link),
                                        imp, max_distance)
-    nearest = _nearest_centroid(*_centroids(v, f), snapped, max_distance, pts)
+    nearest = _nearest_centroid(*shared_centroids(v, f), snapped, max_distance, pts)
     d = node[f[nearest]]
     out = np.full(len(pts), np.inf)
     ok = np.isfinite(d).all(axis=1)

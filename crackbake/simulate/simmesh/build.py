@@ -13,6 +13,8 @@ from crackbake.geometry import (
     barycentric,
     corner_mean,
     face_cross,
+    mesh_derived,
+    remember_derived,
     weld_by_position,
 )
 from crackbake.io.mesh import Mesh
@@ -276,7 +278,9 @@ def build_simmesh(
     key = simmesh_key(mesh.vertices, mesh.faces, settings, local)
     hit = read_simmesh(key, len(mesh.faces))
     if hit is not None:
-        arrays, edge_length, said, parts = hit
+        arrays, edge_length, said, parts, derived = hit
+        # its edges, shells and centroids, which the field, the star check and the solver ask for
+        remember_derived(arrays["vertices"], arrays["faces"], *derived)
         for category, message, filename, line in said:
             warnings.warn_explicit(message, category, filename, line)
         read_proxy = None
@@ -291,7 +295,7 @@ def build_simmesh(
         sim = _build(mesh, detail, target_faces, seed, jitter, proxy_above, proxy, local)
     for w in said:  # the caller's filters decide now, as they would have
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno, source=w.source)
-    write_simmesh(key, sim, said)
+    write_simmesh(key, sim, said, mesh_derived(sim.vertices, sim.faces))
     return sim
 
 

@@ -17,12 +17,16 @@ import numpy as np
 from numba import njit
 
 from crackbake.errors import CrackbakeError, CrackbakeWarning
-from crackbake.geometry import corner_mean, unit_rows, vertex_normals
+from crackbake.geometry import (
+    corner_mean,
+    shared_centroids,
+    shared_shells,
+    unit_rows,
+    vertex_normals,
+)
 from crackbake.io.mesh import Mesh
 from crackbake.simulate.solver.fem import face_frames, face_geometry
 from crackbake.simulate.stress.geodesic import (
-    _centroids,
-    _shells,
     _snap,
     impact_distance,
     iso_length,
@@ -503,7 +507,7 @@ def _warn_off_piece(geo: _Geometry, dist: np.ndarray, face: int, snapped: np.nda
 
     faces = geo.faces
     d = dist[faces].max(axis=1)  # inf past the reach
-    shell = _shells(faces, len(geo.vertices))
+    shell = shared_shells(faces, len(geo.vertices))
     mine = shell[faces[:, 0]] == shell[faces[face, 0]]
     if mine[np.isfinite(d)].all():  # the distance reached no other shell
         return False
@@ -788,8 +792,9 @@ def stress_field(sim, mesh: Mesh, sources: Sequence, seed: int = 0,
     faces = np.asarray(sim.faces, dtype=np.int64)
     area, normal, grad = face_geometry(vertices, faces)
     sources = list(sources)
-    # With impacts, the centroids their snap takes too (once per mesh, :func:`_centroids`).
-    centroid = (_centroids(vertices, faces)[0] if any(isinstance(s, ImpactSource) for s in sources)
+    # With impacts, the centroids their snap takes too (once per mesh, :func:`shared_centroids`).
+    has_impacts = any(isinstance(s, ImpactSource) for s in sources)
+    centroid = (shared_centroids(vertices, faces)[0] if has_impacts
                 else corner_mean(vertices[faces]))
     geo = _Geometry(vertices, faces, area, normal, grad, centroid)
     m = len(faces)

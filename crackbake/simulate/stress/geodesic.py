@@ -19,12 +19,12 @@ from crackbake.errors import CrackbakeWarning
 from crackbake.geometry import (
     closest_on_triangles,
     content_key,
-    corner_mean,
     edges,
     memo,
     recall,
     remember,
-    shared_edges,
+    shared_centroids,
+    shared_shells,
 )
 from crackbake.simulate.simmesh.manifold import split_nonmanifold
 from crackbake.simulate.stress.sources import _finite_vector
@@ -37,7 +37,7 @@ def _snap(sim, point: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, np.ndarr
     the largest centroid-to-corner distance.
     """
     vertices, faces = np.asarray(sim.vertices), np.asarray(sim.faces)
-    centroid, reach = _centroids(vertices, faces)
+    centroid, reach = shared_centroids(vertices, faces)
     dc = np.linalg.norm(centroid - point, axis=1)
     # The face holding the true closest point q has |centroid - p| <= |q - p| + |centroid - q|
     # <= min centroid distance + the largest centroid-to-corner distance; only those can win.
@@ -47,19 +47,6 @@ def _snap(sim, point: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, np.ndarr
     dist = np.linalg.norm(q - point, axis=1)
     k = int(np.argmin(dist))
     return q[k], int(cand[k]), bary[k], centroid, reach
-
-
-def _centroids(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, float]:
-    """Face centroids (M, 3) and the largest centroid-to-corner distance, once per mesh (the
-    stress field and the star check snap on the same sim mesh; :func:`~crackbake.geometry.memo`)."""
-
-    def compute():
-        tri = vertices[faces]
-        centroid = corner_mean(tri)
-        off = tri - centroid[:, None]
-        return centroid, float(np.sqrt(np.einsum("eka,eka->ek", off, off)).max())
-
-    return memo("centroids", compute, vertices, faces)
 
 
 def _fast_marching(vertices: np.ndarray, faces: np.ndarray):
@@ -233,24 +220,13 @@ def _impact_distance(sim, vertices: np.ndarray, faces: np.ndarray, p: np.ndarray
         d_sub = _edge_dijkstra(vertices[nodes], sub_faces, sub_face, snapped, limit)
 
     if link > 0.0:
-        shell = _shells(faces, len(vertices))
+        shell = shared_shells(faces, len(vertices))
         if shell.max() > 0:
             d_sub = _hop_shells(vertices[nodes], sub_faces, d_sub, link, limit, shell[nodes])
     distance = np.full(len(vertices), np.inf)
     distance[nodes] = d_sub
     distance[~np.isfinite(distance)] = np.inf
     return distance, snapped, face, marched
-
-
-def _shells(faces: np.ndarray, n: int) -> np.ndarray:
-    """Connected piece (shell) of each of ``n`` nodes over the faces' edges, (n,) int."""
-    def compute():
-        from crackbake.nearest import components
-
-        return (components(n, shared_edges(faces, n)[0]),)
-
-    # Once per mesh: the stress field (twice), the star check and the solver's mates ask.
-    return memo("shells", compute, faces, int(n))[0]
 
 
 def _hop_shells(vertices: np.ndarray, faces: np.ndarray, d: np.ndarray, link: float,

@@ -194,13 +194,13 @@ def _mates(X0: np.ndarray, F0: np.ndarray, link: float, period: float = 0.0) -> 
     (N,) int64
         The mate of each node, -1 where none.
     """
-    from crackbake.simulate.stress.geodesic import _shells
+    from crackbake.geometry import shared_shells
 
     n = len(X0)
     mate = np.full(n, -1, np.int64)
     if period or link <= 0.0 or n == 0:
         return mate
-    shell = _shells(F0, n)
+    shell = shared_shells(F0, n)
     if shell.max() == 0:
         return mate
     from scipy.spatial import cKDTree  # only for separate shells: scipy is 0.35 s of imports
