@@ -23,12 +23,66 @@ from typing import get_type_hints
 
 import numpy as np
 from numba import from_dtype, njit, types
+from numba.core import cgutils, imputils
+from numba.core.datamodel import default_manager, models
+from numba.core.typing.templates import AttributeTemplate
 from numba.experimental import structref
 
 from crackbake.simulate.solver.iben.state import State, Work
 
 
-@structref.register
+def register_borrowing(struct_type: type) -> type:
+    """``structref.register``, except that an array field is read as a borrowed view.
+
+    numba's own attribute read returns a new reference: an atomic increment of the array's
+    reference count, and an atomic decrement when the local dies.  The kernels read their
+    fields at the top of every small kernel, and those are called per node and per face, so
+    these pairs were about a fifth of the crack loop's time (perf of the README solve: two
+    ``lock`` instructions in ``NRT_incref`` and ``NRT_decref`` took 17 % of the samples).
+    Here an array field reads as the same array without its owner (a null meminfo, as for
+    ``numba.carray``): reference counting skips it.  That is safe because the struct holds the
+    arrays for as long as a kernel runs (the struct is made per entry point call and its fields
+    are never reassigned inside the kernels) and no kernel returns a field to Python.  Writes
+    (the converters' ``r.field = t.field``) count references as numba's do.
+    """
+    from numba.core.extending import infer_getattr, lower_getattr_generic, lower_setattr_generic
+
+    default_manager.register(struct_type, models.StructRefModel)
+
+    @infer_getattr
+    class _Attribute(AttributeTemplate):
+        key = struct_type
+
+        def generic_resolve(self, typ, attr):
+            return typ.field_dict.get(attr)
+
+    @lower_getattr_generic(struct_type)
+    def _getattr(context, builder, typ, val, attr):
+        data = structref._Utils(context, builder, typ).get_data_struct(val)
+        value = getattr(data, attr)
+        field = typ.field_dict[attr]
+        if not isinstance(field, types.Array):
+            return imputils.impl_ret_borrowed(context, builder, field, value)
+        view = context.make_array(field)(context, builder, value=value)
+        view.meminfo = cgutils.get_null_value(view.meminfo.type)
+        view.parent = cgutils.get_null_value(view.parent.type)
+        return imputils.impl_ret_untracked(context, builder, field, view._getvalue())
+
+    @lower_setattr_generic(struct_type)
+    def _setattr(context, builder, sig, args, attr):
+        [inst_type, val_type] = sig.args
+        [instance, val] = args
+        data = structref._Utils(context, builder, inst_type).get_data_struct(instance)
+        cast = context.cast(builder, val, val_type, inst_type.field_dict[attr])
+        old = getattr(data, attr)
+        context.nrt.incref(builder, val_type, cast)
+        context.nrt.decref(builder, val_type, old)  # last: the new value may be the old one
+        setattr(data, attr, cast)
+
+    return struct_type
+
+
+@register_borrowing
 class StateRef(types.StructRef):
     """numba type of the loop's state (the fields of ``State``)."""
 
@@ -36,7 +90,7 @@ class StateRef(types.StructRef):
         return tuple((name, types.unliteral(typ)) for name, typ in fields)
 
 
-@structref.register
+@register_borrowing
 class WorkRef(types.StructRef):
     """numba type of the loop's scratch (the fields of ``Work``)."""
 
