@@ -41,6 +41,10 @@ def main() -> None:
         from crackbake.bake.egl_ahead import start
 
         start()
+        # and the run's heap is faulted in on another
+        from crackbake.prefault import start as prefault
+
+        prefault(_res(sys.argv[1:]))
     from crackbake.cli import main as command
 
     try:
