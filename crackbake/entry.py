@@ -41,10 +41,12 @@ def main() -> None:
         from crackbake.bake.egl_ahead import start
 
         start()
-        # and the run's heap is faulted in on another
-        from crackbake.prefault import start as prefault
+        if not _rebakes(sys.argv[1:]):
+            # and the run's heap is faulted in on another (a re-bake has no stress field or
+            # solver, whose arrays are most of what its thread touches first)
+            from crackbake.prefault import start as prefault
 
-        prefault(_res(sys.argv[1:]))
+            prefault(_res(sys.argv[1:]))
     from crackbake.cli import main as command
 
     try:
@@ -138,6 +140,11 @@ def _res(argv: list[str]) -> int:
         return int(res)
     except ValueError:
         return 0
+
+
+def _rebakes(argv: list[str]) -> bool:
+    """True when ``argv`` re-bakes a crack network (``--cracks``)."""
+    return any(arg == "--cracks" or arg.startswith("--cracks=") for arg in argv)
 
 
 def _is_command() -> bool:

@@ -16,8 +16,9 @@ without writing: the pages malloc hands out meanwhile keep their contents.  ctyp
 GIL around each call, so the faults are taken on another core while the run imports and solves.
 
 Only on glibc, for a bake of ``--res`` 2048 or more, and never beyond a quarter of the memory
-the run may use; ``CRACKBAKE_PREFAULT=0`` turns it off.  Anything that fails leaves malloc as it
-was (the settings are applied only once the heap has grown) and the run goes on as before.
+the run may use; not for a re-bake (``--cracks``: its thread touches little memory first, so the
+thread would only take a core).  ``CRACKBAKE_PREFAULT=0`` turns it off.  Where the heap cannot
+grow or the kernel refuses the advice, the run goes on taking its own faults, as before.
 """
 
 from __future__ import annotations

@@ -77,6 +77,14 @@ def test_small_bakes_a_switch_and_a_tight_limit_are_respected():
     assert 0 < capped <= (1 << 30) // 4
 
 
+def test_the_command_prefaults_bakes_not_re_bakes():
+    from crackbake.entry import _rebakes
+
+    assert not _rebakes(["mesh.obj", "--res", "4096"])
+    assert _rebakes(["mesh.obj", "--cracks", "cracks.json"])
+    assert _rebakes(["mesh.obj", "--cracks=cracks.json"])
+
+
 def _outputs(folder: Path) -> dict[str, str]:
     return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())
             if p.name != "manifest.json"}  # its timings differ run to run
