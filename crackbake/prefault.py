@@ -40,8 +40,9 @@ HEAP_PER_TEXEL = 16
 PREFAULT_RES = 2048
 #: The largest share of the memory the run may use that is prefaulted.
 MAX_SHARE = 0.25
-#: Bytes faulted in per call, so that the thread ends soon after the process asks it to.
-CHUNK = 32 << 20
+#: Bytes faulted in per call: the call holds the process's memory map (read), so the run's own
+#: mmap, munmap and brk wait for at most one chunk (about 2 ms here).
+CHUNK = 2 << 20
 
 _started: list[threading.Thread] = []
 
@@ -78,7 +79,8 @@ def start(res: int, environ: dict | None = None, limit: int | None = None) -> in
     environ : dict, optional
         The environment (``CRACKBAKE_PREFAULT=0`` turns this off); ``os.environ`` by default.
     limit : int, optional
-        The memory the run may use, bytes (default: :func:`crackbake.memory.available_memory`);
+        The memory the run may use, bytes (default:
+        :func:`crackbake.memory_limit.available_memory`);
         at most :data:`MAX_SHARE` of it is prefaulted.
 
     Returns
@@ -94,7 +96,7 @@ def start(res: int, environ: dict | None = None, limit: int | None = None) -> in
     if libc is None:
         return 0
     if limit is None:
-        from crackbake.memory import available_memory
+        from crackbake.memory_limit import available_memory
 
         limit = available_memory()[0]
     size = min(heap_bytes(res), int(MAX_SHARE * limit)) & ~0xFFFFF
