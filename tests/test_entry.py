@@ -145,6 +145,21 @@ def test_only_the_bake_command_starts_the_display_ahead():
         assert not bakes(argv), argv
 
 
+def test_a_bake_collects_garbage_rarely_other_commands_as_python_does():
+    import gc
+
+    from crackbake.entry import GC_THRESHOLDS
+
+    def thresholds(argv):
+        return _run(f"import sys, gc; sys.argv = {argv!r}\n"
+                    "import crackbake.cli as cli\n"
+                    "cli.main = lambda **k: print(gc.get_threshold())\n"
+                    "from crackbake.entry import main; main()").stdout.strip()
+
+    assert thresholds(["crackbake", "mesh.obj", "--res", "512"]) == str(GC_THRESHOLDS)
+    assert thresholds(["crackbake", "inspect", "a.exr"]) == str(gc.get_threshold())
+
+
 def test_numba_skips_coverage_is_not_set_under_a_running_coverage(monkeypatch):
     monkeypatch.setitem(sys.modules, "coverage", sys)  # a coverage already imported
     before = list(sys.meta_path)
