@@ -86,12 +86,13 @@ def start(res: int, environ: dict | None = None, limit: int | None = None) -> in
     Returns
     -------
     int
-        Bytes the thread faults in (0: nothing started).  Call from the main thread, before
-        the run allocates: the heap grown is the main thread's arena.
+        Bytes the thread faults in (0: nothing started, or started before in this process).
+        Call from the main thread, before the run allocates: the heap grown is the main
+        thread's arena.
     """
     env = os.environ if environ is None else environ
-    if env.get("CRACKBAKE_PREFAULT", "1").strip() == "0" or res < PREFAULT_RES:
-        return 0
+    if env.get("CRACKBAKE_PREFAULT", "1").strip() == "0" or res < PREFAULT_RES or _started:
+        return 0  # off, small, or done once already (the heap would grow again)
     libc = _libc()
     if libc is None:
         return 0

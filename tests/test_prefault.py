@@ -71,10 +71,11 @@ def test_small_bakes_a_switch_and_a_tight_limit_are_respected():
     r = _run("from crackbake import prefault\n"
              f"print(prefault.start({PREFAULT_RES // 2}, limit=64 << 30),"
              " prefault.start(4096, environ={'CRACKBAKE_PREFAULT': '0'}, limit=64 << 30),"
-             " prefault.start(4096, limit=1 << 30))")
-    small, off, capped = map(int, r.stdout.split())
+             " prefault.start(4096, limit=1 << 30), prefault.start(4096, limit=64 << 30))")
+    small, off, capped, again = map(int, r.stdout.split())
     assert small == 0 and off == 0
     assert 0 < capped <= (1 << 30) // 4
+    assert again == 0  # once per process
 
 
 def test_the_command_prefaults_bakes_not_re_bakes():
