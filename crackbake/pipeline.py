@@ -193,6 +193,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
             targets.close()
             targets = None
         gutter = _bake_ahead(ctx, uvmesh, params, timings)
+        if params.cracks is None:
+            _field_kernels()  # before the preview's and the solver's threads load theirs
         preview_ahead = _preview_ahead(mesh, uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
@@ -311,6 +313,18 @@ def _targets_ahead(ctx, params: RunParams, tiles: int, images=None):
 
     return TargetPrefetch(ctx, target_specs(params.res, params.tile, True),
                           image_specs(params.res, True), images=images)  # fmt: skip
+
+
+def _field_kernels() -> None:
+    """The stress field's numba kernels loaded now, on the run's thread, while no other thread
+    loads any (:func:`crackbake.simulate.stress.fields.field_kernels`): loaded at their first
+    calls, in the field, they waited on numba's lock for the preview's and the solver's
+    warm-up loads, which other threads make slowly while this one holds the GIL."""
+    from crackbake.jit import preload
+    from crackbake.simulate.stress.fields import field_kernels
+
+    for kernel in field_kernels():
+        preload(kernel)
 
 
 def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
@@ -529,42 +543,38 @@ def solve(
         forget()  # the sim mesh's memoised edges, shells and patches: this run's only
 
 
-def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple:
+def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple[str, ...]:
     """The numba kernels a UV-placed bake of ``params`` calls after the solver, for the warm-up
     thread to load from the cache while the solver runs: the bake's and the stress bake's
     (on the run's thread), the encoders' (the write threads, whose first calls each loaded under
-    numba's one compiler lock, 0.4 s serialised); then the writer's modules by name, to import.
+    numba's one compiler lock, 0.4 s serialised); then the writer's modules.  Named
+    (``"module:kernel"``, ``"module"``), not imported: their modules import on that thread too,
+    not on the run's (16 ms of CPU, 26-54 ms of the run's thread with its waits for the GIL).
     Empty for UDIM pages and projected decals (other kernels)."""
     if uvmesh.udim is not None or params.decal is not None:
         return ()
-    from crackbake import nearest
-    from crackbake.bake import dilation, grid, normal_map, stress, stress_fields
-    from crackbake.geometry_kernels import facing_sum_kernel
-    from crackbake.simulate import timing
-
+    b, x = "crackbake.bake.", "crackbake.exchange."
     # the solve's end (the arrival times, the star check) first, then the bake's
-    later = [timing._arrival, nearest._grid, nearest._query, grid._bin_candidates,
-             grid.slice_members, normal_map.crack_texels, dilation._gather]  # fmt: skip
+    later = ["crackbake.simulate.timing:_arrival", "crackbake.nearest:_grid",
+             "crackbake.nearest:_query", b + "grid:_bin_candidates", b + "grid:slice_members",
+             b + "normal_map:crack_texels", b + "dilation:_gather"]  # fmt: skip
     formats = set(params.formats)
     if "stress" in formats:
-        later += [stress_fields._node_sums, stress_fields._corner_rows,
-                  dilation._nearest_row_per_column, dilation._nearest_source,
-                  stress._fill_principal]  # fmt: skip
+        later += [b + "stress_fields:_node_sums", b + "stress_fields:_corner_rows",
+                  b + "dilation:_nearest_row_per_column", b + "dilation:_nearest_source",
+                  b + "stress:_fill_principal"]  # fmt: skip
     if {"exr", "stress"} & formats:
-        from crackbake.exchange import exrzip, stats_kernels
-
-        later += [exrzip._to_half, exrzip._predict_channel, stats_kernels.float_stats,
-                  stats_kernels.half_stats]  # fmt: skip
+        later += [x + "exrzip:_to_half", x + "exrzip:_predict_channel",
+                  x + "stats_kernels:float_stats", x + "stats_kernels:half_stats"]
     if {"png", "glb", "preview", "usd", "usdz"} & formats:
-        from crackbake.exchange import halving, packing
-
-        later += [packing._data16_band, halving._base_color_half, halving._normal_half,
-                  halving._mip_half, packing._base_color, packing._normal_q, packing._lut_planes,
-                  packing._take, packing._quantise]  # fmt: skip
+        later += [x + "packing:_data16_band", x + "halving:_base_color_half",
+                  x + "halving:_normal_half", x + "halving:_mip_half", x + "packing:_base_color",
+                  x + "packing:_normal_q", x + "packing:_lut_planes", x + "packing:_take",
+                  x + "packing:_quantise"]  # fmt: skip
     if "preview" in formats:
-        later.append(facing_sum_kernel)
+        later.append("crackbake.geometry_kernels:facing_sum_kernel")
     # the write stage's modules last (about 30 ms of imports, OpenEXR's bindings among them)
-    later += ["crackbake.exchange.bundle", "crackbake.exchange.manifest"]
+    later += [x + "bundle", x + "manifest"]
     return tuple(later)
 
 

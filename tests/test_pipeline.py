@@ -438,3 +438,28 @@ def test_a_sim_mesh_rebuilt_for_a_thin_feature_warns_once(tmp_path):
     fins = [ln for ln in lines if "not manifold" in ln]
     assert len(snapped) == 1 and len(fins) == 1, lines
     assert len(lines) == len(set(lines))
+
+
+def test_the_later_kernels_and_the_field_kernels_name_real_kernels():
+    """The warm-up thread skips a name that does not resolve (a renamed kernel would only lose
+    its head start, silently): every name the pipeline hands it is a module's numba kernel,
+    or a module; the field's kernels are dispatchers the field calls."""
+    import importlib
+    from types import SimpleNamespace
+
+    from numba.core.dispatcher import Dispatcher
+
+    from crackbake.pipeline import _later_kernels
+    from crackbake.simulate.stress.fields import field_kernels
+
+    params = SimpleNamespace(decal=None, formats=("exr", "png", "glb", "preview", "stress"))
+    names = _later_kernels(params, SimpleNamespace(udim=None))
+    assert len(names) > 20
+    for name in names:
+        module, _, kernel = name.partition(":")
+        mod = importlib.import_module(module)
+        if kernel:
+            assert isinstance(getattr(mod, kernel), Dispatcher), name
+    assert _later_kernels(params, SimpleNamespace(udim=[1001, 1002])) == ()
+    kernels = field_kernels()
+    assert kernels and all(isinstance(k, Dispatcher) for k in kernels)

@@ -107,3 +107,35 @@ def test_a_bake_writes_the_same_files_with_and_without_it(tmp_path):
         assert r.returncode == 0, r.stderr[-800:]
         outs[flag] = _outputs(out)
     assert outs["1"] == outs["0"] and len(outs["1"]) >= 12
+
+
+def _thp_mode() -> str:
+    try:
+        text = Path("/sys/kernel/mm/transparent_hugepage/enabled").read_text()
+    except OSError:
+        return "never"
+    return text.split("[", 1)[1].split("]", 1)[0] if "[" in text else "never"
+
+
+@pytest.mark.skipif(not GLIBC or _thp_mode() == "never",
+                    reason="glibc's heap on a system with transparent huge pages")
+def test_the_heap_is_faulted_in_on_huge_pages_without_the_restart():
+    """Without glibc's huge-page tunable (a GPU machine does not restart on it), the heap the
+    thread faults in is still backed by 2 MiB pages: the advice is the module's own."""
+    code = """
+import sys
+from crackbake import prefault
+size = prefault.start(4096, limit=64 << 30)
+prefault.wait()
+huge = 0
+for line in open("/proc/self/smaps"):
+    if line.startswith("AnonHugePages:"):
+        huge += int(line.split()[1]) << 10
+print(size, huge)
+"""
+    env = {"GLIBC_TUNABLES": "glibc.malloc.hugetlb=0"}
+    size, huge = map(int, _run(code, env).stdout.split())
+    assert size == heap_bytes(4096) & ~0xFFFFF
+    # all but the partial 2 MiB pages at its ends (the kernel may fall back to small pages
+    # where it has no free huge one: most of the heap is enough)
+    assert huge >= size // 2, (size, huge)

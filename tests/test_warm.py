@@ -79,3 +79,29 @@ def test_named_modules_are_imported_on_the_thread_and_a_bad_name_is_ignored():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=180, check=True)  # fmt: skip
     assert out.stdout.split() == ["True", "False"], out.stderr
+
+
+def test_named_kernels_load_on_the_thread_and_a_bad_name_is_ignored():
+    # "module:kernel": the module imports there and the kernel loads from the cache there
+    # (crackbake.exchange.halving is not imported by the solver; its kernel is loaded once the
+    # thread is done, without a call), a missing module or kernel is skipped.
+    import subprocess
+    import sys
+
+    # in the cache first (the suite's precompiled cache has it; a bare checkout may not)
+    subprocess.run([sys.executable, "-c", "import numpy as np; from crackbake.exchange.halving "
+                    "import mip_half; mip_half(np.zeros((4, 4, 3), np.uint8))"],
+                   capture_output=True, timeout=180, check=True)  # fmt: skip
+    code = (
+        "import sys\n"
+        "from crackbake.simulate import warm\n"
+        "assert 'crackbake.exchange.halving' not in sys.modules\n"
+        "t = warm.start(['crackbake.no_such_module:kernel', 'crackbake.nearest:no_such_kernel',\n"
+        "                'crackbake.exchange.halving:_mip_half'])\n"
+        "t.join(120)\n"
+        "from crackbake.exchange import halving\n"
+        "print('loaded' if halving._mip_half.signatures else 'not loaded', t.is_alive())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=180, check=True)  # fmt: skip
+    assert out.stdout.split() == ["loaded", "False"], out.stderr

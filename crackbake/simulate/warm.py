@@ -58,9 +58,11 @@ def start(later: Sequence = (), stop: threading.Event | None = None) -> threadin
 
     ``later``: numba dispatchers of the stages after the solve (the bake's, the stress bake's,
     the writers'), loaded from the disk cache next (:func:`crackbake.jit.preload`) while the
-    run's thread builds the field and solves, until ``stop`` is set (before the join); a
-    string is a module's name, imported there (the writers' modules: the solver's loop runs
-    without the GIL, so an import beside it is not on the run's path)."""
+    run's thread builds the field and solves, until ``stop`` is set (before the join): each a
+    dispatcher, or named as ``"module:kernel"`` (its module imported there, not on the run's
+    thread); a string without a colon is a module's name, imported there (the writers'
+    modules: the solver's loop runs without the GIL, so an import beside it is not on the
+    run's path)."""
     thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop),
                               name="crackbake-iben-warm", daemon=True)  # fmt: skip
     thread.start()
@@ -81,10 +83,14 @@ def _quiet_warm(later: tuple = (), stop: threading.Event | None = None) -> None:
         for item in later:
             if stop is not None and stop.is_set():
                 break
-            if isinstance(item, str):
-                try:
-                    import_module(item)
-                except Exception:  # noqa: BLE001 - the run's own import reports it
-                    pass
-            else:
+            if not isinstance(item, str):
                 preload(item)
+                continue
+            module, _, name = item.partition(":")
+            try:
+                imported = import_module(module)
+                kernel = getattr(imported, name) if name else None
+            except Exception:  # noqa: BLE001 - the run's own import reports it
+                continue
+            if kernel is not None:
+                preload(kernel)

@@ -556,6 +556,19 @@ def _directional_field(geo: _Geometry, src: DirectionalSource) -> np.ndarray:
 
 
 
+def field_kernels() -> list:
+    """The numba kernels an impact's field calls on the run's thread, in the order it first
+    calls them (its faces' geometry, the geodesic patch's manifold split, the face-node
+    smoothing): for :func:`crackbake.jit.preload` on that thread before any other thread
+    loads kernels.  numba loads each kernel under one process-wide lock, so a kernel the field
+    loads at its first call waited for whatever another thread was loading then (the
+    preview's and the solver's warm-up, 57-165 ms of the README bake's field)."""
+    from crackbake.geometry_kernels import face_geometry_kernel
+    from crackbake.simulate.simmesh.manifold_kernels import fan_split, sorted_sides
+
+    return [face_geometry_kernel, sorted_sides, fan_split, _incidence_sums]
+
+
 def _face_vertex_smooth(faces: np.ndarray, area: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Area-weighted face -> node -> face average of per-face values (K, ...) over (K, 3) faces."""
     k = len(faces)
