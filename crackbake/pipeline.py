@@ -181,7 +181,7 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         if images is not None:
             images.close()
         raise
-    targets = gutter = stress_ahead = preview_ahead = None
+    targets = gutter = stress_ahead = preview_ahead = warming = None
     try:
         # A re-bake has no solver to hide the targets' allocation behind: it starts before the
         # UV stage (which then shares the machine with it); a solving run starts it after its
@@ -194,13 +194,14 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
             targets = None
         gutter = _bake_ahead(ctx, uvmesh, params, timings)
         if params.cracks is None:
-            _field_kernels()  # before the preview's and the solver's threads load theirs
+            warming = _warm_ahead(params, uvmesh)
+            _field_kernels(warming)  # before the preview's and the solver's threads load theirs
         preview_ahead = _preview_ahead(mesh, uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
         if params.cracks is None:
             network, solver_stats, solved = solve(mesh, params, relative, timings, sources,
-                                                  later=_later_kernels(params, uvmesh))
+                                                  warming=warming)
         # The stress bake's rows (closest asset points, nodal values: CPU only) are computed on
         # a thread while the crack bake runs; its draw waits for them.
         stress_ahead = _stress_ahead(uvmesh, solved, params)
@@ -230,7 +231,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         write_manifest(stage.path("manifest.json"), manifest)
         stage.commit()
     finally:
-        for ahead in (images, targets, gutter, stress_ahead, preview_ahead):  # threads end first
+        for ahead in (images, targets, gutter, stress_ahead, preview_ahead, warming):
+            # threads end first
             if ahead is not None:
                 ahead.close()
         ctx.release()
@@ -315,16 +317,51 @@ def _targets_ahead(ctx, params: RunParams, tiles: int, images=None):
                           image_specs(params.res, True), images=images)  # fmt: skip
 
 
-def _field_kernels() -> None:
+def _field_kernels(warming: _Warming | None = None) -> None:
     """The stress field's numba kernels loaded now, on the run's thread, while no other thread
-    loads any (:func:`crackbake.simulate.stress.fields.field_kernels`): loaded at their first
-    calls, in the field, they waited on numba's lock for the preview's and the solver's
-    warm-up loads, which other threads make slowly while this one holds the GIL."""
+    loads any (:func:`crackbake.simulate.stress.fields.field_kernels`), then ``warming``'s
+    thread let go on to the solver's: loaded at their first calls, in the field, they waited
+    on numba's lock for the preview's and the solver's warm-up loads, which other threads make
+    slowly while this one holds the GIL."""
     from crackbake.jit import preload
     from crackbake.simulate.stress.fields import field_kernels
 
-    for kernel in field_kernels():
-        preload(kernel)
+    try:
+        for kernel in field_kernels():
+            preload(kernel)
+    finally:
+        if warming is not None:
+            warming.loaded.set()
+
+
+class _Warming:
+    """The solver's warm-up thread (:func:`crackbake.simulate.warm.start`), started before
+    the field's kernels load: it imports the solver meanwhile, then loads the solver's kernels
+    once ``loaded`` is set, and the later stages' (``later``) while the solver runs."""
+
+    def __init__(self, later: tuple = ()) -> None:
+        # The stages' own modules first, on this thread: the warm-up thread then imports only
+        # the solver's, and no two threads import one package at once.  No scipy: its 0.35 s
+        # of imports came for KD-trees and graph pieces (crackbake.nearest has them now).
+        from crackbake.simulate import simmesh, stress, timing, warm  # noqa: F401
+
+        self.stop = threading.Event()
+        self.loaded = threading.Event()
+        self.thread = warm.start(later, self.stop, self.loaded)
+
+    def close(self) -> None:
+        """Stop it after the kernel it is loading and wait for it (no numba load left running
+        past the run, or its error)."""
+        self.loaded.set()
+        self.stop.set()
+        self.thread.join()
+
+
+def _warm_ahead(params: RunParams, uvmesh: UVMesh) -> _Warming | None:
+    """The solver's warm-up thread for an iben run, started; None for another solver."""
+    if (params.method or "iben") != "iben":
+        return None
+    return _Warming(_later_kernels(params, uvmesh))
 
 
 def _bake_ahead(ctx, uvmesh: UVMesh, params: RunParams, timings: dict[str, float]):
@@ -499,13 +536,16 @@ def solve(
     timings: dict[str, float],
     sources: list | None = None,
     later: tuple = (),
+    warming: _Warming | None = None,
 ) -> tuple[CrackNetwork, dict, Solved]:
     """Simulation mesh, stress field and crack solver: the network for a resolved run.
 
     Stage times are added to ``timings`` (``simmesh``, ``stress``, ``solve``).  ``sources``
     are the run's :func:`~crackbake.simulate.setup.stress_sources` when the caller built them.
     ``later``: numba kernels of the stages after it, loaded from the cache on the solver's
-    warm-up thread once it is done (:func:`crackbake.simulate.warm.start`).
+    warm-up thread once it is done (:func:`crackbake.simulate.warm.start`).  ``warming``: that
+    thread, started by the caller (the pipeline starts it before the field's kernels load);
+    closed here either way.
 
     Returns
     -------
@@ -519,25 +559,16 @@ def solve(
         from crackbake.simulate.setup import stress_sources
 
         sources = stress_sources(params, mesh, relative)
-    # The stages' own modules are imported before the thread starts, which then imports only
-    # the solver's: no two threads import one package at once.  No scipy: its 0.35 s of
-    # imports came for KD-trees and graph pieces (crackbake.nearest has them now).
-    from crackbake.simulate import simmesh, stress, timing  # noqa: F401
-
-    warming = None
-    stop = threading.Event()
-    if (params.method or "iben") == "iben":
-        from crackbake.simulate import warm
-
+    if warming is None and (params.method or "iben") == "iben":
         # The solver's kernels load on a thread while the sim mesh and the field are built,
         # then the later stages' while it solves.
-        warming = warm.start(later, stop)
+        warming = _Warming(later)
+        warming.loaded.set()
     try:
         return _solve(mesh, params, relative, timings, sources)
     finally:
         if warming is not None:  # no numba load left running past the run (or its error)
-            stop.set()
-            warming.join()
+            warming.close()
         from crackbake.geometry import forget
 
         forget()  # the sim mesh's memoised edges, shells and patches: this run's only

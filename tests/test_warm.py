@@ -105,3 +105,26 @@ def test_named_kernels_load_on_the_thread_and_a_bad_name_is_ignored():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=180, check=True)  # fmt: skip
     assert out.stdout.split() == ["loaded", "False"], out.stderr
+
+
+def test_after_holds_the_loads_until_it_is_set():
+    # The pipeline starts the thread before the field's kernels load on the run's thread: the
+    # thread imports the solver, then loads nothing until it is told.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, threading, time\n"
+        "from crackbake.simulate import warm\n"
+        "from crackbake.simulate.solver.iben import update\n"
+        "after = threading.Event()\n"
+        "t = warm.start((), None, after)\n"
+        "time.sleep(1.0)\n"
+        "held = (not update.update_nodes.signatures, t.is_alive())\n"
+        "after.set()\n"
+        "t.join(120)\n"
+        "print(*held, bool(update.update_nodes.signatures), t.is_alive())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=180, check=True)  # fmt: skip
+    assert out.stdout.split() == ["True", "True", "True", "False"], out.stderr

@@ -53,7 +53,13 @@ def warm() -> None:
     solve_iben(sim, field, SolverParams(max_steps=50, max_cracks=4))
 
 
-def start(later: Sequence = (), stop: threading.Event | None = None) -> threading.Thread:
+#: How long the thread waits for ``after`` at most (seconds): a run that never sets it (it
+#: failed first) still gets a thread that ends.
+AFTER_WAIT_S = 30.0
+
+
+def start(later: Sequence = (), stop: threading.Event | None = None,
+          after: threading.Event | None = None) -> threading.Thread:
     """:func:`warm` on a daemon thread, started; join it or let it run out.
 
     ``later``: numba dispatchers of the stages after the solve (the bake's, the stress bake's,
@@ -62,17 +68,27 @@ def start(later: Sequence = (), stop: threading.Event | None = None) -> threadin
     dispatcher, or named as ``"module:kernel"`` (its module imported there, not on the run's
     thread); a string without a colon is a module's name, imported there (the writers'
     modules: the solver's loop runs without the GIL, so an import beside it is not on the
-    run's path)."""
-    thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop),
+    run's path).
+
+    ``after``: the thread imports the solver's modules, then waits for this event before it
+    loads any kernel (the run's thread loads its own first, :func:`crackbake.jit.preload`:
+    numba loads one kernel at a time, under one lock)."""
+    thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop, after),
                               name="crackbake-iben-warm", daemon=True)  # fmt: skip
     thread.start()
     return thread
 
 
-def _quiet_warm(later: tuple = (), stop: threading.Event | None = None) -> None:
+def _quiet_warm(later: tuple = (), stop: threading.Event | None = None,
+                after: threading.Event | None = None) -> None:
     # Only a head start: a failure here is the real solve's to report, with its own inputs.
     try:
-        warm()
+        if after is not None:
+            import crackbake.simulate.solver.iben.solve  # noqa: F401 - imports, no loads
+
+            after.wait(AFTER_WAIT_S)
+        if stop is None or not stop.is_set():
+            warm()
     except Exception:  # noqa: BLE001
         pass
     if later:
