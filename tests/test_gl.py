@@ -201,3 +201,40 @@ def test_finish_waits_for_the_draw_and_lets_other_threads_run(gl_ctx):
     assert (pixels == 1.0).all()  # the draw was complete
     assert waited > 0.05, waited  # long enough for a stall to show
     assert stall < 0.5 * waited, (stall, waited)
+
+
+def test_the_context_made_ahead_is_the_runs_and_draws_as_glcontexts_does():
+    """The command's thread creates the run's context (egl_ahead.make_context); the run's first
+    create_context takes it, once, and draws what a context of glcontext's draws; with
+    CRACKBAKE_EGL_AHEAD=display the thread only initialises the display."""
+    code = (
+        "import hashlib, os, sys\n"
+        "import numpy as np\n"
+        "from crackbake.bake import egl_ahead\n"
+        "from crackbake.bake.context import create_context, renderer_info\n"
+        "thread = egl_ahead.start()\n"
+        "thread.join(30)\n"
+        "made = bool(egl_ahead._made)\n"
+        "def draw(ctx):\n"
+        "    prog = ctx.program(vertex_shader='#version 430\\nin vec2 p; out vec2 q;"
+        " void main() { q = p; gl_Position = vec4(p, 0.0, 1.0); }',\n"
+        "        fragment_shader='#version 430\\nin vec2 q; out vec4 c;"
+        " void main() { c = vec4(q * 0.5 + 0.5, sin(q.x * 40.0), 1.0); }')\n"
+        "    vbo = ctx.buffer(np.array([-0.9, -0.8, 0.7, -0.6, 0.1, 0.95], 'f4'))\n"
+        "    vao = ctx.vertex_array(prog, [(vbo, '2f', 'p')])\n"
+        "    fbo = ctx.framebuffer([ctx.texture((97, 61), 4, dtype='f4')])\n"
+        "    fbo.use(); ctx.clear(0.1, 0.2, 0.3, 1.0); vao.render()\n"
+        "    return hashlib.sha256(fbo.read(components=4, dtype='f4')).hexdigest()\n"
+        "first = create_context()\n"
+        "a, info_a = draw(first), renderer_info(first)\n"
+        "first.release()\n"
+        "second = create_context()\n"  # the thread's context is taken once: glcontext's now
+        "b, info_b = draw(second), renderer_info(second)\n"
+        "second.release()\n"
+        "print(made, not egl_ahead._made, a == b, info_a == info_b)\n"
+    )
+    run = lambda env: subprocess.run([sys.executable, "-c", code], capture_output=True,  # noqa: E731
+                                     text=True, timeout=60, check=True,
+                                     env={**os.environ, **env}).stdout.split()  # fmt: skip
+    assert run({}) == ["True", "True", "True", "True"]
+    assert run({"CRACKBAKE_EGL_AHEAD": "display"})[:2] == ["False", "True"]

@@ -47,9 +47,14 @@ def create_context():
             )
     if "CRACKBAKE_EGL_DEVICE" in os.environ:
         os.environ["GLCONTEXT_DEVICE_INDEX"] = os.environ["CRACKBAKE_EGL_DEVICE"].strip()
-    from crackbake.bake.egl_ahead import wait
+    from crackbake.bake.egl_ahead import take_context, wait
 
     wait()  # the command's thread may still be initialising the display (egl_ahead)
+    made = take_context()
+    if made is not None:
+        ctx = _adopt(made)
+        if ctx is not None:
+            return ctx
     try:
         ctx = moderngl.create_standalone_context(backend="egl", require=430)
     except Exception as exc:
@@ -69,6 +74,42 @@ def create_context():
             f"cannot open a headless OpenGL context ({msg}); on Debian/Ubuntu install: {APT_LINE}"
         ) from exc
     return ctx
+
+
+def _adopt(made, require: int = 430):
+    """A moderngl context on the EGL context the command's thread made
+    (:mod:`crackbake.bake.egl_ahead`), current on this thread; None (and that context destroyed)
+    where it cannot be used, for :func:`create_context` to open its own as before.
+
+    moderngl takes it as it takes glcontext's (``mgl.create_context(context=loader)``, the call
+    its ``init_context`` makes), set up as its standalone context is."""
+    from collections import deque
+
+    import moderngl
+
+    from crackbake.bake.egl_ahead import AheadContext
+
+    loader = None
+    try:
+        loader = AheadContext(made, os.environ.get("GLCONTEXT_LINUX_LIBGL") or "libGL.so.1")
+        if not loader.bind():
+            raise RuntimeError("eglMakeCurrent refused the context")
+        ctx = moderngl.Context.__new__(moderngl.Context)
+        ctx.mglo, ctx.version_code = moderngl.mgl.create_context(context=loader)
+        ctx._info = ctx._extensions = ctx.extra = ctx._gc_mode = None
+        ctx._objects = deque()
+        ctx._screen = ctx.fbo = None
+        if ctx.version_code < require:
+            ctx.release()
+            return None
+        return ctx
+    except Exception:  # noqa: BLE001 - the usual context is opened instead
+        if loader is not None:
+            loader.release()
+        else:
+            egl, display, context = made
+            egl.eglDestroyContext(display, context)
+        return None
 
 
 class GLScope:
