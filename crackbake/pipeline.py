@@ -196,6 +196,8 @@ def _run(params: RunParams, stage: OutputStage, manifest_extra: dict) -> RunResu
         if params.cracks is None:
             warming = _warm_ahead(params, uvmesh)
             _field_kernels(warming)  # before the preview's and the solver's threads load theirs
+        else:
+            warming = _rebake_kernels(params, uvmesh)
         preview_ahead = _preview_ahead(mesh, uvmesh, params)
         if params.cracks is None and uvmesh.udim is None:
             targets, images = _targets_ahead(ctx, params, 1, images), None
@@ -337,17 +339,21 @@ def _field_kernels(warming: _Warming | None = None) -> None:
 class _Warming:
     """The solver's warm-up thread (:func:`crackbake.simulate.warm.start`), started before
     the field's kernels load: it imports the solver meanwhile, then loads the solver's kernels
-    once ``loaded`` is set, and the later stages' (``later``) while the solver runs."""
+    once ``loaded`` is set, and the later stages' (``later``) while the solver runs.
+    ``plate=False``: the later stages' kernels only (a re-bake's)."""
 
-    def __init__(self, later: tuple = ()) -> None:
-        # The stages' own modules first, on this thread: the warm-up thread then imports only
-        # the solver's, and no two threads import one package at once.  No scipy: its 0.35 s
-        # of imports came for KD-trees and graph pieces (crackbake.nearest has them now).
-        from crackbake.simulate import simmesh, stress, timing, warm  # noqa: F401
+    def __init__(self, later: tuple = (), plate: bool = True) -> None:
+        from crackbake.simulate import warm
+
+        if plate:
+            # The stages' own modules first, on this thread: the warm-up thread then imports
+            # only the solver's, and no two threads import one package at once.  No scipy: its
+            # 0.35 s of imports came for KD-trees and graph pieces (crackbake.nearest has them).
+            from crackbake.simulate import simmesh, stress, timing  # noqa: F401
 
         self.stop = threading.Event()
         self.loaded = threading.Event()
-        self.thread = warm.start(later, self.stop, self.loaded)
+        self.thread = warm.start(later, self.stop, self.loaded, plate)
 
     def close(self) -> None:
         """Stop it after the kernel it is loading and wait for it (no numba load left running
@@ -355,6 +361,30 @@ class _Warming:
         self.loaded.set()
         self.stop.set()
         self.thread.join()
+
+
+def _rebake_kernels(params: RunParams, uvmesh: UVMesh) -> _Warming | None:
+    """A re-bake's later kernels: the bake's loaded now, on the run's thread, before any other
+    thread loads one (as :func:`_field_kernels` does for the field), then the encoders' on a
+    thread while the bake draws, as a solving run loads them beside its solver.  The encoders'
+    first calls loaded them in the write stage, one at a time under numba's lock (about 0.25 s
+    of loads on 2 cores).  The writer's own modules are left to the run's thread, after the
+    bake; None where there are no such kernels."""
+    from importlib import import_module
+
+    from crackbake.jit import preload
+
+    names = [name for name in _later_kernels(params, uvmesh, solving=False) if ":" in name]
+    for name in names:
+        if name.startswith("crackbake.bake."):
+            module, _, kernel = name.partition(":")
+            preload(getattr(import_module(module), kernel))
+    later = tuple(name for name in names if not name.startswith("crackbake.bake."))
+    if not later:
+        return None
+    warming = _Warming(later, plate=False)
+    warming.loaded.set()
+    return warming
 
 
 def _warm_ahead(params: RunParams, uvmesh: UVMesh) -> _Warming | None:
@@ -574,27 +604,31 @@ def solve(
         forget()  # the sim mesh's memoised edges, shells and patches: this run's only
 
 
-def _later_kernels(params: RunParams, uvmesh: UVMesh) -> tuple[str, ...]:
+def _later_kernels(params: RunParams, uvmesh: UVMesh, solving: bool = True) -> tuple[str, ...]:
     """The numba kernels a UV-placed bake of ``params`` calls after the solver, for the warm-up
     thread to load from the cache while the solver runs: the bake's and the stress bake's
     (on the run's thread), the encoders' (the write threads, whose first calls each loaded under
     numba's one compiler lock, 0.4 s serialised); then the writer's modules.  Named
     (``"module:kernel"``, ``"module"``), not imported: their modules import on that thread too,
     not on the run's (16 ms of CPU, 26-54 ms of the run's thread with its waits for the GIL).
-    Empty for UDIM pages and projected decals (other kernels)."""
+    Empty for UDIM pages and projected decals (other kernels).  ``solving=False``: a re-bake's
+    (no solve's end, no stress bake)."""
     if uvmesh.udim is not None or params.decal is not None:
         return ()
     b, x = "crackbake.bake.", "crackbake.exchange."
-    # the solve's end (the arrival times, the star check) first, then the bake's
-    later = ["crackbake.simulate.timing:_arrival", "crackbake.nearest:_grid",
-             "crackbake.nearest:_query", b + "grid:_bin_candidates", b + "grid:slice_members",
-             b + "normal_map:crack_texels", b + "dilation:_gather"]  # fmt: skip
+    later = []
+    if solving:  # the solve's end (the arrival times, the star check) first
+        later += ["crackbake.simulate.timing:_arrival", "crackbake.nearest:_grid",
+                  "crackbake.nearest:_query"]
+    # then the bake's
+    later += [b + "grid:_bin_candidates", b + "grid:slice_members", b + "normal_map:crack_texels",
+              b + "dilation:_gather"]
     formats = set(params.formats)
-    if "stress" in formats:
+    if solving and "stress" in formats:
         later += [b + "stress_fields:_node_sums", b + "stress_fields:_corner_rows",
                   b + "dilation:_nearest_row_per_column", b + "dilation:_nearest_source",
                   b + "stress:_fill_principal"]  # fmt: skip
-    if {"exr", "stress"} & formats:
+    if "exr" in formats or (solving and "stress" in formats):
         later += [x + "exrzip:_to_half", x + "exrzip:_predict_channel",
                   x + "stats_kernels:float_stats", x + "stats_kernels:half_stats"]
     if {"png", "glb", "preview", "usd", "usdz"} & formats:

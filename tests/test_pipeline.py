@@ -461,5 +461,12 @@ def test_the_later_kernels_and_the_field_kernels_name_real_kernels():
         if kernel:
             assert isinstance(getattr(mod, kernel), Dispatcher), name
     assert _later_kernels(params, SimpleNamespace(udim=[1001, 1002])) == ()
+    # a re-bake's: no solve's end, no stress bake, the bake's and the encoders' kept
+    rebake = _later_kernels(params, SimpleNamespace(udim=None), solving=False)
+    assert set(rebake) < set(names)
+    assert not any(n.startswith(("crackbake.simulate.", "crackbake.nearest:",
+                                 "crackbake.bake.stress")) for n in rebake)
+    assert "crackbake.bake.grid:_bin_candidates" in rebake
+    assert "crackbake.exchange.exrzip:_to_half" in rebake
     kernels = field_kernels()
     assert kernels and all(isinstance(k, Dispatcher) for k in kernels)

@@ -128,3 +128,23 @@ def test_after_holds_the_loads_until_it_is_set():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=180, check=True)  # fmt: skip
     assert out.stdout.split() == ["True", "True", "True", "False"], out.stderr
+
+
+def test_without_the_plate_only_the_named_kernels_load():
+    # A re-bake's thread: no solver to warm, only the later stages' kernels.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from crackbake.simulate import warm\n"
+        "t = warm.start(['crackbake.exchange.halving:_mip_half'], plate=False)\n"
+        "name = t.name\n"
+        "t.join(120)\n"
+        "from crackbake.exchange import halving\n"
+        "print(name, 'crackbake.simulate.solver.iben.solve' in sys.modules,\n"
+        "      bool(halving._mip_half.signatures))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=180, check=True)  # fmt: skip
+    assert out.stdout.split() == ["crackbake-kernels", "False", "True"], out.stderr

@@ -59,7 +59,7 @@ AFTER_WAIT_S = 30.0
 
 
 def start(later: Sequence = (), stop: threading.Event | None = None,
-          after: threading.Event | None = None) -> threading.Thread:
+          after: threading.Event | None = None, plate: bool = True) -> threading.Thread:
     """:func:`warm` on a daemon thread, started; join it or let it run out.
 
     ``later``: numba dispatchers of the stages after the solve (the bake's, the stress bake's,
@@ -72,22 +72,24 @@ def start(later: Sequence = (), stop: threading.Event | None = None,
 
     ``after``: the thread imports the solver's modules, then waits for this event before it
     loads any kernel (the run's thread loads its own first, :func:`crackbake.jit.preload`:
-    numba loads one kernel at a time, under one lock)."""
-    thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop, after),
-                              name="crackbake-iben-warm", daemon=True)  # fmt: skip
+    numba loads one kernel at a time, under one lock).  ``plate=False``: no :func:`warm`, only
+    ``later`` (a re-bake, which has no solver)."""
+    thread = threading.Thread(target=_quiet_warm, args=(tuple(later), stop, after, plate),
+                              name="crackbake-iben-warm" if plate else "crackbake-kernels",
+                              daemon=True)  # fmt: skip
     thread.start()
     return thread
 
 
 def _quiet_warm(later: tuple = (), stop: threading.Event | None = None,
-                after: threading.Event | None = None) -> None:
+                after: threading.Event | None = None, plate: bool = True) -> None:
     # Only a head start: a failure here is the real solve's to report, with its own inputs.
     try:
         if after is not None:
-            import crackbake.simulate.solver.iben.solve  # noqa: F401 - imports, no loads
-
+            if plate:
+                import crackbake.simulate.solver.iben.solve  # noqa: F401 - imports, no loads
             after.wait(AFTER_WAIT_S)
-        if stop is None or not stop.is_set():
+        if plate and (stop is None or not stop.is_set()):
             warm()
     except Exception:  # noqa: BLE001
         pass
